@@ -1,0 +1,67 @@
+"""``ectskin simulate OUT.h5``: run the paper's experiment (or a variant) in the digital twin."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+
+from ectskin._check import EctskinError, parse_floats
+
+HELP = "simulate the experiment protocol in the digital twin and record it to HDF5"
+log = logging.getLogger(__name__)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("out", help="output HDF5 recording (refuses to overwrite without --force)")
+    p.add_argument("--levels", default="0,10,20", help="inflation levels per chamber, ml (default 0,10,20)")
+    p.add_argument("--touch-trials", type=int, default=6, help="touch trials per state (default 6)")
+    p.add_argument("--duration", type=float, default=30.0, help="trial duration, s (default 30)")
+    p.add_argument("--fps", type=float, default=30.0, help="frame rate, Hz (default 30)")
+    p.add_argument("--finger-radius", type=float, default=8.0, help="fingertip radius, mm (default 8)")
+    p.add_argument("--snr-db", type=float, default=66.0, help="readout SNR, dB (default 66)")
+    p.add_argument("--lifts", action="store_true", help="lift the finger now and then (per-frame labels)")
+    p.add_argument("--layout", help="layout JSON file (default: the paper's layout)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--workers", type=int, default=None, help="parallel processes (default: all cores)")
+    p.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
+    p.add_argument("--no-progress", action="store_true")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ectskin.io.hdf5 import write_recording
+    from ectskin.layout import default_layout, load_layout
+    from ectskin.twin import Protocol, ReadoutConfig, simulate_experiment
+
+    if args.workers is not None and args.workers < 1:
+        raise EctskinError(f"--workers must be >= 1, got {args.workers}")
+    protocol = Protocol(
+        levels_ml=tuple(parse_floats("--levels", args.levels)),
+        touch_trials=args.touch_trials,
+        duration_s=args.duration,
+        frame_rate_hz=args.fps,
+        finger_radius_mm=args.finger_radius,
+        lifts=args.lifts,
+        seed=args.seed,
+        readout=ReadoutConfig(snr_db=args.snr_db),
+    )
+    layout = load_layout(args.layout) if args.layout else default_layout()
+    for v in protocol.levels_ml:  # refuse impossible levels before any work
+        from ectskin.twin import Manipulator
+
+        Manipulator().check_inflation([v] * protocol.n_chambers)
+    from pathlib import Path
+
+    if Path(args.out).exists() and not args.force:
+        raise EctskinError(f"{args.out} exists; pass --force to overwrite it")
+    t0 = time.perf_counter()
+    rec = simulate_experiment(
+        protocol, layout=layout, workers=args.workers, progress=not args.no_progress
+    )
+    dt = time.perf_counter() - t0
+    write_recording(rec, args.out, overwrite=args.force)
+    log.info(
+        "%d trials, %d frames in %.1f s (%.0f frames/s) -> %s",
+        rec.n_trials, rec.n_frames, dt, rec.n_frames / dt, args.out,
+    )
+    return 0

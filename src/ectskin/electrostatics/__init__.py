@@ -1,0 +1,61 @@
+"""Electrostatics: capacitance of conductors by the method of moments (paper Eq. 1).
+
+* :mod:`~ectskin.electrostatics.panels` — flat parallelogram panels (:class:`Panels`) and builders
+  for plates, strips (wires), spheres and cylinders.
+* :mod:`~ectskin.electrostatics.mom` — potential coefficients with exact near-field integrals,
+  the Maxwell capacitance matrix by Cholesky, and the ECT pair readout ``C_ij = −K_ij``.
+
+Units: mm, pF, V, pC.
+"""
+
+from ectskin.electrostatics.mom import (
+    EPS0_PF_PER_MM,
+    NEAR_FACTOR,
+    ect_readout,
+    maxwell_capacitance,
+    potential_integral,
+    potential_matrix,
+    two_terminal_capacitance,
+)
+from ectskin.electrostatics.panels import (
+    STRIP_PANEL_LENGTH_MM,
+    STRIP_PANELS_ACROSS,
+    Panels,
+    cylinder_panels,
+    cylinder_quads,
+    edge_correction_factor,
+    graded_nodes,
+    grid_1d,
+    grid_quads,
+    rectangle_panels,
+    rectangle_quads,
+    sphere_panels,
+    sphere_quads,
+    strip_panels,
+    strip_quads,
+)
+
+__all__ = [
+    "EPS0_PF_PER_MM",
+    "NEAR_FACTOR",
+    "STRIP_PANELS_ACROSS",
+    "STRIP_PANEL_LENGTH_MM",
+    "Panels",
+    "cylinder_panels",
+    "cylinder_quads",
+    "ect_readout",
+    "edge_correction_factor",
+    "graded_nodes",
+    "grid_1d",
+    "grid_quads",
+    "maxwell_capacitance",
+    "potential_integral",
+    "potential_matrix",
+    "rectangle_panels",
+    "rectangle_quads",
+    "sphere_panels",
+    "sphere_quads",
+    "strip_panels",
+    "strip_quads",
+    "two_terminal_capacitance",
+]

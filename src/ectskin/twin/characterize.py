@@ -1,0 +1,181 @@
+"""Characterisation of the e-skin in the twin: the paper's §2.2, Fig. 3 and Fig. 4.
+
+* Inflation: the manipulator inflates from rest to ``inflation`` (paper: (20, 20, 20) ml); the
+  calibrated change c = (c_t − c_0)/c_0 (Eq. 2, c_0 = uninflated) of every pair. Same-face pairs
+  rise (electrode area grows), cross-face pairs fall (the faces move apart).
+* Two-stage: inflate to ``touch_inflation`` (paper: (0, 20, 20)), then touch a region.
+* For every region: its calibrated change (against the uninflated reference), the touch-only
+  change (against the inflated, untouched state) and the bending-only change (the touch's
+  mechanics without the finger in the field) at ``force_n``.
+
+Values in ``characterize.json`` are noise-free (the model's true capacitance); the figures show
+the measured signal (readout noise and quantisation included).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from ectskin.layout import SensorLayout, default_layout
+from ectskin.twin.mechanics import Touch
+from ectskin.twin.readout import ReadoutConfig, readout
+from ectskin.twin.sensor import SensorModel
+
+log = logging.getLogger(__name__)
+
+
+def _ramp_capacitance(sensor, p_start, p_end, fractions):
+    """(len(fractions), n_pairs) capacitance along a linear inflation path."""
+    p_start, p_end = np.asarray(p_start, float), np.asarray(p_end, float)
+    return np.stack([sensor.capacitance(p_start + f * (p_end - p_start))[0] for f in fractions])
+
+
+def _selected_pairs(change: np.ndarray, same: np.ndarray) -> list[int]:
+    """Two same-face pairs with the largest rise and two cross-face pairs with the largest fall."""
+    same_idx = np.flatnonzero(same)
+    cross_idx = np.flatnonzero(~same)
+    rise = same_idx[np.argsort(-change[same_idx])][:2].tolist()
+    fall = cross_idx[np.argsort(change[cross_idx])][:2].tolist()
+    return rise + fall
+
+
+def characterize(
+    out_dir: str | Path | None = None,
+    *,
+    inflation=(20.0, 20.0, 20.0),
+    touch_inflation=(0.0, 20.0, 20.0),
+    force_n: float = 1.0,
+    figure_region: int | None = None,
+    layout: SensorLayout | None = None,
+    sensor: SensorModel | None = None,
+    seed: int = 0,
+) -> dict:
+    """Compute the characterisation; with ``out_dir`` also write the figures and JSON.
+
+    Returns the dict written to ``characterize.json``.
+    """
+    layout = layout or (sensor.layout if sensor else default_layout())
+    sensor = sensor or SensorModel(layout)
+    man = sensor.manipulator
+    p_full = man.check_inflation(inflation)
+    p_touch = man.check_inflation(touch_inflation)
+    rest = np.zeros_like(p_full)
+    c0 = sensor.capacitance(rest)[0]
+    c_full = sensor.capacitance(p_full)[0]
+    c_part = sensor.capacitance(p_touch)[0]
+    change_full = (c_full - c0) / c0
+    change_part = (c_part - c0) / c0
+    same = layout.same_surface
+    names = [e.name for e in layout.electrodes]
+    pairs = [
+        {
+            "pair": layout.pair_names[k],
+            "electrodes": [names[i], names[j]],
+            "same_face": bool(same[k]),
+            "inflation_change": float(change_full[k]),
+        }
+        for k, (i, j) in enumerate(layout.pairs)
+    ]
+    touches = []
+    for reg in layout.regions:
+        touch = Touch(reg.surface, reg.centre_mm)
+        c_t = sensor.capacitance(p_touch, touch, [force_n])[0]
+        c_b = sensor.capacitance(p_touch, touch, [force_n], with_finger=False)[0]
+        touches.append(
+            {
+                "region": reg.id,
+                "surface": reg.surface,
+                "uv_mm": list(reg.centre_mm),
+                "change": ((c_t - c0) / c0).tolist(),
+                "touch_only_change": ((c_t - c_part) / c_part).tolist(),
+                "bending_only_change": ((c_b - c_part) / c_part).tolist(),
+            }
+        )
+    result = {
+        "pair_names": list(layout.pair_names),
+        "inflation_ml": p_full.tolist(),
+        "touch_inflation_ml": p_touch.tolist(),
+        "touch_force_n": float(force_n),
+        "pairs": pairs,
+        "inflation_change_max_abs": float(np.abs(change_full).max()),
+        "partial_inflation_change": change_part.tolist(),
+        "partial_vs_full_correlation": float(np.corrcoef(change_part, change_full)[0, 1]),
+        "touches": touches,
+    }
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        region = figure_region or next(
+            (r.id for r in layout.regions if r.surface == "front"), layout.regions[0].id
+        )
+        _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, same, seed)
+        _atomic_json(out / "characterize.json", result)
+        log.info("characterisation written to %s", out)
+    return result
+
+
+def _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, same, seed):
+    from ectskin.viz.twin import plot_response
+
+    layout = sensor.layout
+    fps = 30.0
+    rng = np.random.default_rng([seed, 4])
+    phase = rng.uniform(0, 2 * np.pi, layout.n_pairs)
+    cfg = ReadoutConfig()
+    selected = _selected_pairs(change_full, same)
+    rest = np.zeros_like(p_full)
+    fr = np.linspace(0, 1, 9)
+
+    # Fig. 3: rest 3 s, inflate over 12 s, hold 5 s
+    t = np.arange(int(20 * fps)) / fps
+    frac = np.clip((t - 3.0) / 12.0, 0, 1)
+    c_ramp = CubicSpline(fr, _ramp_capacitance(sensor, rest, p_full, fr), axis=0)(frac)
+    meas = readout(c_ramp, t, rng, cfg, phase)
+    c0 = meas[: int(3 * fps)].mean(axis=0)
+    fig = plot_response(
+        t, (meas - c0) / c0, list(layout.pair_names), selected,
+        title=f"inflation to p = {tuple(p_full.tolist())} ml",
+        stages=[(3.0, "inflate"), (15.0, "hold")],
+    )
+    fig.savefig(out / "fig3_inflation.png", dpi=120)
+
+    # Fig. 4: rest 3 s, inflate to p_touch over 9 s, hold, touch region with a force ramp
+    t = np.arange(int(30 * fps)) / fps
+    frac = np.clip((t - 3.0) / 9.0, 0, 1)
+    c = CubicSpline(fr, _ramp_capacitance(sensor, rest, p_touch, fr), axis=0)(frac)
+    reg = layout.region(region)
+    touch = Touch(reg.surface, reg.centre_mm)
+    on = (t >= 16.0) & (t < 26.0)
+    force = np.where(on, force_n * (0.6 + 0.4 * np.sin(np.pi * (t - 16.0) / 10.0)), 0.0)
+    nodes = np.linspace(0.6 * force_n, force_n, 5)
+    c_nodes = sensor.capacitance(p_touch, touch, nodes)
+    c[on] = CubicSpline(nodes, c_nodes, axis=0)(force[on])
+    meas = readout(c, t, rng, cfg, phase)
+    c0 = meas[: int(3 * fps)].mean(axis=0)
+    fig = plot_response(
+        t, (meas - c0) / c0, list(layout.pair_names), selected,
+        title=f"two-stage: inflate to {tuple(p_touch.tolist())} ml, then touch region {region}",
+        stages=[(3.0, "inflate"), (16.0, "touch"), (26.0, "release")],
+    )
+    fig.savefig(out / "fig4_touch.png", dpi=120)
+
+
+def _atomic_json(path: Path, obj) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(obj, fh, indent=1)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

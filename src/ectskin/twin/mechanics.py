@@ -1,0 +1,330 @@
+"""Mechanics of the 3-chamber pneumatic manipulator: inflation bulges, touch bending, dimples.
+
+The body is a 50 (x) × 120 (z) × 20 (y) mm block clamped at z = 0 (DESIGN.md). A point of the body
+surface is addressed by ``(surface, u, v)`` (see :mod:`ectskin.layout.layout`); :meth:`Manipulator.deform`
+maps rest surface coordinates to the deformed 3D position, frame by frame. Material points keep
+their (u, v): wires drawn on a face stretch with it, which is how electrode length and width follow
+the local surface strain.
+
+The deformation is composed of four parts (each documented where it is computed):
+
+1. **Axial extension** of each inflated chamber's span (small, ``axial_strain_per_ml``).
+2. **Face bulge** over each chamber footprint, both faces, shape b(x, z) = h_k φ(x) ψ_k(z) with
+   φ(x) = 1 − (2x/w)² (a clamped membrane's parabola across the chamber) and ψ_k a raised-cosine
+   window along it. The e-skin and the face wall limit stretch along z: a fraction κ
+   (``face_axial_inextensibility``) of the arc length the bulge adds along z is taken back by
+   pulling material in towards the base (κ = 0: points move only along the normal and wires
+   stretch fully; κ = 1: face arc length along z is conserved). The bulge height h_k follows from volume conservation: the injected
+   volume fills the two face bulges (2 · h · A/4 for this shape) and the compliance of the rest of
+   the chamber (``wall_compliance`` · pressure), with a membrane pressure that stiffens with
+   stretch, P(h) = k_f · h · (1 + (h/h_s)²).
+3. **Dimple** under the finger: a Gaussian indentation of depth F / k_d, k_d rising with the local
+   chamber pressure.
+4. **Bending** by the touch force: a clamped beam in the y–z plane, curvature κ(z) = M(z) / EI(z)
+   (Euler–Bernoulli), the angle θ(z) = ∫κ integrated exactly (large rotation), the lever arm of the
+   lateral force taken on the deformed axis (two fixed-point passes). EI rises with the pressure
+   of the chamber at z.
+
+Units: mm, ml (= 1000 mm³), N, kPa (= 1e-3 N/mm²).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import brentq
+
+from ectskin._check import EctskinError
+
+SIDE = {"front": 1.0, "back": -1.0}
+
+
+@dataclass(frozen=True)
+class ManipulatorConfig:
+    """Geometry and material parameters. **(assumed)** values are documented defaults."""
+
+    width_mm: float = 50.0
+    length_mm: float = 120.0
+    thickness_mm: float = 20.0  # (assumed)
+    chamber_centres_z_mm: tuple[float, ...] = (20.0, 60.0, 100.0)  # (assumed placement)
+    chamber_size_x_mm: float = 40.0
+    chamber_size_z_mm: float = 30.0
+    max_volume_ml: float = 30.0  # (assumed) beyond this a chamber would burst
+    # inflation: membrane pressure P(h) = k_f h (1 + (h/h_s)^2) [kPa], wall compliance [ml/kPa]
+    face_stiffness_kpa_per_mm: float = 1.0  # (assumed; calibrated with wall_compliance)
+    stiffening_height_mm: float = 6.0  # (assumed)
+    wall_compliance_ml_per_kpa: float = 0.1  # (assumed; calibrated to the paper's ~40 %)
+    face_axial_inextensibility: float = 0.6  # (assumed; calibrated: cross-face pairs fall)
+    axial_strain_per_ml: float = 0.0  # (assumed) chamber span elongation per ml (off)
+    # bending: EI(z) = EI0 (1 + pressure_stiffening * P(z)/kPa)
+    bending_stiffness_nmm2: float = 5.4e4  # (assumed: 2 N near the tip -> ~20 mm deflection)
+    pressure_stiffening_per_kpa: float = 0.05  # (assumed)
+    # dimple: depth = F / (k_d0 (1 + dimple_stiffening * P_local))
+    dimple_stiffness_n_per_mm: float = 1.0  # (assumed)
+    dimple_stiffening_per_kpa: float = 0.05  # (assumed)
+    dimple_sigma_mm: float = 9.0  # (assumed) Gaussian width of the indentation
+    beam_points: int = 241  # axial grid for the beam integration
+
+    @property
+    def n_chambers(self) -> int:
+        return len(self.chamber_centres_z_mm)
+
+
+@dataclass(frozen=True)
+class Touch:
+    """A finger touching ``surface`` at rest surface coordinates ``uv_mm`` (mm)."""
+
+    surface: str
+    uv_mm: tuple[float, float]
+
+
+class Manipulator:
+    """Deformation map of the manipulator surface; see the module docstring for the model."""
+
+    def __init__(self, config: ManipulatorConfig | None = None):
+        self.config = config or ManipulatorConfig()
+        c = self.config
+        self._zgrid = np.linspace(0.0, c.length_mm, c.beam_points)
+
+    # ------------------------------------------------------------------ inflation
+    def check_inflation(self, inflation_ml) -> np.ndarray:
+        """Validate an inflation vector p (ml per chamber); return it as a float array."""
+        c = self.config
+        try:
+            p = np.asarray(inflation_ml, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise EctskinError(f"inflation must be {c.n_chambers} numbers (ml), got {inflation_ml!r}") from None
+        if p.size != c.n_chambers:
+            raise EctskinError(
+                f"inflation must give one volume per chamber ({c.n_chambers}), got {p.size}: "
+                f"{p.tolist()}"
+            )
+        bad = ~np.isfinite(p) | (p < 0) | (p > c.max_volume_ml)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise EctskinError(
+                f"impossible inflation for chamber {k + 1}: {p[k]} ml; expected 0 to "
+                f"{c.max_volume_ml} ml (the chamber's limit)"
+            )
+        return p
+
+    def bulge_height_mm(self, inflation_ml) -> np.ndarray:
+        """(n_chambers,) bulge height h of each face over each chamber (mm).
+
+        Volume conservation: V = 2 · h · A/3 + C_w · P(h), with A the chamber footprint and
+        A/3 the volume factor of the bulge shape (∫(1 − (2x/w)²)dx = 2w/3, ∫cos² over l = l/2).
+        """
+        p = self.check_inflation(inflation_ml)
+        c = self.config
+        a4 = c.chamber_size_x_mm * c.chamber_size_z_mm / 3.0
+        out = np.zeros_like(p)
+        for k, v_ml in enumerate(p):
+            if v_ml <= 0:
+                continue
+            v = v_ml * 1000.0  # mm^3
+
+            def residual(h: float) -> float:
+                return 2.0 * h * a4 + 1000.0 * c.wall_compliance_ml_per_kpa * self._pressure(h) - v
+
+            out[k] = brentq(residual, 0.0, v / (2.0 * a4))
+        return out
+
+    def _pressure(self, h):
+        """Membrane pressure (kPa) at bulge height h (mm): stiffens with stretch."""
+        c = self.config
+        return c.face_stiffness_kpa_per_mm * h * (1.0 + (h / c.stiffening_height_mm) ** 2)
+
+    def pressure_kpa(self, inflation_ml) -> np.ndarray:
+        """(n_chambers,) chamber pressures (kPa) at an inflation state."""
+        return self._pressure(self.bulge_height_mm(inflation_ml))
+
+    def _chamber_window_z(self, z: np.ndarray) -> np.ndarray:
+        """(n_chambers, *z.shape) raised-cosine window ψ_k(z) of each chamber's span."""
+        c = self.config
+        zc = np.asarray(c.chamber_centres_z_mm)[:, None]
+        s = (np.reshape(z, (1, -1)) - zc) / c.chamber_size_z_mm
+        w = np.where(np.abs(s) < 0.5, np.cos(np.pi * s) ** 2, 0.0)
+        return w.reshape((len(c.chamber_centres_z_mm),) + np.shape(z))
+
+    def _window_x(self, x: np.ndarray) -> np.ndarray:
+        s = np.asarray(x) / self.config.chamber_size_x_mm
+        return np.where(np.abs(s) < 0.5, 1.0 - (2.0 * s) ** 2, 0.0)
+
+    def _face_pull_in(self, x: np.ndarray, z: np.ndarray, heights: np.ndarray) -> np.ndarray:
+        """Axial pull-in κ · e(x, z) of face points (mm), e the arc length added by the bulge.
+
+        e(x, z) = ∫_0^z (√(1 + (∂b/∂z')²) − 1) dz' along the face, with ∂b/∂z = φ(x) Σ h_k ψ_k'(z).
+        """
+        kappa = self.config.face_axial_inextensibility
+        if kappa == 0 or not np.any(heights):
+            return np.zeros(np.shape(x))
+        zg = self._zgrid
+        g = np.gradient(np.tensordot(heights, self._chamber_window_z(zg), axes=1), zg)  # (n_z,)
+        phis = np.linspace(0.0, 1.0, 41)  # e depends on x only through φ(x): tabulate over φ
+        integrand = np.sqrt(1.0 + (phis[:, None] * g[None, :]) ** 2) - 1.0
+        e = np.concatenate(
+            [np.zeros((phis.size, 1)), np.cumsum(0.5 * (integrand[:, 1:] + integrand[:, :-1]) * np.diff(zg), axis=1)],
+            axis=1,
+        )
+        phi = self._window_x(x)
+        # bilinear interpolation in (φ, z)
+        fi = np.clip(phi * (phis.size - 1), 0, phis.size - 1 - 1e-9)
+        i0 = fi.astype(int)
+        w = fi - i0
+        e_lo = np.array([np.interp(zz, zg, e[i]) for zz, i in zip(np.ravel(z), np.ravel(i0))])
+        e_hi = np.array([np.interp(zz, zg, e[i + 1]) for zz, i in zip(np.ravel(z), np.ravel(i0))])
+        return kappa * ((1 - np.ravel(w)) * e_lo + np.ravel(w) * e_hi).reshape(np.shape(x))
+
+    def bulge_mm(self, x, z, heights) -> np.ndarray:
+        """Outward bulge b(x, z) = Σ_k h_k φ(x) ψ_k(z) of a front/back face point (mm)."""
+        return self._window_x(x) * np.tensordot(heights, self._chamber_window_z(z), axes=1)
+
+    def axial_position(self, z, inflation_ml) -> np.ndarray:
+        """Stretched axial position z_s(z): each chamber span elongates by ε_k = a · p_k.
+
+        z_s = z + Σ_k ε_k · clip(z − z_k + l/2, 0, l) (uniform strain over the span).
+        """
+        c = self.config
+        p = np.asarray(inflation_ml, dtype=np.float64)
+        z = np.asarray(z, dtype=np.float64)
+        out = z.copy()
+        for zc, pk in zip(c.chamber_centres_z_mm, p):
+            lo = zc - c.chamber_size_z_mm / 2
+            out = out + c.axial_strain_per_ml * pk * np.clip(z - lo, 0.0, c.chamber_size_z_mm)
+        return out
+
+    # ------------------------------------------------------------------ bending
+    def bending_stiffness(self, z, inflation_ml) -> np.ndarray:
+        """EI(z) in N·mm²: rises with the pressure of the chamber spanning z."""
+        c = self.config
+        pk = self.pressure_kpa(inflation_ml)
+        local = np.tensordot(pk, self._chamber_window_z(z), axes=1)
+        return c.bending_stiffness_nmm2 * (1.0 + c.pressure_stiffening_per_kpa * local)
+
+    def centreline(self, force_n, touch: Touch | None, inflation_ml, iterations: int = 2):
+        """Deformed beam axis for each frame's force.
+
+        Returns ``(zs, Y, Z, theta)``: the stretched rest grid (n_z,) and per frame (F, n_z) the
+        axis position (Y, Z) and section rotation θ. A force on the front face (pushing −y) bends
+        towards −y; on the back face towards +y. Moment at section z from a lateral force F at the
+        touch section z_t: M(z) = F · (Z(z_t) − Z(z)) for z < z_t (lever on the deformed axis).
+        """
+        c = self.config
+        force = np.atleast_1d(np.asarray(force_n, dtype=np.float64))
+        zs = self.axial_position(self._zgrid, inflation_ml)
+        n_f = force.size
+        if touch is None or touch.surface not in SIDE:
+            zeros = np.zeros((n_f, zs.size))
+            return zs, zeros, np.broadcast_to(zs, (n_f, zs.size)).copy(), zeros
+        side = SIDE[touch.surface]
+        zt = float(self.axial_position(np.array([touch.uv_mm[1]]), inflation_ml)[0])
+        ei = self.bending_stiffness(self._zgrid, inflation_ml)
+        dz = np.diff(zs)
+        Z = np.broadcast_to(zs, (n_f, zs.size)).copy()
+        for _ in range(iterations):
+            zt_def = np.array([np.interp(zt, zs, Z[f]) for f in range(n_f)])
+            lever = np.clip(zt_def[:, None] - Z, 0.0, None) * (zs[None, :] <= zt)
+            kappa = -side * force[:, None] * lever / ei[None, :]  # (F, n_z), 1/mm
+            theta = np.concatenate(
+                [np.zeros((n_f, 1)), np.cumsum(0.5 * (kappa[:, 1:] + kappa[:, :-1]) * dz, axis=1)],
+                axis=1,
+            )
+            s, co = np.sin(theta), np.cos(theta)
+            Y = np.concatenate(
+                [np.zeros((n_f, 1)), np.cumsum(0.5 * (s[:, 1:] + s[:, :-1]) * dz, axis=1)], axis=1
+            )
+            Z = np.concatenate(
+                [np.zeros((n_f, 1)), np.cumsum(0.5 * (co[:, 1:] + co[:, :-1]) * dz, axis=1)], axis=1
+            )
+        return zs, Y, Z, theta
+
+    def dimple_depth_mm(self, force_n, touch: Touch, inflation_ml) -> np.ndarray:
+        """Indentation depth under the finger, F / k_d with k_d rising with local pressure."""
+        c = self.config
+        pk = self.pressure_kpa(inflation_ml)
+        local = float(np.tensordot(pk, self._chamber_window_z(np.array([touch.uv_mm[1]])), axes=1)[0])
+        k = c.dimple_stiffness_n_per_mm * (1.0 + c.dimple_stiffening_per_kpa * local)
+        return np.asarray(force_n, dtype=np.float64) / k
+
+    # ------------------------------------------------------------------ surface map
+    def deform(
+        self,
+        surface: str,
+        uv_mm: np.ndarray,
+        inflation_ml,
+        touch: Touch | None = None,
+        force_n=0.0,
+    ) -> np.ndarray:
+        """Map rest surface coordinates to deformed 3D points, one set per force value.
+
+        Parameters
+        ----------
+        surface : "front" | "back" | "right" | "left"
+        uv_mm : (n, 2) rest surface coordinates.
+        inflation_ml : (n_chambers,) chamber volumes.
+        touch : the finger's contact, or None.
+        force_n : scalar or (F,) touch force per frame.
+
+        Returns
+        -------
+        (F, n, 3) deformed positions in mm (F = 1 for a scalar force).
+        """
+        c = self.config
+        p = self.check_inflation(inflation_ml)
+        uv = np.asarray(uv_mm, dtype=np.float64).reshape(-1, 2)
+        force = np.atleast_1d(np.asarray(force_n, dtype=np.float64))
+        heights = self.bulge_height_mm(p)
+        if surface in SIDE:
+            side = SIDE[surface]
+            x = uv[:, 0]
+            z = uv[:, 1] - self._face_pull_in(x, uv[:, 1], heights)
+            offset = c.thickness_mm / 2 + self.bulge_mm(x, z, heights)  # (n,)
+            offset = np.broadcast_to(offset, (force.size, x.size)).copy()
+            if touch is not None and touch.surface == surface:
+                depth = self.dimple_depth_mm(force, touch, p)  # (F,)
+                r2 = (x - touch.uv_mm[0]) ** 2 + (z - touch.uv_mm[1]) ** 2
+                offset -= depth[:, None] * np.exp(-r2 / (2 * c.dimple_sigma_mm**2))[None, :]
+            yprime = side * offset
+            xs = np.broadcast_to(x, yprime.shape)
+        elif surface in ("right", "left"):
+            x0 = c.width_mm / 2 * (1.0 if surface == "right" else -1.0)
+            yprime = np.broadcast_to(uv[:, 0], (force.size, uv.shape[0]))
+            z = uv[:, 1]
+            xs = np.full(yprime.shape, x0)
+        else:
+            raise EctskinError(
+                f"unknown surface {surface!r}: expected front, back, right or left"
+            )
+        zs, Y, Z, theta = self.centreline(force, touch, p)
+        zq = self.axial_position(z, p)
+        # interpolate the axis at each point's stretched axial position (per frame)
+        out = np.empty((force.size, uv.shape[0], 3))
+        for f in range(force.size):
+            yc = np.interp(zq, zs, Y[f])
+            zc = np.interp(zq, zs, Z[f])
+            th = np.interp(zq, zs, theta[f])
+            out[f, :, 0] = xs[f]
+            out[f, :, 1] = yc + yprime[f] * np.cos(th)
+            out[f, :, 2] = zc - yprime[f] * np.sin(th)
+        return out
+
+    def surface_normal(self, surface: str, uv_mm, inflation_ml, touch=None, force_n=0.0, h=0.05):
+        """(F, n, 3) outward unit normal of the deformed surface (finite differences)."""
+        uv = np.asarray(uv_mm, dtype=np.float64).reshape(-1, 2)
+        du = np.array([h, 0.0])
+        dv = np.array([0.0, h])
+        pu = self.deform(surface, uv + du, inflation_ml, touch, force_n) - self.deform(
+            surface, uv - du, inflation_ml, touch, force_n
+        )
+        pv = self.deform(surface, uv + dv, inflation_ml, touch, force_n) - self.deform(
+            surface, uv - dv, inflation_ml, touch, force_n
+        )
+        n = np.cross(pu, pv)
+        n /= np.linalg.norm(n, axis=-1, keepdims=True)
+        # orient outward: front +y, back -y, right +x, left -x (at rest)
+        sign = {"front": 1.0, "back": -1.0, "right": 1.0, "left": -1.0}[surface]
+        axis = 1 if surface in SIDE else 0
+        flip = np.sign(n[..., axis]) != sign
+        n[flip] *= -1
+        return n

@@ -1,0 +1,168 @@
+"""The digital twin: electrostatics on the deformed sensor, the paper's §2.2 characterisation,
+the protocol, and the simulation driver."""
+
+import numpy as np
+import pytest
+
+from ectskin import EctskinError
+from ectskin.layout import default_layout
+from ectskin.twin import Protocol, SensorModel, Touch, plan_trials, simulate_experiment
+from ectskin.twin.characterize import characterize
+from ectskin.twin.live import LiveTwin
+from ectskin.twin.simulate import capacitance_over_force
+
+
+@pytest.fixture(scope="module")
+def layout():
+    return default_layout()
+
+
+@pytest.fixture(scope="module")
+def sensor(layout):
+    return SensorModel(layout)
+
+
+@pytest.fixture(scope="module")
+def char(sensor):
+    return characterize(None, sensor=sensor)
+
+
+def test_readout_is_symmetric_and_positive(sensor, layout):
+    c = sensor.capacitance([0, 0, 0])[0]
+    assert np.all(c > 0)  # C_ij = -K_ij > 0
+    # the layout is mirror-symmetric front/back: E1-E2 equals E5-E6, E1-E6 equals E2-E5
+    name = {n: k for k, n in enumerate(layout.pair_names)}
+    assert c[name["E1-E2"]] == pytest.approx(c[name["E5-E6"]], rel=1e-6)
+    assert c[name["E1-E6"]] == pytest.approx(c[name["E2-E5"]], rel=1e-6)
+    # neighbours couple more than distant wires on the same face
+    assert c[name["E1-E2"]] > c[name["E1-E4"]]
+
+
+def _refinement_change(layout):
+    base = SensorModel(layout)
+    fine = SensorModel(layout, discretisation=base.discretisation.refined(2))
+    worst = 0.0
+    for p, touch in (([0, 0, 0], None), ([0, 20, 20], Touch("front", (0.0, 60.0)))):
+        c1 = base.capacitance(p, touch, [1.0])[0]
+        c2 = fine.capacitance(p, touch, [1.0])[0]
+        worst = max(worst, float(np.max(np.abs(c1 - c2) / c2)))
+    return worst
+
+
+@pytest.mark.slow
+def test_readout_converges_under_refinement(layout):
+    """Doubling the panel density changes every pair by < 1 % at the default resolution."""
+    assert _refinement_change(layout) < 0.01
+
+
+def test_inflation_response_matches_the_paper(char, layout):
+    """§2.2: (20,20,20) ml changes readouts by up to about 40 %; same-face pairs rise, cross-face
+    pairs fall; (0,20,20) looks like (20,20,20)."""
+    change = np.array([p["inflation_change"] for p in char["pairs"]])
+    same = np.array([p["same_face"] for p in char["pairs"]])
+    assert 0.25 <= np.abs(change).max() <= 0.60
+    assert np.all(change[same] > 0)
+    assert np.mean(change[~same] < 0) >= 0.75  # the two farthest diagonals rise slightly
+    assert change[~same].mean() < -0.05
+    facing = [layout.pair_names.index(f"E{k}-E{k + 4}") for k in range(1, 5)]
+    assert np.all(change[facing] < 0)  # wires facing each other across the body move apart
+    partial = np.array(char["partial_inflation_change"])
+    assert char["partial_vs_full_correlation"] > 0.7
+    big = np.abs(change) > 0.02
+    assert np.mean(np.sign(partial[big]) == np.sign(change[big])) >= 0.8
+
+
+def test_touch_moves_mainly_the_pairs_near_it(char, layout):
+    """A touch moves the pairs whose field covers the touch point; bending adds much less."""
+    infl = np.abs([p["inflation_change"] for p in char["pairs"]]).max()
+    near_wins = 0
+    for t in char["touches"]:
+        touch_only = np.abs(t["touch_only_change"])
+        bending = np.abs(t["bending_only_change"])
+        assert bending.max() < 0.25 * touch_only.max()
+        assert bending.max() < 0.25 * infl
+        # distance of each pair to the touch point: the nearer of its two wires
+        u, v = t["uv_mm"]
+        dist = []
+        for e in layout.electrodes:
+            poly = e.polyline_mm
+            same_face = layout.skin(e.skin).surface == t["surface"]
+            zc = np.clip(v, poly[:, 1].min(), poly[:, 1].max())
+            d = np.hypot(poly[0, 0] - u, zc - v) if same_face else 1e3
+            dist.append(d)
+        dist = np.array(dist)
+        pair_d = np.minimum(dist[layout.pairs[:, 0]], dist[layout.pairs[:, 1]])
+        top = np.argsort(-touch_only)[:5]
+        near_wins += np.median(pair_d[top]) < np.median(pair_d)
+    assert near_wins >= 0.8 * len(char["touches"])
+
+
+def test_force_interpolation_is_below_the_readout_noise(sensor):
+    p, touch = [10, 0, 20], Touch("back", (5.0, 90.0))
+    forces = np.array([0.35, 0.9, 1.55, 1.95])
+    interp = capacitance_over_force(sensor, p, touch, np.r_[0.3, forces, 2.0], Protocol().force_nodes)[1:-1]
+    direct = sensor.capacitance(p, touch, forces)
+    assert np.max(np.abs(interp - direct)) < 0.2e-3  # well under the 1 fF quantisation step
+
+
+def test_protocol_plan_matches_the_paper(layout):
+    plans = plan_trials(Protocol(), layout)
+    assert len(plans) == 189
+    touch = [p for p in plans if p.kind == "touch"]
+    assert len(touch) == 162
+    assert {p.region for p in touch} == set(range(1, 19))
+    assert sum(p.occluded for p in touch) == 16  # 146 clean tracking trials
+    for p in touch:
+        reg = layout.region(p.region)
+        assert reg.surface == p.surface
+        assert reg.u_mm[0] < p.touch_uv_mm[0] < reg.u_mm[1]
+        assert reg.v_mm[0] < p.touch_uv_mm[1] < reg.v_mm[1]
+    assert plan_trials(Protocol(), layout) == plans  # deterministic for a seed
+    assert plan_trials(Protocol(seed=1), layout) != plans
+
+
+def test_protocol_rejects_bad_parameters():
+    with pytest.raises(EctskinError, match="force_range_n"):
+        Protocol(force_range_n=(2.0, 1.0))
+    with pytest.raises(EctskinError, match="impossible inflation"):
+        simulate_experiment(Protocol(levels_ml=(-5.0,), touch_trials=0, duration_s=0.2), progress=False)
+
+
+def test_simulation_is_deterministic_and_independent_of_workers(layout):
+    proto = Protocol(levels_ml=(0.0, 20.0), n_chambers=3, touch_trials=1, duration_s=2.0, seed=3)
+    a = simulate_experiment(proto, workers=1, progress=False)
+    b = simulate_experiment(proto, workers=2, progress=False)
+    assert a.n_trials == 16 and a.trials[0].n_frames == 60
+    for ta, tb in zip(a.trials, b.trials):
+        np.testing.assert_array_equal(ta.capacitance, tb.capacitance)
+        np.testing.assert_array_equal(ta.markers, tb.markers)
+    t = next(t for t in a.trials if t.meta["kind"] == "touch")
+    assert np.all(t.labels == t.region) and t.region > 0
+    assert np.all((t.force >= 0.3) & (t.force <= 2.0))
+    # readout quantised to 1 fF
+    np.testing.assert_allclose(t.capacitance * 1000, np.round(t.capacitance * 1000), atol=1e-6)
+    nc = a.trials[0]
+    assert nc.meta["kind"] == "no_contact" and np.all(nc.labels == 0)
+
+
+def test_lifts_give_per_frame_contact_labels():
+    proto = Protocol(levels_ml=(0.0,), touch_trials=1, no_contact_trial=False, duration_s=20.0, lifts=True)
+    t = simulate_experiment(proto, workers=1, progress=False).trials[0]
+    assert set(np.unique(t.labels)) == {0, t.region}
+    assert np.all(t.force[t.labels == 0] == 0)
+
+
+def test_live_twin_streams_touch_and_inflation():
+    twin = LiveTwin(seed=1)
+    c0, m0, lab0 = twin.next_frame()
+    assert c0.shape == (28,) and m0.shape == (5, 3) and lab0 == 0
+    twin.set_touch(5, force_n=2.0)
+    for _ in range(30):
+        c1, m1, lab1 = twin.next_frame()
+    assert lab1 == 5
+    assert np.max(np.abs(c1 - c0) / c0) > 0.05  # the finger changes the readout
+    assert np.linalg.norm(m1[-1] - m0[-1]) > 3.0  # and bends the manipulator
+    with pytest.raises(EctskinError, match="unknown region 42"):
+        twin.set_touch(42)
+    with pytest.raises(EctskinError, match="impossible inflation"):
+        twin.set_inflation([0, 50, 0])
