@@ -11,14 +11,18 @@ C_ij = −K_ij (paper Eq. 1).
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
 
+from ectskin._check import EctskinError
 from ectskin.electrostatics import Panels, cylinder_panels, maxwell_capacitance, sphere_panels
 from ectskin.electrostatics.panels import rectangle_quads, strip_quads
 from ectskin.layout import SensorLayout
 from ectskin.twin.mechanics import Manipulator, Touch
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -36,7 +40,7 @@ class Discretisation:
     wire_panels_across: int = 2
     end_panel_fraction: float = 0.125  # free-end cell, as a fraction of the wire width
     pad_panels: int = 3
-    finger_sphere_n: int = 4
+    finger_sphere_n: int = 5
     finger_shaft_around: int = 12
     finger_shaft_along: int = 5
 
@@ -59,7 +63,7 @@ class Finger:
 
     radius_mm: float = 8.0  # (assumed) adult fingertip
     shaft_length_mm: float = 50.0
-    skin_cover_mm: float = 0.5  # (assumed) silicone between the wires and the finger
+    skin_cover_mm: float = 1.0  # (assumed) sealing layer between the wires and the finger
 
 
 def _planar(quads3: np.ndarray) -> np.ndarray:
@@ -157,7 +161,9 @@ class SensorModel:
             for parts in per_force
         ]
 
-    def finger_panels(self, inflation_ml, touch: Touch, forces) -> list[Panels]:
+    def finger_panels(
+        self, inflation_ml, touch: Touch, forces, *, sphere_n: int | None = None
+    ) -> list[Panels]:
         """The grounded finger resting on the deformed skin at each force (conductor n_el)."""
         forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
         fg, d = self.finger, self.discretisation
@@ -168,7 +174,7 @@ class SensorModel:
         cond = self.n_electrodes
         for p, n in zip(pts, nrm):
             centre = p + n * (fg.radius_mm + fg.skin_cover_mm)
-            sphere = sphere_panels(centre, fg.radius_mm, d.finger_sphere_n, cond)
+            sphere = sphere_panels(centre, fg.radius_mm, sphere_n or d.finger_sphere_n, cond)
             keep = (sphere.centres - centre) @ n < 0  # the fingertip: the half facing the skin
             tip = Panels(
                 sphere.centres[keep], sphere.u[keep], sphere.v[keep], sphere.conductor[keep], cond + 1
@@ -211,7 +217,16 @@ class SensorModel:
         fingers = self.finger_panels(inflation_ml, touch, forces)
         out = np.empty((forces.size, len(self._pairs)))
         for f, (pe, pf) in enumerate(zip(electrodes, fingers)):
-            K = maxwell_capacitance(Panels.concatenate([pe, pf]), self.eps_r)
+            try:
+                K = maxwell_capacitance(Panels.concatenate([pe, pf]), self.eps_r)
+            except EctskinError:
+                # a coarse fingertip panel very close to a fine wire-end panel can make the
+                # collocation matrix indefinite: refine the fingertip and solve again
+                log.debug("refining the fingertip at %s, %s N", touch, forces[f])
+                pf = self.finger_panels(
+                    inflation_ml, touch, forces[f : f + 1], sphere_n=2 * self.discretisation.finger_sphere_n
+                )[0]
+                K = maxwell_capacitance(Panels.concatenate([pe, pf]), self.eps_r)
             out[f] = -K[self._pairs[:, 0], self._pairs[:, 1]]
         return out
 

@@ -1,0 +1,603 @@
+// ectskin live dashboard. Plain JS, no dependencies (the page must work offline).
+// Messages on /ws: one "meta", one "history", then "frame"s (see ectskin/dashboard/app.py).
+(function () {
+  "use strict";
+
+  const WINDOW_S = 10;            // strip chart: seconds shown
+  const CHART_COLS = 7;           // strip chart: small multiples per row
+  const GAP_MS = 500;             // strip chart: a longer pause in the stream breaks the line
+  const SURFACE_ORDER = ["front", "back", "right", "left"];
+  const SVG_NS = "http://www.w3.org/2000/svg";
+
+  const state = {
+    meta: null,
+    frames: [],                   // [{w, raw, calibrated}] for the chart, oldest first
+                                  // (w: page clock, ms; a source's t may restart per trial)
+    mode: "raw",
+    chartDirty: true,
+    lastFrame: null,
+    lastFrameWall: 0,
+    frameCount: 0,                // frames received by this page
+    ref: { state: "unknown", requestedAt: 0, sawNotReady: false, requests: 0 },
+    views: {},                    // marker views by svg id
+    refKey: null,                 // identity of the reference pose the views were scaled for
+    ws: null,
+    retryMs: 500,
+  };
+
+  const $ = (id) => document.getElementById(id);
+  function svgEl(tag, attrs, parent) {
+    const el = document.createElementNS(SVG_NS, tag);
+    for (const k in attrs) el.setAttribute(k, attrs[k]);
+    if (parent) parent.appendChild(el);
+    return el;
+  }
+  const isNum = (v) => typeof v === "number" && isFinite(v);
+  function fmt(v, digits) { return isNum(v) ? v.toFixed(digits) : "—"; }
+  function setText(id, text) { const el = $(id); if (el.textContent !== text) el.textContent = text; }
+
+  // ------------------------------------------------------------------ connection
+  function connect() {
+    const proto = location.protocol === "https:" ? "wss" : "ws";
+    const ws = new WebSocket(proto + "://" + location.host + "/ws");
+    state.ws = ws;
+    setConnection("connecting", "connecting…");
+    ws.onopen = () => { state.retryMs = 500; setConnection("open", "live"); };
+    ws.onmessage = (ev) => {
+      let msg;
+      try { msg = JSON.parse(ev.data); } catch (e) { console.error("bad message", e); return; }
+      if (msg.type === "meta") onMeta(msg);
+      else if (msg.type === "history") onHistory(msg);
+      else if (msg.type === "frame") onFrame(msg);
+    };
+    ws.onclose = () => {
+      setConnection("closed", "disconnected, retrying…");
+      setTimeout(connect, state.retryMs);
+      state.retryMs = Math.min(state.retryMs * 2, 5000);
+    };
+  }
+  function setConnection(s, text) {
+    const el = $("connection-status");
+    el.dataset.state = s;
+    el.textContent = text;
+  }
+
+  // ------------------------------------------------------------------ meta: build the drawings
+  function onMeta(meta) {
+    state.meta = meta;
+    state.frames = [];
+    state.refKey = null;
+    setText("layout-name", meta.layout_name || "");
+    buildFaces(meta);
+    buildProbs(meta);
+    for (const id of ["markers-yz", "markers-xz"]) buildView(id, meta);
+    resizeChart();
+  }
+
+  function surfacesOf(meta) {
+    const present = new Set();
+    meta.skins.forEach((s) => present.add(s.surface));
+    meta.regions.forEach((r) => present.add(r.surface));
+    return SURFACE_ORDER.filter((s) => present.has(s));
+  }
+
+  function buildFaces(meta) {
+    const host = $("faces");
+    host.innerHTML = "";
+    const skinSurface = {};
+    meta.skins.forEach((s) => { skinSurface[s.name] = s.surface; });
+    for (const surface of surfacesOf(meta)) {
+      const rects = meta.skins.filter((s) => s.surface === surface)
+        .concat(meta.regions.filter((r) => r.surface === surface));
+      let u0 = Infinity, u1 = -Infinity, v0 = Infinity, v1 = -Infinity;
+      for (const r of rects) {
+        u0 = Math.min(u0, r.u_mm[0]); u1 = Math.max(u1, r.u_mm[1]);
+        v0 = Math.min(v0, r.v_mm[0]); v1 = Math.max(v1, r.v_mm[1]);
+      }
+      const m = 3;
+      const div = document.createElement("div");
+      div.className = "face";
+      div.dataset.surface = surface;
+      // Surface coordinates (u, v) in mm; v (towards the tip) points up: SVG y = -v.
+      const svg = svgEl("svg", {
+        id: "face-" + surface, class: "face-svg",
+        viewBox: [u0 - m, -(v1 + m), u1 - u0 + 2 * m, v1 - v0 + 2 * m].join(" "),
+      }, div);
+      for (const s of meta.skins.filter((s) => s.surface === surface)) {
+        svgEl("rect", {
+          class: "skin", "data-skin": s.name, x: s.u_mm[0], y: -s.v_mm[1],
+          width: s.u_mm[1] - s.u_mm[0], height: s.v_mm[1] - s.v_mm[0], rx: 1.5,
+        }, svg);
+      }
+      // Regions under the wires (a lit region shows which wires cover it), labels on top.
+      const regions = meta.regions.filter((r) => r.surface === surface);
+      for (const r of regions) {
+        svgEl("rect", {
+          class: "region", "data-region": r.id, "data-surface": r.surface,
+          x: r.u_mm[0], y: -r.v_mm[1], width: r.u_mm[1] - r.u_mm[0], height: r.v_mm[1] - r.v_mm[0],
+        }, svg);
+      }
+      for (const e of meta.electrodes.filter((e) => e.surface === surface)) {
+        const g = svgEl("g", { class: "electrode", "data-electrode": e.name }, svg);
+        const pc = e.pad.centre_mm, ps = e.pad.size_mm;
+        svgEl("rect", { class: "pad", x: pc[0] - ps[0] / 2, y: -(pc[1] + ps[1] / 2),
+          width: ps[0], height: ps[1], rx: 0.6 }, g);
+        svgEl("polyline", {
+          class: "wire", "stroke-width": e.width_mm,
+          points: e.polyline_mm.map((p) => p[0] + "," + (-p[1])).join(" "),
+        }, g);
+        const tip = e.polyline_mm[e.polyline_mm.length - 1];
+        const lab = svgEl("text", { class: "electrode-label", x: tip[0], y: -(tip[1] + 1.5) }, g);
+        lab.textContent = e.name;
+      }
+      for (const r of regions) {
+        const t = svgEl("text", { class: "region-label", "data-region-label": r.id,
+          x: (r.u_mm[0] + r.u_mm[1]) / 2, y: -(r.v_mm[0] + r.v_mm[1]) / 2 }, svg);
+        t.textContent = r.id;
+      }
+      const title = document.createElement("div");
+      title.className = "title";
+      title.textContent = surface + (surface === "back" ? " (x to the right, as the front)" : "");
+      div.appendChild(title);
+      host.appendChild(div);
+    }
+  }
+
+  function className(meta, k) {
+    if (k === 0) return "0 none";
+    const r = meta.regions.find((r) => r.id === k);
+    return r ? k + " " + r.surface : String(k);
+  }
+
+  function buildProbs(meta) {
+    const host = $("probs");
+    host.innerHTML = "";
+    for (let k = 0; k < meta.n_classes; k++) {
+      const row = document.createElement("div");
+      row.className = "prob-row";
+      row.dataset.class = k;
+      row.innerHTML = '<span class="name"></span><span class="track"><span class="bar"></span></span>' +
+        '<span class="p">0.00</span>';
+      row.querySelector(".name").textContent = className(meta, k);
+      host.appendChild(row);
+    }
+  }
+
+  // ------------------------------------------------------------------ frames
+  function onHistory(msg) {
+    const now = performance.now();
+    for (const f of msg.frames || []) pushChart(f, now - 1000 * (f.age_s || 0));
+    state.chartDirty = true;
+  }
+
+  function onFrame(f) {
+    state.lastFrame = f;
+    state.lastFrameWall = performance.now();
+    state.frameCount += 1;
+    document.body.dataset.framesReceived = state.frameCount;
+    pushChart(f, state.lastFrameWall);
+    state.chartDirty = true;
+    if (f.stats) updateStats(f.stats);
+    setText("frame-seq", String(f.seq));
+    updateTouch(f.touch, f.label);
+    updateMarkers(f.markers);
+  }
+
+  function pushChart(f, wallMs) {
+    if (!Array.isArray(f.raw)) return;
+    const fr = state.frames;
+    fr.push({ w: wallMs, raw: f.raw, calibrated: f.calibrated });
+    const cutoff = wallMs - 1000 * WINDOW_S;
+    let drop = 0;
+    while (drop < fr.length && fr[drop].w < cutoff) drop++;
+    if (drop) fr.splice(0, drop);
+  }
+
+  function updateStats(s) {
+    setText("frames-count", String(s.frames ?? "—"));
+    setText("processed-count", String(s.processed ?? "—"));
+    setText("dropped-count", String(s.dropped ?? "—"));
+    setText("malformed-count", String(s.malformed ?? "—"));
+    setText("reconnects-count", String(s.reconnects ?? "—"));
+    $("dropped-count").classList.toggle("warn", s.dropped > 0);
+    $("malformed-count").classList.toggle("warn", s.malformed > 0);
+    setText("latency-p50", fmt(s.latency_ms_p50, 2));
+    setText("latency-p99", fmt(s.latency_ms_p99, 2));
+    setText("fps", fmt(s.fps_in, 1) + " / " + fmt(s.fps_out, 1));
+    setText("policy", s.policy || "—");
+    if (typeof s.reference_ready === "boolean") {
+      updateReference(s.reference_ready && !s.reference_capturing);
+    }
+  }
+
+  // ------------------------------------------------------------------ reference
+  function updateReference(ready) {
+    const ref = state.ref;
+    let st;
+    if (!ready) { st = "capturing"; ref.sawNotReady = true; }
+    else if (ref.state === "requested" && !ref.sawNotReady &&
+             performance.now() - ref.requestedAt < 1500) st = "requested";
+    else st = "ready";
+    setReference(st);
+  }
+  function setReference(st, detail) {
+    const ref = state.ref;
+    ref.state = st;
+    const el = $("reference-status");
+    el.dataset.state = st;
+    el.dataset.requests = ref.requests;
+    const text = {
+      unknown: "reference: —",
+      requested: "reference: re-capture requested…",
+      capturing: "reference: capturing…",
+      ready: "reference: ready" + (ref.requests ? " (re-captured ×" + ref.requests + ")" : ""),
+      error: "reference: " + (detail || "request failed"),
+    }[st];
+    if (el.textContent !== text) el.textContent = text;
+  }
+  async function captureReference() {
+    const btn = $("capture-reference");
+    btn.disabled = true;
+    try {
+      const resp = await fetch("/api/reference", { method: "POST" });
+      const body = await resp.json().catch(() => ({}));
+      if (!resp.ok || !body.ok) {
+        setReference("error", body.error || ("HTTP " + resp.status));
+      } else {
+        state.ref.requests = body.reference_requests || state.ref.requests + 1;
+        state.ref.requestedAt = performance.now();
+        state.ref.sawNotReady = false;
+        setReference("requested");
+      }
+    } catch (e) {
+      setReference("error", String(e));
+    } finally {
+      btn.disabled = false;
+    }
+  }
+
+  // ------------------------------------------------------------------ touch
+  function updateTouch(touch, label) {
+    const meta = state.meta;
+    if (!meta) return;
+    const regions = document.querySelectorAll("#faces .region");
+    const cls = touch && Number.isInteger(touch.cls) ? touch.cls : null;
+    const probs = touch && Array.isArray(touch.probs) ? touch.probs : null;
+    const pc = $("predicted-class");
+    if (cls === null) {
+      pc.textContent = "—"; pc.dataset.class = "";
+      setText("predicted-label", touch ? "" : "no touch model");
+    } else {
+      if (pc.textContent !== String(cls)) pc.textContent = String(cls);
+      pc.dataset.class = cls;
+      setText("predicted-label", cls === 0 ? "no touch" : className(meta, cls).replace(/^\d+ /, "") +
+        " region " + cls + (probs && isNum(probs[cls]) ? " (p = " + probs[cls].toFixed(2) + ")" : ""));
+    }
+    const truth = Number.isInteger(label) ? label : null;
+    setText("true-class", truth === null ? "—" : String(truth));
+    for (const el of regions) {
+      const id = Number(el.dataset.region);
+      const lit = cls !== null && id === cls;
+      el.classList.toggle("lit", lit);
+      el.classList.toggle("truth", truth !== null && id === truth);
+      const lab = el.ownerSVGElement.querySelector('[data-region-label="' + id + '"]');
+      if (lab) lab.classList.toggle("lit", lit);
+      // Unlit regions are tinted by their probability.
+      const p = probs && isNum(probs[id]) ? probs[id] : 0;
+      el.style.fillOpacity = lit ? "" : String(Math.min(0.5, 0.5 * p));
+    }
+    const rows = $("probs").children;
+    for (let k = 0; k < rows.length; k++) {
+      const p = probs && isNum(probs[k]) ? probs[k] : 0;
+      const row = rows[k];
+      row.querySelector(".bar").style.width = (100 * Math.max(0, Math.min(1, p))).toFixed(1) + "%";
+      row.querySelector(".p").textContent = probs ? p.toFixed(2) : "—";
+      row.classList.toggle("top", k === cls);
+      row.classList.toggle("truth", k === truth);
+    }
+  }
+
+  // ------------------------------------------------------------------ markers
+  const AXIS = { x: 0, y: 1, z: 2 };
+  function validPoint(p) { return Array.isArray(p) && p.length === 3 && p.every(isNum); }
+  function dist(a, b) { return Math.hypot(a[0] - b[0], a[1] - b[1], a[2] - b[2]); }
+
+  function buildView(id, meta) {
+    const svg = $(id);
+    svg.innerHTML = "";
+    const [h, v] = svg.dataset.axes.split(",");
+    const n = meta.marker_names.length;
+    const view = { svg, h: AXIS[h], v: AXIS[v], hName: h, vName: v, bounds: null,
+                   static: svgEl("g", {}, svg), lines: {}, dots: {} };
+    for (const kind of ["ref", "true", "pred"]) {
+      view.lines[kind] = svgEl("polyline", { class: "l-" + kind, "data-kind": kind }, svg);
+    }
+    for (const kind of ["ref", "true", "pred"]) {
+      view.dots[kind] = [];
+      for (let j = 0; j < n; j++) {
+        view.dots[kind].push(svgEl("circle", {
+          class: "m-" + kind, r: kind === "ref" ? 5 : 4, "data-kind": kind,
+          "data-marker": meta.marker_names[j], visibility: "hidden",
+        }, svg));
+      }
+    }
+    view.names = meta.marker_names.map((name) => {
+      const t = svgEl("text", { class: "m-name", visibility: "hidden" }, svg);
+      t.textContent = name;
+      return t;
+    });
+    state.views[id] = view;
+    if (validPoints(meta.reference_markers)) setBounds(view, meta.reference_markers);
+  }
+  function validPoints(ps) { return Array.isArray(ps) && ps.some(validPoint); }
+
+  // Equal-aspect mm → px mapping around the reference pose; grows if points leave it.
+  function setBounds(view, ref, extra) {
+    const pts = ref.filter(validPoint).concat((extra || []).filter(validPoint));
+    let h0 = Infinity, h1 = -Infinity, v0 = Infinity, v1 = -Infinity;
+    for (const p of pts) {
+      h0 = Math.min(h0, p[view.h]); h1 = Math.max(h1, p[view.h]);
+      v0 = Math.min(v0, p[view.v]); v1 = Math.max(v1, p[view.v]);
+    }
+    if (view.v === 2) v0 = Math.min(v0, 0);          // keep the clamped base (z = 0) in view
+    const hc = (h0 + h1) / 2, half = Math.max(35, (h1 - h0) / 2 + 15);
+    view.bounds = { h0: hc - half, h1: hc + half, v0: v0 - 10, v1: v1 + 15 };
+    drawAxes(view);
+  }
+  function mapper(view) {
+    const W = view.svg.clientWidth || 300, H = view.svg.clientHeight || 360;
+    const b = view.bounds, pad = 28;
+    const s = Math.min((W - 2 * pad) / (b.h1 - b.h0), (H - 2 * pad) / (b.v1 - b.v0));
+    const ox = W / 2 - s * (b.h0 + b.h1) / 2, oy = H / 2 + s * (b.v0 + b.v1) / 2;
+    return { s, W, H, x: (a) => ox + s * a, y: (c) => oy - s * c,
+             a: (px) => (px - ox) / s, c: (py) => (oy - py) / s };
+  }
+  function drawAxes(view) {
+    const g = view.static;
+    g.innerHTML = "";
+    const m = mapper(view);
+    view.map = m;
+    const lo = { h: m.a(0), v: m.c(m.H) }, hi = { h: m.a(m.W), v: m.c(0) };
+    const step = (hi.v - lo.v) > 200 ? 20 : 10;
+    // Tick labels keep clear of the axis names (bottom right, top left).
+    for (let a = Math.ceil(lo.h / step) * step; a <= hi.h; a += step) {
+      svgEl("line", { class: "grid", x1: m.x(a), x2: m.x(a), y1: 0, y2: m.H }, g);
+      if (a % (2 * step) === 0 && m.x(a) > 24 && m.x(a) < m.W - 70) {
+        const t = svgEl("text", { class: "tick", x: m.x(a) + 2, y: m.H - 4 }, g);
+        t.textContent = a;
+      }
+    }
+    for (let c = Math.ceil(lo.v / step) * step; c <= hi.v; c += step) {
+      svgEl("line", { class: "grid", x1: 0, x2: m.W, y1: m.y(c), y2: m.y(c) }, g);
+      if (c % (2 * step) === 0 && m.y(c) > 28 && m.y(c) < m.H - 16) {
+        const t = svgEl("text", { class: "tick", x: 3, y: m.y(c) - 2 }, g);
+        t.textContent = c;
+      }
+    }
+    if (view.v === 2) {  // the clamp at the base, z = 0
+      svgEl("line", { class: "axis", x1: 0, x2: m.W, y1: m.y(0), y2: m.y(0),
+                      "stroke-width": 3 }, g);
+    }
+    const lab = svgEl("text", { class: "tick axis-name", x: m.W - 4, y: m.H - 4,
+                                "text-anchor": "end" }, g);
+    lab.textContent = view.hName + " (mm) →";
+    const lab2 = svgEl("text", { class: "tick axis-name", x: 3, y: 12 }, g);
+    lab2.textContent = "↑ " + view.vName + " (mm)";
+  }
+  function outside(view, pts) {
+    const b = view.bounds;
+    return pts.some((p) => validPoint(p) &&
+      (p[view.h] < b.h0 || p[view.h] > b.h1 || p[view.v] < b.v0 || p[view.v] > b.v1));
+  }
+  function drawPoints(view, kind, pts) {
+    const dots = view.dots[kind], m = view.map, line = [];
+    for (let j = 0; j < dots.length; j++) {
+      const p = pts && pts[j];
+      if (validPoint(p)) {
+        const x = m.x(p[view.h]), y = m.y(p[view.v]);
+        dots[j].setAttribute("cx", x.toFixed(1));
+        dots[j].setAttribute("cy", y.toFixed(1));
+        dots[j].setAttribute("visibility", "visible");
+        line.push(x.toFixed(1) + "," + y.toFixed(1));
+        if (kind === "ref") {
+          view.names[j].setAttribute("x", (x + 8).toFixed(1));
+          view.names[j].setAttribute("y", (y + 4).toFixed(1));
+          view.names[j].setAttribute("visibility", "visible");
+        }
+      } else {
+        dots[j].setAttribute("visibility", "hidden");
+      }
+    }
+    view.lines[kind].setAttribute("points", line.join(" "));
+  }
+
+  // Predicted markers against the reference pose (and the true markers when the source has them).
+  // Without a tracking model the true markers are still drawn. "moved" is the largest distance of
+  // a marker from its reference position: predicted markers if any, else true ones
+  // (data-source says which).
+  function updateMarkers(mk) {
+    if (!state.meta) return;
+    const moved = $("markers-moved"), err = $("markers-error");
+    const pred = mk && validPoints(mk.pred) ? mk.pred : null;
+    const truth = mk && validPoints(mk.true) ? mk.true : null;
+    let ref = mk && validPoints(mk.reference) ? mk.reference : null;
+    if (!ref && validPoints(state.meta.reference_markers)) ref = state.meta.reference_markers;
+    const shown = pred || truth;
+    if (!shown) {
+      moved.textContent = "—"; moved.dataset.value = ""; moved.dataset.source = "";
+      err.textContent = "—"; err.dataset.value = "";
+      return;
+    }
+    const key = ref ? JSON.stringify(ref) : "none";
+    const all = (pred || []).concat(truth || []);
+    for (const id in state.views) {
+      const view = state.views[id];
+      if (key !== state.refKey || !view.bounds) setBounds(view, ref || shown);
+      if (outside(view, all)) setBounds(view, ref || shown, all);
+      drawPoints(view, "ref", ref);
+      drawPoints(view, "true", truth);
+      drawPoints(view, "pred", pred);
+    }
+    state.refKey = key;
+    let maxMove = null;
+    if (ref) {
+      for (let j = 0; j < shown.length; j++) {
+        if (validPoint(shown[j]) && validPoint(ref[j])) {
+          const d = dist(shown[j], ref[j]);
+          maxMove = maxMove === null ? d : Math.max(maxMove, d);
+        }
+      }
+    }
+    moved.textContent = fmt(maxMove, 2);
+    moved.dataset.value = maxMove === null ? "" : String(maxMove);
+    moved.dataset.source = pred ? "pred" : "true";
+    // Average distance of the predicted to the true markers (paper Eq. 3, for this frame).
+    let sum = 0, n = 0;
+    if (pred && truth) {
+      for (let j = 0; j < pred.length; j++) {
+        if (validPoint(pred[j]) && validPoint(truth[j])) { sum += dist(pred[j], truth[j]); n++; }
+      }
+    }
+    err.textContent = n ? (sum / n).toFixed(2) : "—";
+    err.dataset.value = n ? String(sum / n) : "";
+  }
+
+  // ------------------------------------------------------------------ strip chart
+  const chart = { canvas: null, ctx: null, dpr: 1, W: 0, H: 0 };
+  function resizeChart() {
+    const c = $("strip-chart");
+    chart.canvas = c;
+    chart.ctx = c.getContext("2d");
+    chart.dpr = window.devicePixelRatio || 1;
+    const n = state.meta ? state.meta.n_pairs : 28;
+    const rows = Math.max(1, Math.ceil(n / CHART_COLS));
+    chart.W = c.clientWidth;
+    chart.H = rows * 78;
+    c.style.height = chart.H + "px";
+    c.width = Math.round(chart.W * chart.dpr);
+    c.height = Math.round(chart.H * chart.dpr);
+    state.chartDirty = true;
+    for (const id in state.views) if (state.views[id].bounds) drawAxes(state.views[id]);
+  }
+
+  function pairColor(meta, i) {
+    const s = meta.pair_surfaces && meta.pair_surfaces[i];
+    if (!s || s[0] !== s[1]) return getVar("--cross");
+    return s[0] === "back" ? getVar("--back") : getVar("--front");
+  }
+  const varCache = {};
+  function getVar(name) {
+    if (!(name in varCache)) varCache[name] = getComputedStyle(document.documentElement)
+      .getPropertyValue(name).trim() || "#888";
+    return varCache[name];
+  }
+
+  function drawChart() {
+    const meta = state.meta, ctx = chart.ctx;
+    if (!meta || !ctx) return;
+    const dpr = chart.dpr, W = chart.W, H = chart.H;
+    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+    ctx.clearRect(0, 0, W, H);
+    const n = meta.n_pairs, cols = CHART_COLS, rows = Math.ceil(n / cols);
+    const cw = W / cols, ch = H / rows;
+    const fr = state.frames, mode = state.mode;
+    // Time axis: the page clock (s); the window scrolls even when frames stop coming.
+    const tEnd = performance.now() / 1000, tStart = tEnd - WINDOW_S;
+    const calibrated = mode === "calibrated";
+    const series = fr.filter((f) => Array.isArray(f[mode]) && f.w / 1000 >= tStart);
+    ctx.font = "11px system-ui, sans-serif";
+    ctx.textBaseline = "top";
+    for (let i = 0; i < n; i++) {
+      const x0 = (i % cols) * cw, y0 = Math.floor(i / cols) * ch;
+      const px0 = x0 + 4, px1 = x0 + cw - 6, py0 = y0 + 16, py1 = y0 + ch - 14;
+      ctx.strokeStyle = "#e6e9ed"; ctx.lineWidth = 1;
+      ctx.strokeRect(px0 + 0.5, py0 + 0.5, px1 - px0, py1 - py0);
+      // Second grid lines every 2 s.
+      ctx.strokeStyle = "#f1f3f5";
+      for (let s = Math.ceil(tStart / 2) * 2; s < tEnd; s += 2) {  // grid fixed to the clock
+        const gx = px0 + (px1 - px0) * (s - tStart) / WINDOW_S;
+        ctx.beginPath(); ctx.moveTo(gx + 0.5, py0); ctx.lineTo(gx + 0.5, py1); ctx.stroke();
+      }
+      ctx.fillStyle = "#4b545e";
+      ctx.fillText(meta.pair_names[i], px0, y0 + 2);
+      let lo = Infinity, hi = -Infinity, last = null;
+      for (const f of series) {
+        const v = f[mode][i];
+        if (isNum(v)) { lo = Math.min(lo, v); hi = Math.max(hi, v); last = v; }
+      }
+      if (!isFinite(lo)) {
+        ctx.fillStyle = "#a0a8b2";
+        ctx.fillText(calibrated && fr.length ? "no reference yet" : "no data", px0 + 4, py0 + 4);
+        continue;
+      }
+      // Autoscale per pair with a floor on the span (1 fF raw, 0.1 % calibrated).
+      const minSpan = calibrated ? 1e-3 : 1e-3;
+      let span = hi - lo;
+      if (span < minSpan) { const c = (hi + lo) / 2; lo = c - minSpan / 2; hi = c + minSpan / 2; span = minSpan; }
+      lo -= 0.08 * span; hi += 0.08 * span;
+      const val = calibrated ? (last >= 0 ? "+" : "") + (100 * last).toFixed(1) + " %"
+                             : last.toFixed(3);
+      ctx.textAlign = "right";
+      ctx.fillText(val, px1, y0 + 2);
+      ctx.fillStyle = "#a0a8b2";
+      ctx.fillText("Δ " + (calibrated ? (100 * span).toFixed(2) + " %" : (1000 * span).toFixed(1) + " fF"),
+                   px1, py1 + 2);
+      ctx.textAlign = "left";
+      ctx.strokeStyle = pairColor(meta, i);
+      ctx.lineWidth = 1.4;
+      ctx.beginPath();
+      let pen = false, prevW = -Infinity;
+      for (const f of series) {
+        const v = f[mode][i];
+        if (!isNum(v)) { pen = false; continue; }
+        if (f.w - prevW > GAP_MS) pen = false;  // no line across a gap in the stream
+        prevW = f.w;
+        const x = px0 + (px1 - px0) * (f.w / 1000 - tStart) / WINDOW_S;
+        const y = py1 - (py1 - py0) * (v - lo) / (hi - lo);
+        if (pen) ctx.lineTo(x, y); else ctx.moveTo(x, y);
+        pen = true;
+      }
+      ctx.stroke();
+    }
+  }
+
+  let lastDraw = 0;
+  function tick(now) {
+    // Redraw on new data, and at least every 100 ms so that the time axis keeps scrolling.
+    if (state.chartDirty || now - lastDraw > 100) {
+      state.chartDirty = false; lastDraw = now; drawChart();
+    }
+    requestAnimationFrame(tick);
+  }
+
+  // ------------------------------------------------------------------ polling (when idle)
+  async function pollStats() {
+    try {
+      const resp = await fetch("/api/stats");
+      if (!resp.ok) return;
+      const s = await resp.json();
+      const d = s.dashboard || {};
+      const errEl = $("engine-error");
+      errEl.hidden = !d.engine_error;
+      errEl.textContent = d.engine_error ? "engine: " + d.engine_error : "";
+      if (performance.now() - state.lastFrameWall > 1500) updateStats(s);
+    } catch (e) { /* server gone: the websocket reports it */ }
+  }
+  function updateAge() {
+    if (!state.lastFrameWall) return;
+    const age = (performance.now() - state.lastFrameWall) / 1000;
+    setText("frame-age", age < 1 ? "" : age.toFixed(0) + " s ago");
+  }
+
+  // ------------------------------------------------------------------ start
+  document.querySelectorAll('input[name="chart-mode"]').forEach((el) => {
+    el.addEventListener("change", () => { state.mode = el.value; state.chartDirty = true; });
+  });
+  $("capture-reference").addEventListener("click", captureReference);
+  window.addEventListener("resize", resizeChart);
+  resizeChart();
+  connect();
+  requestAnimationFrame(tick);
+  setInterval(pollStats, 2000);
+  setInterval(updateAge, 500);
+})();

@@ -1,0 +1,279 @@
+"""Calibrated capacitance, paper Eq. 2: c = (c_t − c_0) / c_0, against an explicit reference c_0.
+
+The paper calibrates every readout against a *reference state*: the uninflated, untouched
+manipulator for touch recognition, and the first frame of each trajectory for deformation tracking
+("prior knowledge", §4.2). This module holds Eq. 2 itself and the choice of the touch reference;
+the tracking reference (first frame per trajectory) is taken in :mod:`ectskin.learn.datasets`.
+
+A reference is checked before it is divided by: a zero, tiny or non-finite c_0 is an
+:class:`~ectskin.EctskinError` naming the channel, and a non-finite frame is an error naming the
+trial, the frame index and the channel. Nothing here ever returns a silent inf or NaN.
+
+Where references come from (``reference`` argument of :func:`touch_reference`):
+
+``"auto"``   every trial carries its own ``trial.meta["reference"]`` (generic imports with a
+             reference field, see ``docs/import-format.md``) → those; otherwise ``"rest"``.
+``"rest"``   the mean readout of the rest state: the trial(s) with inflation all 0 ml and no
+             contact (``meta["kind"] == "no_contact"``, or region 0 with all labels 0). A
+             recording with no inflation information at all (every ``trial.inflation == ()``, a
+             non-inflatable skin) uses its no-contact trials. Error if there is none.
+``"meta"``   ``trial.meta["reference"]`` of every trial (error if one lacks it).
+array        an explicit (n_pairs,) reference in the recording's units (pF).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import numpy as np
+
+from ectskin._check import EctskinError
+from ectskin.io.recording import Recording, Trial
+
+log = logging.getLogger(__name__)
+
+REFERENCE_OPTIONS = ("auto", "rest", "meta")
+
+#: A reference channel is "tiny" when |c_0| <= REFERENCE_RTOL * max_j |c_0,j|: dividing by it
+#: would turn readout noise into huge calibrated values. Readouts of one skin span at most a few
+#: decades, never six.
+REFERENCE_RTOL = 1e-6
+
+
+def _channel(j: int, pair_names: Sequence[str] | None) -> str:
+    if pair_names is not None and j < len(pair_names):
+        return f"channel {j} ({pair_names[j]!r})"
+    return f"channel {j}"
+
+
+def check_reference(
+    reference: np.ndarray,
+    n_pairs: int,
+    *,
+    source: str = "reference",
+    pair_names: Sequence[str] | None = None,
+) -> np.ndarray:
+    """Check a reference c_0 for Eq. 2 and return it as float64.
+
+    Parameters
+    ----------
+    reference : (n_pairs,) or (n_frames, n_pairs) array, pF
+        One reference for all frames, or one per frame.
+    n_pairs : int
+        Expected channel count.
+
+    Raises
+    ------
+    EctskinError
+        Wrong shape, non-numeric, or a channel whose reference is non-finite, zero or tiny
+        (|c_0| <= ``REFERENCE_RTOL`` × the largest |c_0|): the message names the channel.
+    """
+    try:
+        ref = np.asarray(reference, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise EctskinError(f"{source}: reference must be numeric; {exc}") from None
+    if ref.ndim not in (1, 2) or ref.shape[-1] != n_pairs:
+        raise EctskinError(
+            f"{source}: reference must have shape ({n_pairs},) or (n_frames, {n_pairs}), "
+            f"got {ref.shape}"
+        )
+    rows = ref.reshape(-1, n_pairs)
+    scale = np.max(np.abs(np.where(np.isfinite(rows), rows, 0.0)), axis=1, initial=0.0)
+    # non-finite, or |c_0| tiny next to the largest channel of the same reference row
+    bad = ~np.isfinite(rows) | (np.abs(rows) <= REFERENCE_RTOL * scale[:, None])
+    if bad.any():
+        r, j = (int(v) for v in np.argwhere(bad)[0])
+        where_ = f"{source}: reference" + (f" of frame {r}" if ref.ndim == 2 else "")
+        if not np.isfinite(rows[r, j]):
+            raise EctskinError(
+                f"{where_}, {_channel(j, pair_names)} is {rows[r, j]}; Eq. 2 needs a finite, "
+                f"non-zero reference readout"
+            )
+        raise EctskinError(
+            f"{where_}, {_channel(j, pair_names)} is {rows[r, j]:.6g} (largest channel "
+            f"{scale[r]:.6g}); Eq. 2 divides by the reference, expected a non-zero readout"
+        )
+    return ref
+
+
+def calibrate(
+    frames: np.ndarray,
+    reference: np.ndarray,
+    *,
+    source: str = "frames",
+    pair_names: Sequence[str] | None = None,
+    allow_nonfinite: bool = False,
+) -> np.ndarray:
+    """Calibrated capacitance by paper Eq. 2: c = (c_t − c_0) / c_0.
+
+    Parameters
+    ----------
+    frames : (n_frames, n_pairs) or (n_pairs,) array
+        Raw readouts c_t, pF (any unit: Eq. 2 is a ratio).
+    reference : (n_pairs,) or (n_frames, n_pairs) array
+        Reference readouts c_0 in the same unit, one for all frames or one per frame.
+    source : str
+        Where the frames come from, for error messages, e.g. ``"trial 'touch_003'"``.
+    pair_names : sequence of str, optional
+        Channel names for error messages.
+    allow_nonfinite : bool
+        If False (default) a non-finite frame value is an error naming the frame and channel.
+        If True such values propagate as NaN (the caller drops those frames).
+
+    Returns
+    -------
+    (n_frames, n_pairs) or (n_pairs,) float32
+        Relative change, dimensionless (0.4 = +40 %).
+    """
+    try:
+        c_t = np.asarray(frames, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise EctskinError(f"{source}: readouts must be numeric; {exc}") from None
+    single = c_t.ndim == 1
+    if single:
+        c_t = c_t[None, :]
+    if c_t.ndim != 2:
+        raise EctskinError(
+            f"{source}: readouts must have shape (n_frames, n_pairs), got {c_t.shape}"
+        )
+    n, n_pairs = c_t.shape
+    c_0 = check_reference(reference, n_pairs, source=source, pair_names=pair_names)
+    if c_0.ndim == 2 and c_0.shape[0] != n:
+        raise EctskinError(
+            f"{source}: a per-frame reference must have {n} rows (one per frame), got {c_0.shape[0]}"
+        )
+    finite = np.isfinite(c_t)
+    if not allow_nonfinite and not finite.all():
+        i, j = (int(v) for v in np.argwhere(~finite)[0])
+        raise EctskinError(
+            f"{source}: frame {i}, {_channel(j, pair_names)} is {c_t[i, j]}; calibrated readouts "
+            f"must be finite (drop masked frames, e.g. touch_dataset(..., nonfinite='drop'))"
+        )
+    c = (c_t - c_0) / c_0  # Eq. 2
+    # float32 cannot hold everything float64 can: refuse an overflow rather than return inf.
+    big = finite & (np.abs(c) > np.finfo(np.float32).max)
+    if big.any():
+        i, j = (int(v) for v in np.argwhere(big)[0])
+        raise EctskinError(
+            f"{source}: frame {i}, {_channel(j, pair_names)} calibrates to {c[i, j]:.3g}, too "
+            f"large for float32; is the reference in the same unit as the readouts?"
+        )
+    out = c.astype(np.float32)
+    return out[0] if single else out
+
+
+# --------------------------------------------------------------------------- references
+def is_no_contact(trial: Trial) -> bool:
+    """True for a trial without contact: ``meta["kind"] == "no_contact"``, or (when the trial has
+    no ``kind``) region 0 with every frame labelled 0."""
+    kind = trial.meta.get("kind")
+    if kind is not None:
+        return kind == "no_contact"
+    return trial.region == 0 and not np.any(trial.labels)
+
+
+def is_uninflated(trial: Trial) -> bool:
+    """True when the trial's inflation vector is known and all zero (ml)."""
+    return len(trial.inflation) > 0 and all(v == 0 for v in trial.inflation)
+
+
+def rest_trials(rec: Recording) -> list[Trial]:
+    """The rest-state trials of ``rec``: uninflated (all chambers 0 ml) and without contact.
+
+    A recording without any inflation information (every ``trial.inflation == ()``) is taken as
+    a non-inflatable skin: its no-contact trials are the rest state.
+    """
+    if all(len(t.inflation) == 0 for t in rec.trials):
+        return [t for t in rec.trials if is_no_contact(t)]
+    return [t for t in rec.trials if is_no_contact(t) and is_uninflated(t)]
+
+
+def meta_reference(trial: Trial, n_pairs: int, channels: np.ndarray | None = None) -> np.ndarray:
+    """A trial's own reference ``trial.meta["reference"]`` as (n_pairs,) float64 (None → NaN).
+
+    ``channels`` (indices) selects the measured channels before the check.
+    """
+    src = f"trial {trial.name!r}"
+    if "reference" not in trial.meta:
+        raise EctskinError(f"{src}: meta has no 'reference' (expected one per trial)")
+    raw = trial.meta["reference"]
+    try:
+        ref = np.array([np.nan if v is None else v for v in raw], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise EctskinError(f"{src}: meta['reference'] must be a list of numbers") from None
+    if ref.shape != (trial.n_pairs,):
+        raise EctskinError(
+            f"{src}: meta['reference'] must hold {trial.n_pairs} values (one per channel), "
+            f"got shape {ref.shape}"
+        )
+    if channels is not None:
+        ref = ref[channels]
+    return check_reference(ref, ref.shape[0], source=src)
+
+
+def touch_reference(
+    rec: Recording,
+    *,
+    reference: str | np.ndarray = "auto",
+    channels: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """The touch-recognition reference c_0 of every trial (see the module docstring).
+
+    Parameters
+    ----------
+    rec : Recording
+    reference : "auto" | "rest" | "meta" | (n_pairs,) array
+    channels : (n_kept,) int array, optional
+        Measured channel indices; the references returned are restricted to them.
+
+    Returns
+    -------
+    dict trial name → (n_kept,) float64 reference, pF.
+    """
+    keep = np.arange(rec.n_pairs) if channels is None else np.asarray(channels)
+    names = [rec.layout.pair_names[j] for j in keep]
+    if not isinstance(reference, str):
+        ref = check_reference(
+            reference, rec.n_pairs, source="reference", pair_names=rec.layout.pair_names
+        )
+        if ref.ndim != 1:
+            raise EctskinError(f"reference must have shape ({rec.n_pairs},), got {ref.shape}")
+        return {t.name: ref[keep] for t in rec.trials}
+    if reference not in REFERENCE_OPTIONS:
+        raise EctskinError(
+            f"Invalid value for 'reference': allowed values are "
+            f"{', '.join(repr(o) for o in REFERENCE_OPTIONS)} or an array of {rec.n_pairs} "
+            f"readouts; got {reference!r}"
+        )
+    if reference == "meta" or (
+        reference == "auto" and rec.trials and all("reference" in t.meta for t in rec.trials)
+    ):
+        return {t.name: meta_reference(t, rec.n_pairs, keep) for t in rec.trials}
+    rest = rest_trials(rec)
+    if not rest:
+        raise EctskinError(
+            "recording has no rest-state trial (inflation all 0 ml and no contact) to calibrate "
+            "against (paper Eq. 2); pass reference=<array of "
+            f"{rec.n_pairs} readouts> or import the file with a reference field"
+        )
+    frames = np.concatenate([t.capacitance[:, keep] for t in rest], axis=0)
+    if not np.all(np.isfinite(frames)):
+        # the mean of masked frames would be NaN: average only the finite readouts per channel
+        count = np.isfinite(frames).sum(axis=0)
+        if (count == 0).any():
+            j = int(np.argmax(count == 0))
+            raise EctskinError(
+                f"rest-state trial(s) {[t.name for t in rest]}: {_channel(j, names)} has no "
+                f"finite readout to use as reference"
+            )
+        ref = np.nanmean(frames, axis=0)
+    else:
+        ref = frames.mean(axis=0)
+    log.info(
+        "touch reference: mean of %d frames of rest-state trial(s) %s",
+        frames.shape[0],
+        ", ".join(t.name for t in rest),
+    )
+    ref = check_reference(ref, keep.size, source="rest-state reference", pair_names=names)
+    return {t.name: ref for t in rec.trials}

@@ -1,0 +1,782 @@
+"""Learning data from recordings: calibrated touch frames, tracking windows, splits, normalisation.
+
+* :func:`touch_dataset` → :class:`TouchData`: one sample per frame, the frame's calibrated
+  readouts (paper Eq. 2 against the rest state, see :mod:`ectskin.learn.calibration`) and its
+  touch class (0 = no touch, 1..n_regions).
+* :func:`track_dataset` → :class:`TrackData`: one sample per frame of every tracking trial, the
+  window of the last ``k`` calibrated frames (oldest first) ending at that frame, the marker
+  coordinates of the trajectory's first frame (``init``) and of the window's last frame (``y``).
+  With ``prior=True`` (the paper, §4.2) each trajectory is calibrated against its own first frame;
+  ``prior=False`` is the ablation: absolute calibration against the touch reference, ``init`` = 0.
+* :func:`split_groups`: trial-exclusive train / val / test splits (paper: 125/32/32 touch trials,
+  108/18/20 tracking trials), scaled to recordings of other sizes, optionally stratified.
+* :class:`Normalizer`: per-channel mean / std fitted on the training split only, stored as plain
+  lists inside checkpoints.
+
+Channels a recording does not measure (``rec.meta["unmeasured_pairs"]``, pair indices, set by the
+generic importer when a file's channel count is not n(n−1)/2, see ``docs/import-format.md``) are
+left out of every data set: ``pair_names`` and ``pairs`` list the measured channels only
+(``pair_names`` are the file's channel names when the import stored them in
+``rec.meta["channel_names"]``).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from ectskin._check import EctskinError
+from ectskin.io.recording import Recording, Trial
+from ectskin.learn.calibration import calibrate, is_no_contact, touch_reference
+
+log = logging.getLogger(__name__)
+
+#: Paper §3: touch data 189 trials split 125 / 32 / 32 (train / val / test).
+TOUCH_SPLIT = (125, 32, 32)
+#: Paper §3: tracking data 146 trials split 108 / 18 / 20.
+TRACK_SPLIT = (108, 18, 20)
+SPLITS = ("train", "val", "test")
+NONFINITE_OPTIONS = ("raise", "drop")
+
+__all__ = [
+    "NONFINITE_OPTIONS",
+    "SPLITS",
+    "TOUCH_SPLIT",
+    "TRACK_SPLIT",
+    "Normalizer",
+    "TouchData",
+    "TrackData",
+    "channel_names",
+    "measured_channels",
+    "split_from_names",
+    "split_groups",
+    "split_names",
+    "touch_dataset",
+    "track_dataset",
+]
+
+
+# --------------------------------------------------------------------------- data objects
+@dataclass
+class TouchData:
+    """Touch-recognition samples, one per frame.
+
+    Attributes
+    ----------
+    x : (n, n_pairs) float32
+        Calibrated readouts (Eq. 2), dimensionless.
+    y : (n,) int64
+        Touch class, 0 = no touch, 1..n_regions.
+    group : (n,) int64
+        Index into ``group_names`` of the sample's trial (for trial-exclusive splits).
+    group_names : list of str
+        Trial names.
+    n_classes : int
+        1 + number of regions of the layout.
+    pair_names : list of str
+        Channel names (measured pairs), length n_pairs.
+    group_region : (n_groups,) int64
+        Each trial's touched region (0 = none): the ``stratify`` labels of :func:`split_groups`.
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    group: np.ndarray
+    group_names: list[str]
+    n_classes: int
+    pair_names: list[str]
+    group_region: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.x.shape[0])
+
+    @property
+    def n_pairs(self) -> int:
+        return int(self.x.shape[1])
+
+    @property
+    def n_groups(self) -> int:
+        return len(self.group_names)
+
+    def select(self, groups: Sequence[int] | np.ndarray) -> TouchData:
+        """The samples of the given group ids (e.g. ``split["train"]``); group ids are kept."""
+        m = _group_mask(self.group, groups, self.n_groups)
+        return replace(self, x=self.x[m], y=self.y[m], group=self.group[m])
+
+
+@dataclass
+class TrackData:
+    """Deformation-tracking samples, one per frame (the window ends at that frame).
+
+    Attributes
+    ----------
+    x : (n, k, n_pairs) float32
+        Calibrated readouts of the window's k frames, oldest first.
+    init : (n, n_markers, 3) float32
+        Marker coordinates of the trajectory's first frame, mm (zeros when ``prior`` is False).
+    y : (n, n_markers, 3) float32
+        Marker coordinates at the window's last frame, mm.
+    group : (n,) int64
+        Index into ``group_names`` of the sample's trial.
+    frame : (n,) int64
+        Index of the window's last frame inside its trial.
+    group_names : list of str
+        Trial names.
+    electrode_desc : (n_electrodes, d) float32
+        ``layout.electrode_descriptors()`` (P / Q embeddings of the C2DT).
+    pairs : (n_pairs, 2) int64
+        Electrode indices of each channel (measured pairs only).
+    prior : bool
+        True: per-trajectory reference and init coordinates (paper); False: ablation.
+    pair_names : list of str
+        Channel names, length n_pairs.
+    group_region : (n_groups,) int64
+        Each trial's touched region.
+    """
+
+    x: np.ndarray
+    init: np.ndarray
+    y: np.ndarray
+    group: np.ndarray
+    frame: np.ndarray
+    group_names: list[str]
+    electrode_desc: np.ndarray
+    pairs: np.ndarray
+    prior: bool
+    pair_names: list[str] = field(default_factory=list)
+    group_region: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.x.shape[0])
+
+    @property
+    def window(self) -> int:
+        return int(self.x.shape[1])
+
+    @property
+    def n_pairs(self) -> int:
+        return int(self.x.shape[2])
+
+    @property
+    def n_markers(self) -> int:
+        return int(self.y.shape[1])
+
+    @property
+    def n_groups(self) -> int:
+        return len(self.group_names)
+
+    def select(self, groups: Sequence[int] | np.ndarray) -> TrackData:
+        """The samples of the given group ids (e.g. ``split["test"]``); group ids are kept."""
+        m = _group_mask(self.group, groups, self.n_groups)
+        return replace(
+            self,
+            x=self.x[m],
+            init=self.init[m],
+            y=self.y[m],
+            group=self.group[m],
+            frame=self.frame[m],
+        )
+
+
+def _group_mask(group: np.ndarray, groups: Any, n_groups: int) -> np.ndarray:
+    ids = np.asarray(groups)
+    if ids.size and (ids.dtype.kind not in "iu" or ids.min() < 0 or ids.max() >= n_groups):
+        raise EctskinError(
+            f"group ids must be integers in 0..{n_groups - 1}, got {ids.tolist()[:10]}"
+        )
+    return np.isin(group, ids)
+
+
+# --------------------------------------------------------------------------- helpers
+def measured_channels(rec: Recording) -> np.ndarray:
+    """(n_measured,) int64 indices of the channels that hold data (all but
+    ``rec.meta["unmeasured_pairs"]``)."""
+    unmeasured = rec.meta.get("unmeasured_pairs", [])
+    try:
+        drop = np.asarray(list(unmeasured), dtype=np.int64)
+    except (TypeError, ValueError):
+        raise EctskinError(
+            f"recording meta 'unmeasured_pairs' must be a list of pair indices, got {unmeasured!r}"
+        ) from None
+    if drop.size and (drop.min() < 0 or drop.max() >= rec.n_pairs):
+        raise EctskinError(
+            f"recording meta 'unmeasured_pairs' must hold indices in 0..{rec.n_pairs - 1}, "
+            f"got {drop.tolist()}"
+        )
+    keep = np.setdiff1d(np.arange(rec.n_pairs, dtype=np.int64), drop)
+    if keep.size == 0:
+        raise EctskinError("recording meta 'unmeasured_pairs' leaves no channel to learn from")
+    return keep
+
+
+def channel_names(rec: Recording, keep: np.ndarray | None = None) -> list[str]:
+    """Names of the measured channels: ``rec.meta["channel_names"]`` when a generic import stored
+    the file's own names (one per measured channel), else the layout's pair names."""
+    keep = measured_channels(rec) if keep is None else keep
+    names = rec.meta.get("channel_names")
+    if isinstance(names, (list, tuple)) and len(names) == keep.size:
+        return [str(v) for v in names]
+    return [rec.layout.pair_names[j] for j in keep]
+
+
+def _select_trials(rec: Recording, trials: Any) -> list[Trial]:
+    if trials is None:
+        return list(rec.trials)
+    if isinstance(trials, str):
+        trials = [trials]
+    out = []
+    for t in trials:
+        if isinstance(t, (int, np.integer)) and not isinstance(t, bool):
+            if not 0 <= int(t) < rec.n_trials:
+                raise EctskinError(f"trial index {t} out of range 0..{rec.n_trials - 1}")
+            out.append(rec.trials[int(t)])
+        else:
+            out.append(rec.trial(str(t)))
+    return out
+
+
+def _finite_rows(c: np.ndarray) -> np.ndarray:
+    return np.all(np.isfinite(c), axis=1)
+
+
+# --------------------------------------------------------------------------- touch
+def touch_dataset(
+    rec: Recording,
+    *,
+    reference: str | np.ndarray = "auto",
+    trials: Sequence[str | int] | None = None,
+    nonfinite: str = "raise",
+) -> TouchData:
+    """Calibrated touch frames of a recording, one sample per frame.
+
+    Parameters
+    ----------
+    rec : Recording
+    reference : "auto" | "rest" | "meta" | (n_pairs,) array
+        The reference state c_0 of Eq. 2 (see :func:`ectskin.learn.calibration.touch_reference`);
+        "auto" = the mean readout of the uninflated, untouched trial (or per-trial references of
+        a generic import).
+    trials : sequence of names or indices, optional
+        Restrict to these trials (default: all, in recording order).
+    nonfinite : "raise" | "drop"
+        A frame with a non-finite readout (masked channel) is an error naming the trial, frame and
+        channel ("raise"), or is left out with a logged count ("drop").
+
+    Returns
+    -------
+    TouchData with ``group`` indexing the selected trials in order.
+    """
+    if nonfinite not in NONFINITE_OPTIONS:
+        raise EctskinError(
+            f"Invalid value for 'nonfinite': allowed values are 'raise', 'drop'; got {nonfinite!r}"
+        )
+    keep = measured_channels(rec)
+    pair_names = channel_names(rec, keep)
+    refs = touch_reference(rec, reference=reference, channels=keep)
+    chosen = _select_trials(rec, trials)
+    if not chosen:
+        raise EctskinError("touch_dataset: no trials selected")
+    xs, ys, gs = [], [], []
+    dropped = 0
+    for g, t in enumerate(chosen):
+        c = calibrate(
+            t.capacitance[:, keep],
+            refs[t.name],
+            source=f"trial {t.name!r}",
+            pair_names=pair_names,
+            allow_nonfinite=nonfinite == "drop",
+        )
+        ok = _finite_rows(c)
+        if not ok.all():
+            dropped += int((~ok).sum())
+            c = c[ok]
+        xs.append(c)
+        ys.append(t.labels[ok].astype(np.int64))
+        gs.append(np.full(c.shape[0], g, dtype=np.int64))
+    if dropped:
+        log.warning("touch_dataset: dropped %d frames with non-finite readouts", dropped)
+    return TouchData(
+        x=np.concatenate(xs, axis=0),
+        y=np.concatenate(ys),
+        group=np.concatenate(gs),
+        group_names=[t.name for t in chosen],
+        n_classes=rec.layout.n_classes,
+        pair_names=pair_names,
+        group_region=np.array([t.region for t in chosen], dtype=np.int64),
+    )
+
+
+# --------------------------------------------------------------------------- tracking
+def tracking_trials(rec: Recording, trials: Any = None) -> list[Trial]:
+    """The trials usable for deformation tracking (paper §3: touch trials without occlusion).
+
+    Skips, with a logged count per reason: empty trials, trials without markers, no-contact
+    trials, and trials whose markers have any NaN (occlusion).
+    """
+    chosen = _select_trials(rec, trials)
+    out, empty, no_markers, no_contact, occluded = [], [], [], [], []
+    for t in chosen:
+        if t.n_frames == 0:
+            empty.append(t.name)
+        elif t.markers is None or t.n_markers == 0:
+            no_markers.append(t.name)
+        elif is_no_contact(t):
+            no_contact.append(t.name)
+        elif t.has_occlusion:
+            occluded.append(t.name)
+        else:
+            out.append(t)
+    for what, names in (
+        ("without frames", empty),
+        ("without markers", no_markers),
+        ("without contact", no_contact),
+        ("with occluded markers (NaN)", occluded),
+    ):
+        if names:
+            log.info("tracking: skipped %d trial(s) %s", len(names), what)
+            log.debug("tracking: skipped %s: %s", what, ", ".join(names))
+    log.info("tracking: %d of %d trial(s) used", len(out), len(chosen))
+    return out
+
+
+def _windows(c: np.ndarray, k: int, pad: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Sliding windows of the last ``k`` frames, oldest first.
+
+    c : (n, P) → windows (m, k, P) (a strided view) and the index of each window's last frame (m,).
+    With ``pad`` the first k−1 frames are preceded by copies of frame 0 (m = n); otherwise windows
+    start at frame k−1 (m = n − k + 1).
+    """
+    n = c.shape[0]
+    if pad:
+        c = np.concatenate([np.repeat(c[:1], k - 1, axis=0), c], axis=0)
+        last = np.arange(n, dtype=np.int64)
+    else:
+        last = np.arange(k - 1, n, dtype=np.int64)
+    # sliding_window_view over frames: (m, P, k) → (m, k, P)
+    w = sliding_window_view(c, k, axis=0).transpose(0, 2, 1)
+    return w, last
+
+
+def track_dataset(
+    rec: Recording,
+    *,
+    window: int = 10,
+    prior: bool = True,
+    trials: Sequence[str | int] | None = None,
+    reference: str | np.ndarray = "auto",
+    pad: bool = True,
+    nonfinite: str = "raise",
+) -> TrackData:
+    """Calibrated windows and marker coordinates of the tracking trials, one sample per frame.
+
+    Parameters
+    ----------
+    rec : Recording
+    window : int
+        k, frames per window (paper: 10, against the unknown camera/readout delay).
+    prior : bool
+        True (paper): each trajectory is calibrated against its own first frame and ``init`` holds
+        the first frame's marker coordinates. False (ablation): absolute calibration against the
+        touch reference (``reference``) and ``init`` = zeros.
+    trials : sequence of names or indices, optional
+        Candidate trials (default all); no-contact, marker-less and occluded ones are skipped and
+        counted in the log (see :func:`tracking_trials`).
+    reference : "auto" | "rest" | "meta" | array
+        The touch reference, used only when ``prior`` is False.
+    pad : bool
+        True (default): the first k−1 frames of a trial get windows padded by repeating the first
+        frame, so every frame is a sample (the paper's 900 samples per 30-s trial). False: those
+        frames are dropped (n − k + 1 samples per trial).
+    nonfinite : "raise" | "drop"
+        A non-finite readout is an error naming trial/frame/channel, or every window containing it
+        is dropped (with a logged count). The first frame of a trajectory must be finite when
+        ``prior`` is True (it is the reference).
+
+    Returns
+    -------
+    TrackData; ``group`` indexes the used trials in order.
+    """
+    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
+        raise EctskinError(f"window must be an integer >= 1 (frames), got {window!r}")
+    if nonfinite not in NONFINITE_OPTIONS:
+        raise EctskinError(
+            f"Invalid value for 'nonfinite': allowed values are 'raise', 'drop'; got {nonfinite!r}"
+        )
+    k = int(window)
+    keep = measured_channels(rec)
+    pair_names = channel_names(rec, keep)
+    used = tracking_trials(rec, trials)
+    if not used:
+        raise EctskinError(
+            "track_dataset: no usable tracking trial (need touch trials with markers and no "
+            "occlusion)"
+        )
+    refs = None if prior else touch_reference(rec, reference=reference, channels=keep)
+
+    # per trial: calibrated frames and which windows are kept; then fill preallocated arrays
+    per_trial = []
+    dropped = short = 0
+    for t in used:
+        cap = t.capacitance[:, keep]
+        src = f"trial {t.name!r}"
+        if prior:
+            if not np.all(np.isfinite(cap[0])):
+                j = int(np.argmax(~np.isfinite(cap[0])))
+                raise EctskinError(
+                    f"{src}: frame 0, channel {j} ({pair_names[j]!r}) is {cap[0, j]}; the first "
+                    f"frame is the trajectory's reference (prior) and must be finite"
+                )
+            ref = cap[0]  # prior knowledge: first frame = reference of Eq. 2
+        else:
+            ref = refs[t.name]
+        c = calibrate(
+            cap, ref, source=src, pair_names=pair_names, allow_nonfinite=nonfinite == "drop"
+        )
+        if not pad and c.shape[0] < k:
+            short += 1
+            continue
+        ok = _finite_rows(c)
+        if ok.all():
+            valid = None
+        else:
+            # a window is valid when all its k frames are finite
+            okw, _ = _windows(ok[:, None], k, pad)
+            valid = okw[:, :, 0].all(axis=1)
+            dropped += int((~valid).sum())
+        per_trial.append((t, c, valid))
+    if short:
+        log.warning("tracking: skipped %d trial(s) shorter than the window (%d frames)", short, k)
+    if dropped:
+        log.warning("tracking: dropped %d window(s) containing non-finite readouts", dropped)
+    if not per_trial:
+        raise EctskinError(f"track_dataset: every tracking trial is shorter than window={k}")
+
+    counts = []
+    for t, c, valid in per_trial:
+        m = c.shape[0] if pad else c.shape[0] - k + 1
+        counts.append(m if valid is None else int(valid.sum()))
+    n_total = int(sum(counts))
+    n_markers = per_trial[0][0].n_markers
+    x = np.empty((n_total, k, keep.size), dtype=np.float32)
+    init = np.zeros((n_total, n_markers, 3), dtype=np.float32)
+    y = np.empty((n_total, n_markers, 3), dtype=np.float32)
+    group = np.empty(n_total, dtype=np.int64)
+    frame = np.empty(n_total, dtype=np.int64)
+    pos = 0
+    for g, ((t, c, valid), m) in enumerate(zip(per_trial, counts)):
+        w, last = _windows(c, k, pad)
+        if valid is not None:
+            w, last = w[valid], last[valid]
+        sl = slice(pos, pos + m)
+        x[sl] = w
+        y[sl] = t.markers[last]
+        if prior:
+            init[sl] = t.markers[0]
+        group[sl] = g
+        frame[sl] = last
+        pos += m
+    layout = rec.layout
+    return TrackData(
+        x=x,
+        init=init,
+        y=y,
+        group=group,
+        frame=frame,
+        group_names=[t.name for t, _, _ in per_trial],
+        electrode_desc=layout.electrode_descriptors().astype(np.float32),
+        pairs=layout.pairs[keep].astype(np.int64),
+        prior=bool(prior),
+        pair_names=pair_names,
+        group_region=np.array([t.region for t, _, _ in per_trial], dtype=np.int64),
+    )
+
+
+# --------------------------------------------------------------------------- splits
+def _scaled_counts(counts: Sequence[float], n: int) -> np.ndarray:
+    """Scale (train, val, test) counts to ``n`` groups by largest remainder; none left empty."""
+    c = np.asarray(counts, dtype=np.float64)
+    total = float(c.sum())
+    if total == float(n) and np.all(c == np.round(c)):
+        out = c.astype(np.int64)
+    else:
+        exact = c * n / total
+        out = np.floor(exact).astype(np.int64)
+        rest = n - int(out.sum())
+        # largest remainders first; ties broken by split order (train, val, test)
+        order = np.lexsort((np.arange(3), -(exact - out)))
+        out[order[:rest]] += 1
+    # an empty split only where the caller asked for zero groups in it
+    while np.any((out == 0) & (c > 0)) and out.max() > 1:
+        out[int(np.argmax(out))] -= 1
+        out[int(np.argmax((out == 0) & (c > 0)))] += 1
+    return out
+
+
+def split_groups(
+    n_groups_or_names: int | Sequence[str],
+    counts: Sequence[float] = TOUCH_SPLIT,
+    *,
+    seed: int = 0,
+    stratify: Sequence[int] | np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """Trial-exclusive train / val / test split of group ids 0..n_groups−1.
+
+    Parameters
+    ----------
+    n_groups_or_names : int or sequence of str
+        Number of groups, or their names (``data.group_names``).
+    counts : (3,) numbers
+        Groups per split (paper: :data:`TOUCH_SPLIT` 125/32/32, :data:`TRACK_SPLIT` 108/18/20).
+        When they do not add up to the number of groups they are scaled proportionally (largest
+        remainder rounding), so fractions like (0.7, 0.15, 0.15) work too. A split that would get
+        no group takes one from the largest split.
+    seed : int
+        The split is a deterministic function of (n_groups, counts, seed, stratify).
+    stratify : (n_groups,) ints, optional
+        A label per group (e.g. ``data.group_region``). Every label gets at least one group in
+        train first (where train is large enough), then the remaining groups are spread over the
+        splits in proportion, label by label (systematic sampling).
+
+    Returns
+    -------
+    {"train": ids, "val": ids, "test": ids}: sorted, disjoint int64 arrays covering all groups.
+
+    Raises
+    ------
+    EctskinError
+        Bad counts, fewer groups than non-empty splits, or a wrong-length ``stratify``.
+    """
+    if isinstance(n_groups_or_names, (int, np.integer)) and not isinstance(n_groups_or_names, bool):
+        n = int(n_groups_or_names)
+    else:
+        try:
+            n = len(n_groups_or_names)  # type: ignore[arg-type]
+        except TypeError:
+            raise EctskinError(
+                f"split_groups: expected a number of groups or a list of names, got "
+                f"{type(n_groups_or_names).__name__}"
+            ) from None
+    try:
+        c = np.asarray(counts, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise EctskinError(
+            f"split counts must be 3 numbers (train, val, test), got {counts!r}"
+        ) from None
+    if c.shape != (3,) or not np.all(np.isfinite(c)) or np.any(c < 0) or c.sum() <= 0:
+        raise EctskinError(
+            f"split counts must be 3 non-negative numbers (train, val, test) with a positive "
+            f"sum, got {counts!r}"
+        )
+    need = int(np.count_nonzero(c))
+    if n < need:
+        raise EctskinError(
+            f"cannot split {n} group(s) (trials) into {need} non-empty splits "
+            f"{dict(zip(SPLITS, c.tolist()))}: every split needs at least one trial"
+        )
+    sizes = _scaled_counts(c, n)
+    if np.any((sizes == 0) & (c > 0)):
+        raise EctskinError(
+            f"split of {n} groups by {counts!r} leaves an empty split: {sizes.tolist()}"
+        )
+    if c.sum() != n:
+        log.info(
+            "split: %d groups, counts %s scaled to %s", n, [float(v) for v in c], sizes.tolist()
+        )
+    rng = np.random.default_rng(seed)
+    if stratify is None:
+        order = rng.permutation(n)
+    else:
+        order = _stratified_order(np.asarray(stratify), n, int(sizes[0]), rng)
+    bounds = np.cumsum(sizes)
+    parts = np.split(order, bounds[:-1])
+    return {name: np.sort(p).astype(np.int64) for name, p in zip(SPLITS, parts)}
+
+
+def _stratified_order(labels: np.ndarray, n: int, n_train: int, rng) -> np.ndarray:
+    """An ordering of 0..n−1 such that the first ``n_train`` hold one group of every label (as far
+    as they can) and every label is spread evenly along the rest (systematic sampling)."""
+    if labels.shape != (n,):
+        raise EctskinError(
+            f"stratify must hold one label per group ({n}), got shape {labels.shape}"
+        )
+    strata = np.unique(labels)
+    members = {s: rng.permutation(np.flatnonzero(labels == s)) for s in strata}
+    firsts = np.array([members[s][0] for s in rng.permutation(strata)], dtype=np.int64)
+    if firsts.size > n_train:
+        log.warning(
+            "split: %d labels but only %d training groups: %d label(s) get no training group",
+            firsts.size,
+            n_train,
+            firsts.size - n_train,
+        )
+    rest, keys = [], []
+    for s in strata:
+        m = members[s][1:]
+        if m.size:
+            # fractional rank inside the label with a random phase: labels interleave evenly
+            keys.append((np.arange(m.size) + rng.random()) / m.size)
+            rest.append(m)
+    if rest:
+        rest_a = np.concatenate(rest)
+        key = np.concatenate(keys)
+        rest_a = rest_a[np.lexsort((rng.random(rest_a.size), key))]
+    else:
+        rest_a = np.zeros(0, dtype=np.int64)
+    return np.concatenate([firsts, rest_a]).astype(np.int64)
+
+
+def split_names(
+    split: Mapping[str, np.ndarray], group_names: Sequence[str]
+) -> dict[str, list[str]]:
+    """Group ids → group names per split (what ``split.json`` stores)."""
+    return {k: [group_names[int(i)] for i in v] for k, v in split.items()}
+
+
+def split_from_names(
+    names: Mapping[str, Sequence[str]], group_names: Sequence[str], *, source: str = "split"
+) -> dict[str, np.ndarray]:
+    """Re-create a split from the names stored in ``split.json`` (inverse of :func:`split_names`).
+
+    Raises EctskinError for a missing split, a name that is not a group of the data, or a name in
+    two splits.
+    """
+    index = {name: i for i, name in enumerate(group_names)}
+    out: dict[str, np.ndarray] = {}
+    seen: dict[str, str] = {}
+    for k in SPLITS:
+        if k not in names:
+            raise EctskinError(f"{source}: missing split {k!r} (expected train, val, test)")
+        ids = []
+        for name in names[k]:
+            if name not in index:
+                raise EctskinError(
+                    f"{source}: {k} trial {name!r} is not in the data ({len(group_names)} trials, "
+                    f"e.g. {list(group_names)[:3]})"
+                )
+            if name in seen:
+                raise EctskinError(f"{source}: trial {name!r} is in both {seen[name]} and {k}")
+            seen[name] = k
+            ids.append(index[name])
+        out[k] = np.sort(np.asarray(ids, dtype=np.int64))
+    return out
+
+
+# --------------------------------------------------------------------------- normalisation
+class Normalizer:
+    """Per-channel standardisation z = (x − mean) / std, fitted on training data only.
+
+    Statistics are taken over every axis but the trailing ``channel_ndim`` ones: for touch frames
+    (n, n_pairs) and windows (n, k, n_pairs) they are per pair; for displacements (n, M, 3) with
+    ``channel_ndim=2`` per marker and axis. A channel whose std is below ``min_std`` (constant
+    over the training data) keeps std = 1, so it is centred but not blown up.
+
+    Saved as plain lists (:meth:`to_dict` / :meth:`from_dict`) inside checkpoints.
+    """
+
+    def __init__(self, mean: Any, std: Any, *, min_std: float = 1e-8) -> None:
+        mean_a = np.asarray(mean, dtype=np.float64)
+        std_a = np.asarray(std, dtype=np.float64)
+        if mean_a.shape != std_a.shape or mean_a.ndim == 0:
+            raise EctskinError(
+                f"Normalizer: mean and std must have the same (channel) shape, got "
+                f"{mean_a.shape} and {std_a.shape}"
+            )
+        if not (np.all(np.isfinite(mean_a)) and np.all(np.isfinite(std_a)) and np.all(std_a > 0)):
+            raise EctskinError("Normalizer: mean must be finite and std finite and > 0")
+        self.mean = mean_a
+        self.std = std_a
+        self.min_std = float(min_std)
+
+    @classmethod
+    def fit(cls, x: np.ndarray, *, channel_ndim: int = 1, min_std: float = 1e-8) -> Normalizer:
+        """Fit on (training) samples ``x`` of shape (..., *channel_shape)."""
+        a = np.asarray(x)
+        if a.dtype.kind not in "biuf":
+            raise EctskinError(f"Normalizer.fit: samples must be numeric, got dtype {a.dtype}")
+        if a.ndim <= channel_ndim:
+            raise EctskinError(
+                f"Normalizer.fit: need samples of shape (n, ..., channels), got {a.shape}"
+            )
+        if a.size == 0:
+            raise EctskinError("Normalizer.fit: no training samples")
+        # two passes over chunks of samples with float64 accumulators: no float64 copy of a
+        # ~100 000-window training set
+        flat = a.reshape(-1, *a.shape[a.ndim - channel_ndim :])
+        count = flat.shape[0]
+        total = np.zeros(flat.shape[1:])
+        for start in range(0, count, 65536):
+            chunk = flat[start : start + 65536]
+            if not np.all(np.isfinite(chunk)):
+                k = start + int(np.argwhere(~np.isfinite(chunk))[0][0])
+                idx = np.unravel_index(k * int(np.prod(flat.shape[1:])), a.shape)
+                raise EctskinError(
+                    f"Normalizer.fit: non-finite value in the sample at index "
+                    f"{tuple(int(i) for i in idx[: a.ndim - channel_ndim])}"
+                )
+            total += chunk.sum(axis=0, dtype=np.float64)
+        mean = total / count
+        sq = np.zeros_like(mean)
+        for start in range(0, count, 65536):
+            dev = flat[start : start + 65536] - mean
+            sq += np.einsum("n...,n...->...", dev, dev)
+        std = np.sqrt(sq / count)
+        const = std < min_std
+        if const.any():
+            log.info("Normalizer: %d constant channel(s) keep std = 1", int(const.sum()))
+            std = np.where(const, 1.0, std)
+        return cls(mean, std, min_std=min_std)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self.mean.shape
+
+    def _check(self, x: np.ndarray, what: str) -> np.ndarray:
+        a = np.asarray(x)
+        if a.shape[a.ndim - self.mean.ndim :] != self.mean.shape:
+            raise EctskinError(
+                f"Normalizer.{what}: data has trailing shape {a.shape[a.ndim - self.mean.ndim :]}, "
+                f"the normaliser was fitted on channels of shape {self.mean.shape}"
+            )
+        return a
+
+    def transform(self, x: np.ndarray) -> np.ndarray:
+        """(..., *channel_shape) → standardised float32."""
+        a = self._check(x, "transform")
+        return ((a - self.mean) / self.std).astype(np.float32)
+
+    def inverse_transform(self, z: np.ndarray) -> np.ndarray:
+        """Undo :meth:`transform` (float32)."""
+        a = self._check(z, "inverse_transform")
+        return (a * self.std + self.mean).astype(np.float32)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain lists, safe for JSON and ``torch.load(weights_only=True)``."""
+        return {
+            "kind": "standard",
+            "mean": self.mean.tolist(),
+            "std": self.std.tolist(),
+            "min_std": self.min_std,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Any, *, source: str = "normalizer") -> Normalizer:
+        if not isinstance(d, Mapping) or "mean" not in d or "std" not in d:
+            raise EctskinError(
+                f"{source}: expected a dict with 'mean' and 'std' lists, got {d!r:.80}"
+            )
+        if d.get("kind", "standard") != "standard":
+            raise EctskinError(f"{source}: unknown normaliser kind {d.get('kind')!r}")
+        try:
+            return cls(d["mean"], d["std"], min_std=float(d.get("min_std", 1e-8)))
+        except (TypeError, ValueError) as exc:
+            raise EctskinError(f"{source}: {exc}") from None
+
+    def __repr__(self) -> str:
+        return f"Normalizer(shape={self.shape})"
