@@ -1,0 +1,57 @@
+"""`ectskin simulate` and `ectskin characterize`: files written, and one clear error for bad input."""
+
+import json
+
+import numpy as np
+import pytest
+
+from ectskin.cli import main
+from ectskin.io.hdf5 import read_recording
+
+
+def test_simulate_writes_a_readable_recording(tmp_path, capsys):
+    out = tmp_path / "d.h5"
+    args = ["simulate", str(out), "--levels", "0,15", "--touch-trials", "2", "--duration", "1",
+            "--workers", "1", "--no-progress", "--seed", "4"]
+    assert main(args) == 0
+    rec = read_recording(out)
+    assert rec.n_trials == 8 * 3 and rec.trials[0].n_frames == 30
+    assert {t.inflation for t in rec.trials} >= {(0.0, 0.0, 0.0), (15.0, 15.0, 15.0)}
+    assert rec.meta["protocol"]["seed"] == 4
+    # nothing recorded is overwritten silently
+    assert main(args) == 2
+    assert "exists; pass --force" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["simulate", "{out}", "--levels", "0,45"], "impossible inflation for chamber 1: 45.0 ml"),
+        (["simulate", "{out}", "--levels", "-5"], "impossible inflation"),
+        (["simulate", "{out}", "--levels", "a,b"], "--levels must be comma-separated numbers"),
+        (["simulate", "{out}", "--layout", "{bad}"], "not valid JSON"),
+        (["characterize", "{dir}", "--region", "25"], "unknown region 25"),
+        (["characterize", "{dir}", "--inflation", "20,20"], "one volume per chamber"),
+    ],
+)
+def test_bad_input_gives_one_clear_error(tmp_path, capsys, argv, message):
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    argv = [a.format(out=tmp_path / "o.h5", bad=bad, dir=tmp_path / "c") for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert "Traceback" not in err and err.count("\n") == 1
+
+
+@pytest.mark.slow
+def test_characterize_writes_figures_and_json(tmp_path):
+    assert main(["characterize", str(tmp_path), "--region", "5"]) == 0
+    assert (tmp_path / "fig3_inflation.png").stat().st_size > 10_000
+    assert (tmp_path / "fig4_touch.png").stat().st_size > 10_000
+    res = json.loads((tmp_path / "characterize.json").read_text())
+    assert len(res["pairs"]) == 28 and len(res["touches"]) == 18
+    pair = res["pairs"][0]
+    assert set(pair) == {"pair", "electrodes", "same_face", "inflation_change"}
+    assert len(res["touches"][4]["change"]) == 28
+    assert np.isfinite(res["inflation_change_max_abs"])
