@@ -1,0 +1,156 @@
+"""Trained models for live use: load a run, feed calibrated frames, get answers.
+
+:class:`TouchPredictor` and :class:`TrackPredictor` rebuild their model from a run directory's
+``model.pt`` alone (see :mod:`ectskin.learn.checkpoint`). The training-set normalisation lives in
+the model's buffers, so both take *calibrated* readouts (paper Eq. 2) exactly as the data sets
+hold them. Calls run in eval mode under ``torch.inference_mode`` on the CPU by default; a single
+frame or window costs well under a millisecond (see ``benchmarks/bench_train.py``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from ectskin._check import EctskinError
+from ectskin.learn.checkpoint import load_checkpoint
+
+
+def _model_file(run_dir: str | Path) -> Path:
+    path = Path(run_dir)
+    return path / "model.pt" if path.is_dir() else path
+
+
+def _as_input(
+    name: str, value: Any, shape: tuple[int, ...], owner: str, channel_names: list[str]
+) -> tuple[torch.Tensor, bool]:
+    """A float32 tensor (B, *shape) from one sample of ``shape`` or a batch; returns
+    (tensor, batched). A non-finite value is an error naming its index (and channel, when
+    the last axis is the channel axis, i.e. ``channel_names`` is given)."""
+    try:
+        arr = np.ascontiguousarray(value, dtype=np.float32)
+    except (TypeError, ValueError) as exc:
+        raise EctskinError(f"{owner}: {name} must be numeric; {exc}") from None
+    batched = arr.ndim == len(shape) + 1
+    if arr.shape[int(batched) :] != shape:
+        want = ", ".join(map(str, shape))
+        raise EctskinError(
+            f"{owner}: {name} must have shape ({want}) or (B, {want}), got {arr.shape}"
+        )
+    if not np.isfinite(arr).all():
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+        label = f" (channel {channel_names[bad[-1]]!r})" if channel_names else ""
+        raise EctskinError(f"{owner}: {name} is not finite at index {bad}{label}: {arr[bad]}")
+    return torch.from_numpy(arr if batched else arr[None]), batched
+
+
+class _Predictor:
+    kind = ""
+
+    def __init__(self, model: torch.nn.Module, config: Any, payload: dict, source: str) -> None:
+        self.model = model.eval()
+        self.config = config
+        self.payload = payload
+        self.source = source
+        self.device = next(model.buffers()).device
+        extra = payload.get("extra", {})
+        names = extra.get("pair_names") or []
+        self.pair_names: list[str] = (
+            [str(n) for n in names]
+            if len(names) == config.n_pairs
+            else [f"ch{i}" for i in range(config.n_pairs)]
+        )
+
+    @classmethod
+    def from_run(cls, run_dir: str | Path, *, device: str | torch.device = "cpu"):
+        """Load ``run_dir/model.pt`` (or the checkpoint file itself) on ``device``."""
+        path = _model_file(run_dir)
+        model, config, payload = load_checkpoint(path, kind=cls.kind, map_location=device)
+        return cls(model, config, payload, str(path))
+
+    @property
+    def n_pairs(self) -> int:
+        return int(self.config.n_pairs)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.source!r}, n_pairs={self.n_pairs})"
+
+
+class TouchPredictor(_Predictor):
+    """Touch class probabilities from calibrated frames (TouchMLP)."""
+
+    kind = "touch_mlp"
+
+    @property
+    def n_classes(self) -> int:
+        return int(self.config.n_classes)
+
+    def predict(self, c_calibrated: Any) -> np.ndarray:
+        """(n_pairs,) → (n_classes,) probabilities; (B, n_pairs) → (B, n_classes). Class 0 = no
+        touch, k = region k."""
+        x, batched = _as_input(
+            "readouts",
+            c_calibrated,
+            (self.n_pairs,),
+            f"TouchPredictor({self.source})",
+            self.pair_names,
+        )
+        with torch.inference_mode():
+            probs = torch.softmax(self.model(x.to(self.device)), dim=-1).cpu().numpy()
+        return probs if batched else probs[0]
+
+    def classify(self, c_calibrated: Any) -> np.ndarray | int:
+        """The most probable class: an int for one frame, (B,) int64 for a batch."""
+        probs = self.predict(c_calibrated)
+        return int(probs.argmax()) if probs.ndim == 1 else probs.argmax(axis=1)
+
+
+class TrackPredictor(_Predictor):
+    """Marker coordinates (mm) from a window of calibrated frames (C2DT)."""
+
+    kind = "c2dt"
+
+    @property
+    def window(self) -> int:
+        return int(self.config.window)
+
+    @property
+    def n_markers(self) -> int:
+        return int(self.config.n_markers)
+
+    @property
+    def prior(self) -> bool:
+        return bool(self.config.prior)
+
+    def predict(self, window_calibrated: Any, init: Any = None) -> np.ndarray:
+        """(k, n_pairs) window (oldest first) and (n_markers, 3) initial coordinates (mm) →
+        (n_markers, 3) coordinates, mm. Batched: (B, k, n_pairs), (B, n_markers, 3) →
+        (B, n_markers, 3). ``init`` is required with prior knowledge, ignored without.
+
+        With prior knowledge the window must be calibrated against the trajectory's first
+        frame (its readouts are c_0 of Eq. 2) and ``init`` holds that frame's markers.
+        """
+        owner = f"TrackPredictor({self.source})"
+        x, batched = _as_input(
+            "window", window_calibrated, (self.window, self.n_pairs), owner, self.pair_names
+        )
+        i = None
+        if self.prior:
+            if init is None:
+                raise EctskinError(
+                    f"{owner}: this model uses prior knowledge; pass init, the markers' "
+                    f"coordinates in the trajectory's first frame ({self.n_markers}, 3) mm"
+                )
+            i, batched_i = _as_input("init", init, (self.n_markers, 3), owner, [])
+            if batched_i != batched or i.shape[0] != x.shape[0]:
+                raise EctskinError(
+                    f"{owner}: window and init disagree in batch size "
+                    f"({tuple(x.shape)} vs {tuple(i.shape)})"
+                )
+            i = i.to(self.device)
+        with torch.inference_mode():
+            out = self.model(x.to(self.device), i).cpu().numpy()
+        return out if batched else out[0]

@@ -1,0 +1,474 @@
+"""Training loop (ectskin.learn.train): profiles, files, best weights, resume, determinism,
+errors, sharding, and the CLI helper on a small recording."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from ectskin._check import EctskinError
+from ectskin.layout import default_layout
+from ectskin.learn.checkpoint import load_checkpoint, read_checkpoint
+from ectskin.learn.datasets import TouchData, TrackData
+from ectskin.learn.train import (
+    PROFILES,
+    epoch_indices,
+    main_from_args,
+    profile_settings,
+    read_metrics,
+    train,
+)
+
+torch.set_num_threads(1)
+LAYOUT = default_layout()
+
+
+# ============================================================================ synthetic data
+def blobs(n_groups: int, per: int, *, seed: int, n_classes: int = 5, noise: float = 0.25):
+    """Gaussian blobs: group g is class g % n_classes around a fixed centre (28 channels)."""
+    centres = np.random.default_rng(123).normal(0, 0.2, size=(n_classes, 28))
+    rng = np.random.default_rng(seed)
+    cls = np.arange(n_groups) % n_classes
+    x = centres[np.repeat(cls, per)] + noise * 0.2 * rng.standard_normal((n_groups * per, 28))
+    return TouchData(
+        x=x.astype(np.float32),
+        y=np.repeat(cls, per).astype(np.int64),
+        group=np.repeat(np.arange(n_groups), per).astype(np.int64),
+        group_names=[f"s{seed}-t{g}" for g in range(n_groups)],
+        n_classes=n_classes,
+        pair_names=list(LAYOUT.pair_names),
+    )
+
+
+def displacements(n_groups: int, per: int, *, seed: int, k: int = 4) -> TrackData:
+    """A bending-like law: the markers (on a line along z, like the paper's) move along y by
+    30 mm x (mean of 6 front pairs' last frame) x (z / 120)², a clamped beam's shape; the other
+    22 pairs are distractors. The C2DT must find the right pairs among 28 tokens."""
+    rng = np.random.default_rng(seed)
+    n = n_groups * per
+    x = (0.1 * rng.standard_normal((n, k, 28))).astype(np.float32)
+    z = np.array([24.0, 48, 72, 96, 120])
+    base = np.stack([np.full(5, 25.0), np.zeros(5), z], axis=1)  # (5, 3)
+    init = base + rng.normal(0, 1.0, size=(n_groups, 1, 3))  # per-trajectory offset
+    init = np.repeat(init, per, axis=0).astype(np.float32)
+    bend = x[:, -1, [0, 1, 2, 7, 8, 13]].mean(1)  # (n,)
+    y = init.copy()
+    y[:, :, 1] += 30 * bend[:, None] * (z / 120) ** 2
+    return TrackData(
+        x=x,
+        init=init,
+        y=y.astype(np.float32),
+        group=np.repeat(np.arange(n_groups), per).astype(np.int64),
+        frame=np.tile(np.arange(per), n_groups).astype(np.int64),
+        group_names=[f"s{seed}-t{g}" for g in range(n_groups)],
+        electrode_desc=LAYOUT.electrode_descriptors().astype(np.float32),
+        pairs=LAYOUT.pairs.astype(np.int64),
+        prior=True,
+        pair_names=list(LAYOUT.pair_names),
+    )
+
+
+SMALL_C2DT = {"d_model": 16, "n_heads": 2, "ff": 32}
+
+
+# ============================================================================ profiles
+def test_paper_profile_is_the_papers_settings():
+    touch, track = PROFILES["paper"]["touch"], PROFILES["paper"]["track"]
+    assert (touch.epochs, touch.batch_size, track.epochs, track.batch_size) == (100, 256, 150, 255)
+    for s in (touch, track):
+        assert (s.lr, s.step_size, s.gamma) == (1e-3, 15, 1 / 1.2)
+        assert s.samples_per_epoch is None and s.val_samples is None
+    assert profile_settings("touch", "quick", epochs=3).epochs == 3
+    assert profile_settings("track", "quick", samples_per_epoch=None).samples_per_epoch is None
+    with pytest.raises(EctskinError, match="'epochs' must be a positive integer, got 0"):
+        train("touch", blobs(2, 5, seed=0), blobs(1, 5, seed=1), "unused", epochs=0)
+    with pytest.raises(EctskinError, match="allowed values are 'paper', 'quick'; got 'fast'"):
+        profile_settings("touch", "fast")
+    with pytest.raises(EctskinError, match="'batch_size' must be a positive integer"):
+        profile_settings("touch", "paper", batch_size=0)
+    with pytest.raises(EctskinError, match="unknown training setting"):
+        profile_settings("touch", "paper", momentum=0.9)
+
+
+# ============================================================================ touch
+def test_touch_training_writes_the_run_and_keeps_the_best_weights(tmp_path):
+    tr, va, te = blobs(20, 50, seed=0), blobs(5, 50, seed=1), blobs(5, 50, seed=2)
+    out = tmp_path / "run"
+    s = train(
+        "touch", tr, va, out, profile="quick", epochs=6, settings={"step_size": 2}, progress=False
+    )
+    assert sorted(p.name for p in out.iterdir()) == [
+        "config.json",
+        "last.pt",
+        "metrics.csv",
+        "model.pt",
+        "split.json",
+    ]
+    rows = read_metrics(out / "metrics.csv")
+    with open(out / "metrics.csv") as fh:
+        assert next(csv.reader(fh)) == [
+            "epoch",
+            "train_loss",
+            "val_loss",
+            "val_metric",
+            "lr",
+            "seconds",
+        ]
+    assert [r["epoch"] for r in rows] == [1, 2, 3, 4, 5, 6]
+    # StepLR: lr 1e-3 divided by 1.2 every step_size (2) epochs
+    assert [r["lr"] for r in rows] == pytest.approx([1e-3 / 1.2 ** (e // 2) for e in range(6)])
+    best = min(range(6), key=lambda i: rows[i]["val_loss"])
+    assert s["best_epoch"] == best + 1 and s["best_val_loss"] == pytest.approx(
+        rows[best]["val_loss"]
+    )
+    model, config, payload = load_checkpoint(out / "model.pt", kind="touch_mlp", n_pairs=28)
+    assert payload["extra"]["epoch"] == best + 1 and config.n_classes == 5
+    # the model takes calibrated readouts: normalisation fitted on train only, held inside
+    np.testing.assert_allclose(model.x_mean.numpy(), tr.x.mean(0), atol=1e-6)
+    np.testing.assert_allclose(payload["normalizer"]["x"]["std"], tr.x.std(0), rtol=1e-4)
+    with torch.no_grad():
+        acc = (model(torch.from_numpy(te.x)).argmax(1).numpy() == te.y).mean()
+    assert acc > 0.97
+    # val_metric is the accuracy of the validation set
+    with torch.no_grad():
+        vacc = (model(torch.from_numpy(va.x)).argmax(1).numpy() == va.y).mean()
+    assert rows[best]["val_metric"] == pytest.approx(vacc)
+    split = json.loads((out / "split.json").read_text())
+    assert split == {"train": tr.group_names, "val": va.group_names}
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["task"] == "touch" and cfg["settings"]["epochs"] == 6 and cfg["n_train"] == 1000
+
+
+def test_resume_equals_an_uninterrupted_run(tmp_path):
+    tr, va = blobs(10, 40, seed=0), blobs(4, 40, seed=1)
+    straight = train(
+        "touch",
+        tr,
+        va,
+        tmp_path / "a",
+        profile="quick",
+        epochs=4,
+        seed=3,
+        settings={"step_size": 1},
+        progress=False,
+    )
+    first = train(
+        "touch",
+        tr,
+        va,
+        tmp_path / "b",
+        profile="quick",
+        epochs=2,
+        seed=3,
+        settings={"step_size": 1},
+        progress=False,
+    )
+    assert first["epochs_run"] == 2
+    resumed = train(
+        "touch",
+        tr,
+        va,
+        tmp_path / "b",
+        profile="quick",
+        epochs=4,
+        seed=3,
+        settings={"step_size": 1},
+        progress=False,
+    )
+    assert resumed["resumed_from"] == 2 and resumed["epochs_run"] == 2
+    for name in ("last.pt", "model.pt"):
+        a = read_checkpoint(tmp_path / "a" / name)["state_dict"]
+        b = read_checkpoint(tmp_path / "b" / name)["state_dict"]
+        for k in a:
+            assert torch.equal(a[k], b[k]), (name, k)
+    ra, rb = (
+        read_metrics(tmp_path / "a" / "metrics.csv"),
+        read_metrics(tmp_path / "b" / "metrics.csv"),
+    )
+    for x, y in zip(ra, rb, strict=True):
+        assert {k: v for k, v in x.items() if k != "seconds"} == {
+            k: v for k, v in y.items() if k != "seconds"
+        }
+    assert straight["best_epoch"] == resumed["best_epoch"]
+    # a finished run is not trained again
+    again = train(
+        "touch",
+        tr,
+        va,
+        tmp_path / "b",
+        profile="quick",
+        epochs=4,
+        seed=3,
+        settings={"step_size": 1},
+        progress=False,
+    )
+    assert again["epochs_run"] == 0 and again["best_val_loss"] == resumed["best_val_loss"]
+
+
+def test_resume_drops_metrics_rows_written_after_last_checkpoint(tmp_path):
+    tr, va = blobs(10, 20, seed=0), blobs(4, 20, seed=1)
+    kw = {"profile": "quick", "progress": False}
+    train("touch", tr, va, tmp_path, epochs=2, **kw)
+    with open(tmp_path / "metrics.csv", "a") as fh:  # a crash after the CSV, before last.pt
+        fh.write("3,9,9,0,0.001,1\n")
+    train("touch", tr, va, tmp_path, epochs=3, **kw)
+    rows = read_metrics(tmp_path / "metrics.csv")
+    assert [r["epoch"] for r in rows] == [1, 2, 3] and rows[2]["train_loss"] != 9
+
+
+def test_resume_refuses_other_settings_or_data(tmp_path):
+    tr, va = blobs(10, 20, seed=0), blobs(4, 20, seed=1)
+    train("touch", tr, va, tmp_path, profile="quick", epochs=1, progress=False)
+    with pytest.raises(EctskinError, match=r"last\.pt: training settings differ \(batch_size"):
+        train("touch", tr, va, tmp_path, profile="quick", epochs=2, batch_size=64, progress=False)
+    with pytest.raises(EctskinError, match="different training data"):
+        train(
+            "touch", blobs(10, 20, seed=5), va, tmp_path, profile="quick", epochs=2, progress=False
+        )
+    with pytest.raises(EctskinError, match="seed"):
+        train("touch", tr, va, tmp_path, profile="quick", epochs=2, seed=1, progress=False)
+    with pytest.raises(EctskinError, match="model differs"):
+        train(
+            "touch",
+            tr,
+            va,
+            tmp_path,
+            profile="quick",
+            epochs=2,
+            progress=False,
+            model_options={"hidden": 64},
+        )
+    # resume=False starts over
+    s = train(
+        "touch",
+        tr,
+        va,
+        tmp_path,
+        profile="quick",
+        epochs=1,
+        batch_size=64,
+        resume=False,
+        progress=False,
+    )
+    assert s["resumed_from"] == 0 and s["epochs_run"] == 1
+
+
+def test_training_is_deterministic_for_a_seed(tmp_path):
+    tr, va = blobs(10, 30, seed=0), blobs(4, 30, seed=1)
+    kw = {"profile": "quick", "epochs": 2, "progress": False}
+    train("touch", tr, va, tmp_path / "a", seed=7, **kw)
+    train("touch", tr, va, tmp_path / "b", seed=7, **kw)
+    train("touch", tr, va, tmp_path / "c", seed=8, **kw)
+    sd = {k: read_checkpoint(tmp_path / k / "last.pt")["state_dict"] for k in "abc"}
+    assert all(torch.equal(sd["a"][k], sd["b"][k]) for k in sd["a"])
+    assert not torch.equal(sd["a"]["net.0.weight"], sd["c"]["net.0.weight"])
+
+
+def test_bad_inputs_are_clear_errors(tmp_path):
+    tr, va = blobs(6, 10, seed=0), blobs(2, 10, seed=1)
+    bad = blobs(6, 10, seed=0)
+    bad.x[23, 4] = np.nan
+    with pytest.raises(EctskinError, match=r"train_data: x of trial 's0-t2' \(sample 23\)"):
+        train("touch", bad, va, tmp_path, epochs=1, progress=False)
+    bad = blobs(6, 10, seed=0)
+    bad.y[5] = 9
+    with pytest.raises(EctskinError, match="has label 9, expected 0..4"):
+        train("touch", bad, va, tmp_path, epochs=1, progress=False)
+    narrow = blobs(2, 10, seed=1)
+    narrow.x = narrow.x[:, :27]
+    with pytest.raises(EctskinError, match="disagree"):
+        train("touch", tr, narrow, tmp_path, epochs=1, progress=False)
+    with pytest.raises(EctskinError, match="allowed values are 'touch', 'track'"):
+        train("shape", tr, va, tmp_path, epochs=1, progress=False)
+    with pytest.raises(EctskinError, match="TrackData"):
+        train("track", tr, va, tmp_path, epochs=1, progress=False)
+
+
+def test_non_finite_loss_stops_naming_epoch_and_batch(tmp_path):
+    tr, va = blobs(10, 40, seed=0), blobs(4, 40, seed=1)
+    with pytest.raises(EctskinError, match=r"non-finite loss .* at epoch 1, batch \d+ of 13"):
+        train(
+            "touch",
+            tr,
+            va,
+            tmp_path,
+            epochs=3,
+            batch_size=32,
+            settings={"lr": 1e38},
+            progress=False,
+        )
+
+
+# ============================================================================ track
+def test_track_training_beats_no_motion(tmp_path):
+    tr, va = displacements(6, 200, seed=0), displacements(2, 200, seed=1)
+    s = train(
+        "track",
+        tr,
+        va,
+        tmp_path,
+        profile="quick",
+        epochs=8,
+        batch_size=64,
+        settings={"step_size": 4, "samples_per_epoch": None, "val_samples": None},
+        model_options=SMALL_C2DT,
+        progress=False,
+    )
+    assert s["metric"] == "ad_mm"
+    no_motion = np.linalg.norm(va.y - va.init, axis=-1).mean()
+    assert s["best_val_metric"] < 0.5 * no_motion, (s["best_val_metric"], no_motion)
+    model, config, _ = load_checkpoint(tmp_path / "model.pt", kind="c2dt")
+    assert (config.window, config.n_markers, config.prior, config.desc_dim) == (4, 5, True, 6)
+    np.testing.assert_array_equal(model.pairs.numpy(), LAYOUT.pairs)
+    # val_metric is Eq. 3 on the validation set and val_loss the MSE per coordinate, mm²
+    with torch.no_grad():
+        pred = model(torch.from_numpy(va.x), torch.from_numpy(va.init)).numpy()
+    rows = read_metrics(tmp_path / "metrics.csv")
+    best = rows[s["best_epoch"] - 1]
+    assert best["val_metric"] == pytest.approx(
+        np.linalg.norm(pred - va.y, axis=-1).mean(), rel=1e-4
+    )
+    assert best["val_loss"] == pytest.approx(np.mean((pred - va.y) ** 2), rel=1e-4)
+
+
+def test_track_without_prior_and_with_subsampled_epochs(tmp_path):
+    tr, va = displacements(4, 50, seed=0), displacements(2, 50, seed=1)
+    tr.prior = va.prior = False
+    s = train(
+        "track",
+        tr,
+        va,
+        tmp_path,
+        profile="quick",
+        epochs=2,
+        settings={"samples_per_epoch": 64, "val_samples": 30},
+        batch_size=32,
+        model_options=SMALL_C2DT,
+        progress=False,
+    )
+    assert math.isfinite(s["best_val_metric"])
+    _, config, _ = load_checkpoint(tmp_path / "model.pt")
+    assert config.prior is False
+    cfg = json.loads((tmp_path / "config.json").read_text())
+    assert cfg["settings"]["samples_per_epoch"] == 64
+
+
+# ============================================================================ sharding
+def test_epoch_indices_shard_one_permutation():
+    n = 103
+    for world in (1, 2, 3):
+        shards = [epoch_indices(n, 4, 0, rank=r, world_size=world) for r in range(world)]
+        assert len({len(s) for s in shards}) == 1  # equal steps on every rank
+        allidx = torch.cat(shards)
+        assert set(allidx.tolist()) == set(range(n))  # every sample in the epoch
+        assert len(allidx) - n == (-n) % world  # padded only to a multiple of world
+        if world > 1:
+            assert not set(shards[0].tolist()) & set(shards[1].tolist()[: n // world - 1])
+    # rank r's b-th batch of size B / world = the single-process b-th batch of size B
+    single = epoch_indices(n, 4, 0)
+    r0, r1 = (epoch_indices(n, 4, 0, rank=r, world_size=2) for r in (0, 1))
+    assert sorted(torch.cat([r0[:8], r1[:8]]).tolist()) == sorted(single[:16].tolist())
+    assert torch.equal(epoch_indices(n, 4, 0), single)
+    assert not torch.equal(epoch_indices(n, 5, 0), single)
+    assert len(epoch_indices(n, 4, 0, samples=10)) == 10
+
+
+# ============================================================================ CLI helper
+def _tiny_recording(path):
+    """A hand-made recording: 2 inflation states x (no contact + 4 touch regions), 40 frames."""
+    from ectskin.io.hdf5 import write_recording
+    from ectskin.io.recording import Recording, Trial
+
+    rng = np.random.default_rng(0)
+    base = 1.0 + rng.uniform(0, 1, 28)
+    resp = rng.normal(0, 0.05, size=(LAYOUT.n_classes, 28))
+    trials = []
+    for s, infl in enumerate((0.0, 20.0)):
+        for region in (0, 1, 5, 10, 14):
+            n = 40
+            force = np.abs(np.sin(np.linspace(0, 3, n))) if region else np.zeros(n)
+            c = base * (1 + 0.01 * infl / 20) + base * resp[region] * (0.5 + force[:, None])
+            c = c + rng.normal(0, 1e-3, size=c.shape)
+            markers = np.broadcast_to(
+                np.array([[25.0, 0, z] for z in (24, 48, 72, 96, 120)]), (n, 5, 3)
+            ).copy()
+            markers[:, :, 1] += 3 * force[:, None]
+            trials.append(
+                Trial(
+                    name=f"p{s}-r{region}",
+                    capacitance=c,
+                    timestamps=np.arange(n) / 30.0,
+                    labels=np.full(n, region, dtype=np.int16),
+                    inflation=(infl,) * 3,
+                    region=region,
+                    markers=markers,
+                    meta={"kind": "touch" if region else "no_contact"},
+                )
+            )
+    write_recording(Recording(LAYOUT, trials, 30.0), path)
+    return path
+
+
+def test_main_from_args_trains_from_a_recording_file(tmp_path):
+    data = _tiny_recording(tmp_path / "data.h5")
+    s = main_from_args(
+        "touch",
+        data,
+        tmp_path / "touch",
+        profile="quick",
+        epochs=2,
+        counts=(6, 2, 2),
+        progress=False,
+    )
+    split = json.loads((tmp_path / "touch" / "split.json").read_text())
+    assert s["n_train"] == 6 * 40 and (s["n_val"], s["n_test"]) == (80, 80)
+    assert {len(split[k]) for k in ("train", "val", "test")} == {6, 2}.union({2})
+    assert not set(split["train"]) & set(split["test"]) and split["task"] == "touch"
+    assert split["data"] == str(data.resolve())
+    s = main_from_args(
+        "track",
+        data,
+        tmp_path / "track",
+        profile="quick",
+        epochs=1,
+        window=3,
+        counts=(4, 2, 2),
+        progress=False,
+        model_options=SMALL_C2DT,
+    )
+    _, config, _ = load_checkpoint(tmp_path / "track" / "model.pt")
+    assert config.window == 3 and s["n_train"] == 4 * 40
+    with pytest.raises(EctskinError, match="no such data file"):
+        main_from_args("touch", tmp_path / "nope.h5", tmp_path / "x")
+
+
+def test_progress_bars_on_a_tty_and_epoch_logs_otherwise(tmp_path, monkeypatch, caplog):
+    import io
+    import logging
+    import sys
+
+    class Tty(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    tr, va = blobs(6, 20, seed=0), blobs(2, 20, seed=1)
+    tty = Tty()
+    monkeypatch.setattr(sys, "stderr", tty)
+    train("touch", tr, va, tmp_path / "a", profile="quick", epochs=2)
+    assert "train touch" in tty.getvalue() and "2/2" in tty.getvalue()
+    monkeypatch.setattr(sys, "stderr", io.StringIO())  # not a terminal: one log line per epoch
+    with caplog.at_level(logging.INFO, logger="ectskin.learn.train"):
+        train("touch", tr, va, tmp_path / "b", profile="quick", epochs=2)
+    assert [r.getMessage()[:9] for r in caplog.records if "epoch" in r.getMessage()][:2] == [
+        "epoch 1/2",
+        "epoch 2/2",
+    ]
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="ectskin.learn.train"):
+        train("touch", tr, va, tmp_path / "c", profile="quick", epochs=2, progress=False)
+    assert not [r for r in caplog.records if r.getMessage().startswith("epoch")]
