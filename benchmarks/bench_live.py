@@ -1,0 +1,372 @@
+"""Live engine benchmark: end-to-end throughput and latency on one CPU core, and a soak test.
+
+Throughput (default)::
+
+    python benchmarks/bench_live.py --frames 20000 --out bench_live.json
+
+replays a synthetic recording as fast as possible (``speed=inf``) through the whole engine
+(reference capture → Eq. 2 calibration → TouchMLP → C2DT window + C2DT → Output) with policy
+``block`` (every frame processed), with ``torch.set_num_threads(1)`` and the process pinned to one
+CPU core. It reports frames/s sustained and the per-frame latency (frame arrival → output) p50 /
+p99 / max, plus the cost of each stage measured alone. The target is >= 300 frames/s. At
+saturation the latency includes waiting behind the previous frame (``--queue-size 1`` keeps that
+to about one frame); the ``paced`` section gives the live latency, with frames arriving at
+``--paced-rate`` (below capacity) under the live policy ``skip-to-newest``.
+
+Soak::
+
+    python benchmarks/bench_live.py --soak-seconds 600 --rate 300 --out soak.json
+
+paces the replay at ``--rate`` frames/s with the live policy ``skip-to-newest`` and a recorder
+attached (as ``ectskin live --record``), and checks zero lost frames (nothing skipped by the
+engine, no sequence gaps, every frame recorded) and flat memory (RSS sampled every
+``--rss-every`` seconds; start / end / max reported).
+
+Models: the run directories given with ``--touch-run`` / ``--track-run`` (``model.pt`` from
+``ectskin train``), else randomly initialised TouchMLP and C2DT of the paper's size (latency is
+what matters). Results are printed and written as JSON to ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import os
+import platform
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _rss_mb() -> float:
+    """Resident set size of this process, MiB (Linux /proc)."""
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def _pin_one_core() -> int | None:
+    try:
+        cpu = sorted(os.sched_getaffinity(0))[0]
+        os.sched_setaffinity(0, {cpu})
+        return cpu
+    except (AttributeError, OSError):
+        return None
+
+
+def _predictors(layout, touch_run, track_run, tmp: Path):
+    """TouchPredictor / TrackPredictor from run dirs, or random paper-size models saved and
+    loaded through the same checkpoint path a trained run uses."""
+    import torch
+
+    from ectskin.learn.checkpoint import save_checkpoint
+    from ectskin.learn.models import C2DT, C2DTConfig, TouchMLP, TouchMLPConfig
+    from ectskin.learn.predict import TouchPredictor, TrackPredictor
+
+    extra = {"pair_names": list(layout.pair_names)}
+    torch.manual_seed(0)
+    if touch_run is None:
+        cfg = TouchMLPConfig(n_pairs=layout.n_pairs, n_classes=layout.n_classes)
+        touch_run = tmp / "touch"
+        save_checkpoint(touch_run / "model.pt", TouchMLP(cfg), extra=extra)
+    if track_run is None:
+        cfg = C2DTConfig(
+            n_pairs=layout.n_pairs, n_markers=layout.n_markers, n_electrodes=layout.n_electrodes
+        )
+        model = C2DT(cfg, desc=layout.electrode_descriptors(), pairs=layout.pairs)
+        track_run = tmp / "track"
+        save_checkpoint(track_run / "model.pt", model, extra=extra)
+    return TouchPredictor.from_run(touch_run), TrackPredictor.from_run(track_run)
+
+
+def _recording(layout, n_frames: int, frame_rate_hz: float, seed: int = 0):
+    """A synthetic recording: one trial of slowly varying readouts with markers."""
+    from ectskin.io.recording import Recording, Trial
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(n_frames) / frame_rate_hz
+    base = 0.05 + 0.2 * rng.random(layout.n_pairs)
+    cap = base * (
+        1
+        + 0.1 * np.sin(2 * np.pi * 0.3 * t)[:, None]
+        + 0.001 * rng.standard_normal((n_frames, layout.n_pairs))
+    )
+    markers = np.zeros((n_frames, layout.n_markers, 3))
+    markers[:, :, 2] = np.linspace(24, 120, layout.n_markers)
+    markers[:, :, 0] = 25 + np.sin(2 * np.pi * 0.2 * t)[:, None]
+    labels = (np.arange(n_frames) // 90) % layout.n_classes
+    return Recording(layout, [Trial("bench", cap, t, labels, markers=markers)], frame_rate_hz)
+
+
+def _pct(a: np.ndarray) -> dict[str, float]:
+    return {
+        "p50": float(np.percentile(a, 50)),
+        "p99": float(np.percentile(a, 99)),
+        "max": float(a.max()),
+        "mean": float(a.mean()),
+    }
+
+
+def _stage_costs(touch, track, layout, n: int = 2000) -> dict[str, dict[str, float]]:
+    """Each predictor called alone (ms per call) with realistic inputs."""
+    rng = np.random.default_rng(1)
+    x = (0.01 * rng.standard_normal(layout.n_pairs)).astype(np.float32)
+    w = (0.01 * rng.standard_normal((track.window, layout.n_pairs))).astype(np.float32)
+    init = rng.normal(size=(layout.n_markers, 3)).astype(np.float32) * 20
+    out = {}
+    for name, fn in (
+        ("touch_predict", lambda: touch.predict(x)),
+        ("track_predict", lambda: track.predict(w, init)),
+    ):
+        for _ in range(50):
+            fn()
+        t = np.empty(n)
+        for i in range(n):
+            t0 = time.perf_counter()
+            fn()
+            t[i] = time.perf_counter() - t0
+        out[name] = _pct(t * 1e3)
+    return out
+
+
+def throughput(args, layout, touch, track) -> dict:
+    from ectskin.live import LiveEngine, ReplaySource
+
+    rec = _recording(layout, args.frames, 30.0)
+    result = {"mode": "throughput", "frames": args.frames}
+    for label, t_model, k_model in (("engine_only", None, None), ("end_to_end", touch, track)):
+        src = ReplaySource(rec, speed=math.inf)
+        eng = LiveEngine(
+            src,
+            touch=t_model,
+            track=k_model,
+            policy="block",
+            queue_size=args.queue_size,
+            reference_frames=30,
+        )
+        lat = np.empty(args.frames)
+        n = [0]
+
+        def on_output(o, lat=lat, n=n):
+            lat[n[0]] = o.latency_ms
+            n[0] += 1
+
+        t0 = time.perf_counter()
+        stats = eng.run(on_output=on_output)
+        wall = time.perf_counter() - t0
+        lat = lat[: n[0]]
+        result[label] = {
+            "fps": stats["processed"] / wall,
+            "wall_s": wall,
+            "processed": stats["processed"],
+            "dropped": stats["dropped"],
+            "errors": stats["errors"],
+            "latency_ms": _pct(lat),
+        }
+        logging.info(
+            "%s: %.0f frames/s, latency p50 %.3f ms p99 %.3f ms",
+            label,
+            result[label]["fps"],
+            result[label]["latency_ms"]["p50"],
+            result[label]["latency_ms"]["p99"],
+        )
+    # live latency: frames paced at --paced-rate (below capacity), live policy skip-to-newest
+    n_paced = int(args.paced_rate * args.paced_seconds)
+    src = ReplaySource(_recording(layout, n_paced, 30.0), speed=args.paced_rate / 30.0)
+    eng = LiveEngine(src, touch=touch, track=track, policy="skip-to-newest")
+    lat = []
+    stats = eng.run(on_output=lambda o: lat.append(o.latency_ms))
+    result["paced"] = {
+        "rate_hz": args.paced_rate,
+        "frames": stats["frames"],
+        "processed": stats["processed"],
+        "dropped": stats["dropped"],
+        "latency_ms": _pct(np.asarray(lat)),
+    }
+    logging.info(
+        "paced %.0f frames/s: %d dropped of %d, latency p50 %.3f ms p99 %.3f ms",
+        args.paced_rate,
+        stats["dropped"],
+        stats["frames"],
+        result["paced"]["latency_ms"]["p50"],
+        result["paced"]["latency_ms"]["p99"],
+    )
+    result["stages_ms"] = _stage_costs(touch, track, layout)
+    result["target_fps"] = 300
+    result["meets_target"] = result["end_to_end"]["fps"] >= 300
+    return result
+
+
+def soak(args, layout, touch, track) -> dict:
+    from ectskin.live import LiveEngine, Recorder, ReplaySource
+
+    rate = float(args.rate)
+    # a 60 s loop at 30 fps, replayed rate/30 times faster: frames arrive every 1/rate s
+    rec = _recording(layout, 1800, 30.0)
+    src = ReplaySource(rec, speed=rate / 30.0, loop=True)
+    tmp = Path(args.record_dir or tempfile.mkdtemp(prefix="ectskin-soak-"))
+    path = tmp / "soak.h5"
+    if path.exists():
+        path.unlink()
+    recorder = None if args.no_record else Recorder(path, layout, rate)
+    eng = LiveEngine(
+        src,
+        touch=touch,
+        track=track,
+        policy="skip-to-newest",
+        recorder=recorder,
+        max_lag_ms=args.max_lag_ms,
+    )
+    cap = int(rate * args.soak_seconds * 1.2) + 1000
+    lat = np.empty(cap)  # preallocated: the benchmark's own bookkeeping does not grow
+    n = [0]
+
+    def on_output(o):
+        if n[0] < cap:
+            lat[n[0]] = o.latency_ms
+        n[0] += 1
+
+    rss: list[tuple[float, float]] = []
+    done = threading.Event()
+
+    def sample():
+        t0 = time.perf_counter()
+        while not done.wait(args.rss_every):
+            rss.append((time.perf_counter() - t0, _rss_mb()))
+            s = eng.stats
+            logging.info(
+                "t=%4.0f s rss %.1f MiB frames %d dropped %d recorded %d p99 %.2f ms",
+                rss[-1][0],
+                rss[-1][1],
+                s["frames"],
+                s["dropped"],
+                s.get("recorded", 0),
+                s["latency_ms_p99"] or float("nan"),
+            )
+
+    rss.append((0.0, _rss_mb()))
+    th = threading.Thread(target=sample, daemon=True)
+    th.start()
+    stats = eng.run(duration_s=args.soak_seconds, on_output=on_output)
+    done.set()
+    th.join()
+    rss.append((args.soak_seconds, _rss_mb()))
+    if recorder is not None:
+        recorder.close()
+        from ectskin.io.hdf5 import list_trials
+
+        recorded = sum(t["n_frames"] for t in list_trials(path))
+    else:
+        recorded = stats["frames"]  # nothing to lose on the recording side
+    lat = lat[: min(n[0], cap)]
+    mem = np.array([m for _, m in rss])
+    # growth over the second half (after warm-up: caches, allocator pools)
+    half = [m for t, m in rss if t >= args.soak_seconds / 2]
+    lost = stats["dropped"] + stats["seq_gaps"] + (stats["frames"] - recorded)
+    result = {
+        "mode": "soak",
+        "rate_hz": rate,
+        "max_lag_ms": args.max_lag_ms,
+        "recording_on": recorder is not None,
+        "seconds": args.soak_seconds,
+        "frames": stats["frames"],
+        "processed": stats["processed"],
+        "dropped": stats["dropped"],
+        "seq_gaps": stats["seq_gaps"],
+        "recorded": recorded,
+        "lost": lost,
+        "zero_lost": lost == 0,
+        "fps_in_mean": stats["frames"] / args.soak_seconds,
+        "latency_ms": _pct(lat) if lat.size else None,
+        "rss_mib": {
+            "start": float(mem[0]),
+            "end": float(mem[-1]),
+            "max": float(mem.max()),
+            "second_half_growth": float(half[-1] - half[0]) if len(half) > 1 else 0.0,
+        },
+        "rss_samples": [[round(t, 1), round(m, 2)] for t, m in rss],
+    }
+    result["recording"] = None if recorder is None else str(path)
+    if recorder is not None and not args.keep_recording:
+        path.unlink()
+        result["recording"] = "deleted"
+    return result
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--frames", type=int, default=20000, help="throughput: frames to replay")
+    ap.add_argument(
+        "--queue-size",
+        type=int,
+        default=1,
+        help="throughput: engine queue (1 = latency without queueing delay)",
+    )
+    ap.add_argument(
+        "--paced-rate",
+        type=float,
+        default=300.0,
+        help="throughput: also measure latency with frames paced at this rate",
+    )
+    ap.add_argument("--paced-seconds", type=float, default=5.0)
+    ap.add_argument("--touch-run", type=Path, help="run dir of a trained TouchMLP")
+    ap.add_argument("--track-run", type=Path, help="run dir of a trained C2DT")
+    ap.add_argument("--soak-seconds", type=float, help="run the soak test for this long")
+    ap.add_argument("--rate", type=float, help="soak: frames per second")
+    ap.add_argument("--rss-every", type=float, default=5.0, help="soak: RSS sampling period, s")
+    ap.add_argument("--record-dir", type=Path, help="soak: where the recording goes (tmp)")
+    ap.add_argument("--keep-recording", action="store_true")
+    ap.add_argument("--no-record", action="store_true", help="soak without the recorder")
+    ap.add_argument(
+        "--max-lag-ms", type=float, default=50.0, help="soak: engine max_lag_ms (default 50)"
+    )
+    ap.add_argument("--no-pin", action="store_true", help="do not pin to one CPU core")
+    ap.add_argument("--out", type=Path, help="write the results as JSON here")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", datefmt="%H:%M:%S")
+    if args.soak_seconds is not None and not args.rate:
+        ap.error("--soak-seconds needs --rate")
+
+    import torch
+
+    torch.set_num_threads(1)
+    cpu = None if args.no_pin else _pin_one_core()
+    from ectskin.layout import default_layout
+
+    layout = default_layout()
+    with tempfile.TemporaryDirectory() as tmp:
+        touch, track = _predictors(layout, args.touch_run, args.track_run, Path(tmp))
+        if args.soak_seconds is not None:
+            result = soak(args, layout, touch, track)
+        else:
+            result = throughput(args, layout, touch, track)
+    result["machine"] = {
+        "python": sys.version.split()[0],
+        "torch": torch.__version__,
+        "platform": platform.platform(),
+        "cpu_count": os.cpu_count(),
+        "pinned_cpu": cpu,
+        "torch_threads": torch.get_num_threads(),
+    }
+    result["models"] = {
+        "touch": str(args.touch_run or "random TouchMLP (paper size)"),
+        "track": str(args.track_run or "random C2DT (paper size)"),
+    }
+    text = json.dumps(result, indent=1)
+    print(text)
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

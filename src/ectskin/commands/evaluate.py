@@ -1,0 +1,72 @@
+"""``ectskin evaluate RUN_DIR [--data DATA.h5]``: test-set metrics, baselines and figures of a run.
+
+Thin wrapper over :func:`ectskin.learn.evaluate.evaluate_run`; writes ``RUN_DIR/metrics.json``
+and the figures (Fig. 7 for touch, Fig. 9 / Fig. 10 for tracking) and prints a summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+
+HELP = "evaluate a trained run on its test split (metrics.json, baselines, figures)"
+log = logging.getLogger(__name__)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("run_dir", help="run directory written by 'ectskin train'")
+    p.add_argument(
+        "--data",
+        default=None,
+        help="recording to evaluate on (default: the file named in RUN_DIR/split.json)",
+    )
+    p.add_argument("--no-baselines", action="store_true", help="skip the baselines")
+    p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    p.add_argument("--seed", type=int, default=0, help="seed of the baselines' subsampling")
+
+
+def summary_lines(metrics: dict) -> list[str]:
+    """Human-readable lines of an ``evaluate_run`` result."""
+    lines = []
+    t = metrics.get("touch")
+    if t:
+        lines.append(
+            f"touch: accuracy {100 * t['accuracy']:.2f} % ({t['misclassified']} test frames "
+            f"misclassified"
+            + (
+                f", {t['n_misclassified_adjacent']} between adjacent regions"
+                if "n_misclassified_adjacent" in t
+                else ""
+            )
+            + ")"
+        )
+        for name, b in (t.get("baselines") or {}).items():
+            lines.append(f"  baseline {name}: accuracy {100 * b['accuracy']:.2f} %")
+    k = metrics.get("track")
+    if k:
+        lines.append(
+            f"track: AD {k['ad_mm_mean']:.3f} ± {k['ad_mm_std']:.3f} mm over "
+            f"{k['n_test_samples']} test samples (window {k.get('window')}, prior {k.get('prior')})"
+        )
+        if "worst_trajectory" in k:
+            w = k["worst_trajectory"]
+            lines.append(f"  worst trajectory {w['name']}: {w['ad_mm_mean']:.3f} mm")
+        for name, b in (k.get("baselines") or {}).items():
+            lines.append(f"  baseline {name}: AD {b['ad_mm_mean']:.3f} ± {b['ad_mm_std']:.3f} mm")
+    return lines
+
+
+def run(args: argparse.Namespace) -> int:
+    from ectskin.learn.evaluate import evaluate_run
+
+    metrics = evaluate_run(
+        args.run_dir,
+        args.data,
+        baselines=not args.no_baselines,
+        figures=not args.no_figures,
+        seed=args.seed,
+    )
+    for line in summary_lines(metrics):
+        print(line)
+    print(f"written: {args.run_dir}/metrics.json")
+    return 0

@@ -1,0 +1,99 @@
+"""``ectskin reproduce OUT_DIR``: the paper end to end (simulate, characterise, train, evaluate,
+report). Thin wrapper over :func:`ectskin.report.reproduce.reproduce`.
+
+Finished steps in OUT_DIR are reused (and reported as such), interrupted trainings resume;
+results made with other settings are never overwritten without ``--force``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+
+from ectskin._check import EctskinError
+
+HELP = (
+    "reproduce the paper: simulate, characterise, train both models + ablations, evaluate, report"
+)
+log = logging.getLogger(__name__)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "out_dir", help="output folder (data.h5, runs/, figures/, metrics.json, report.md/.html)"
+    )
+    add_common_arguments(p, default_profile="paper")
+
+
+def add_common_arguments(p: argparse.ArgumentParser, *, default_profile: str) -> None:
+    """Options shared by ``reproduce`` and ``demo``."""
+    p.add_argument(
+        "--profile",
+        choices=("quick", "paper"),
+        default=default_profile,
+        help=f"training settings (default {default_profile}; 'paper' needs a GPU to be quick)",
+    )
+    p.add_argument(
+        "--workers", type=int, default=None, help="simulation processes (default: all cores)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of simulation, splits and training")
+    p.add_argument("--epochs", type=int, default=None, help="override the epochs of every training")
+    p.add_argument("--no-ablations", action="store_true", help="skip the two tracking ablations")
+    p.add_argument("--no-baselines", action="store_true", help="skip the baselines")
+    p.add_argument("--device", default=None, help="training device (default: CUDA if available)")
+    p.add_argument(
+        "--threads",
+        default="auto",
+        help="torch CPU threads: a number, 'auto' (default: 1 on machines with <= 4 cores, where "
+        "more gain nothing for these small models) or 'torch' (one per core)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="redo steps whose earlier results in the folder used other settings",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
+    from ectskin.report.reproduce import reproduce
+
+    if args.workers is not None and args.workers < 1:
+        raise EctskinError(f"--workers must be >= 1, got {args.workers}")
+    if args.epochs is not None and args.epochs < 1:
+        raise EctskinError(f"--epochs must be >= 1, got {args.epochs}")
+    threads = {"auto": "auto", "torch": None}.get(args.threads, args.threads)
+    if isinstance(threads, str) and threads != "auto":
+        try:
+            threads = int(threads)
+        except ValueError:
+            threads = 0
+        if threads < 1:
+            raise EctskinError(
+                f"--threads must be a number >= 1, 'auto' or 'torch', got {args.threads!r}"
+            )
+    m = reproduce(
+        out_dir,
+        profile=args.profile,
+        seed=args.seed,
+        workers=args.workers,
+        force=args.force,
+        epochs=args.epochs,
+        ablations=not args.no_ablations,
+        baselines=not args.no_baselines,
+        device=args.device,
+        threads=threads,
+        progress=not args.no_progress,
+    )
+    from ectskin.report.report import results_table
+
+    for metric, paper, this, base in results_table(m):
+        print(f"{metric}: {this} (paper {paper}; baselines: {base})")
+    if m.get("reused"):
+        print(f"reused finished steps: {', '.join(m['reused'])}")
+    print(f"total {m['timings_s']['total']:.0f} s; report: {out_dir}/report.html")
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    return run_reproduce(args, args.out_dir)

@@ -1,0 +1,45 @@
+"""Live operation: frame sources, crash-safe recording and the inference engine.
+
+* :mod:`ectskin.live.sources` — :class:`Frame` and the sources (replay, twin, LSL, serial, TCP)
+  behind one iterator interface; :func:`open_source` parses ``replay:FILE``, ``sim``,
+  ``lsl:NAME``, ``serial:PORT[@BAUD]``, ``tcp:HOST:PORT``.
+* :mod:`ectskin.live.recorder` — :class:`Recorder` (every frame to HDF5, flushed ≤ 0.25 s) and
+  :func:`record_main` (``ectskin record``).
+* :mod:`ectskin.live.engine` — :class:`LiveEngine`: reference capture, calibration (paper Eq. 2),
+  touch and tracking predictors, latency and drop accounting; emits :class:`Output`.
+
+Optional dependencies (pyserial, pylsl) are imported only when such a source is opened.
+"""
+
+from ectskin.live.engine import POLICIES, LiveEngine, Output
+from ectskin.live.recorder import Recorder, record_main
+from ectskin.live.sources import (
+    Frame,
+    FrameSource,
+    LslSource,
+    ReplaySource,
+    SerialSource,
+    TcpSource,
+    TwinSource,
+    TwinStep,
+    open_source,
+    parse_line,
+)
+
+__all__ = [
+    "POLICIES",
+    "Frame",
+    "FrameSource",
+    "LiveEngine",
+    "LslSource",
+    "Output",
+    "Recorder",
+    "ReplaySource",
+    "SerialSource",
+    "TcpSource",
+    "TwinSource",
+    "TwinStep",
+    "open_source",
+    "parse_line",
+    "record_main",
+]

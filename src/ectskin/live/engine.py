@@ -1,0 +1,668 @@
+"""The live engine: source → reference capture → calibration (Eq. 2) → touch + tracking → outputs.
+
+Threads and policy
+------------------
+A reader thread takes every frame from the source, hands it to the recorder (if any: recording
+never drops a frame) and puts it into a bounded queue. The inference loop (the thread that calls
+:meth:`LiveEngine.run`) takes what is queued:
+
+``"skip-to-newest"`` (live default)
+    every queued frame updates the reference capture and the C2DT window. The newest frame is
+    always run through the models; an older queued frame is run only while it is fresh (waited
+    less than ``max_lag_ms``, default 50 ms), else it is skipped and counted in
+    ``stats["dropped"]``. So a short burst (two frames arriving together) is processed whole, and
+    when inference falls behind the engine jumps to the newest frame and the latency stays
+    bounded. ``max_lag_ms=0`` processes only the newest frame of each batch. If the inference loop
+    stalls so long that the queue fills (``queue_size`` frames), the reader drops the oldest
+    queued frame (also counted as dropped) rather than slowing the source down.
+``"block"`` (offline, benchmarks)
+    every frame is processed; the reader waits when the queue is full (back-pressure).
+
+Reference and calibration
+-------------------------
+The first ``reference_frames`` frames (and again the next ones after :meth:`capture_reference`)
+are averaged channel-wise (NaN-aware) into the reference c_0; frames are calibrated by paper Eq. 2,
+c = (c_t − c_0)/c_0. Touch uses the touch reference (the paper's rest state: capture it untouched
+and uninflated), tracking its own reference (the paper's "prior knowledge": the state at the start
+of the trajectory, with the marker coordinates of that moment as the decoder's initial coordinates).
+``capture_reference(which="both"|"touch"|"track")`` re-captures one or both. Initial marker
+coordinates are the mean markers of the reference frames when the source provides markers, else
+``reference_markers`` (e.g. the twin's rest pose). A channel whose reference is missing or zero is
+calibrated to NaN (shown as null) and fed to the models as 0 (no change).
+
+Latency is ``perf_counter()`` from the frame's arrival (``Frame.arrival``) to its output.
+
+Run torch single-threaded for live use (``torch.set_num_threads(1)``, as ``ectskin live`` does):
+the models are tiny, and on a busy 2-core machine torch's extra intra-op threads starved the
+reader and recorder threads, stalling inference for 0.3–1 s (measured; 1 thread: p50 ≈ 2.4 ms,
+max < 10 ms at 60 frames/s with recording).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ectskin._check import EctskinError, check_array, check_option
+from ectskin.layout import SensorLayout
+
+logger = logging.getLogger(__name__)
+
+POLICIES = ("skip-to-newest", "block")
+REFERENCE_KINDS = ("both", "touch", "track")
+_LATENCY_WINDOW = 1000  # processed frames over which p50/p99 are computed
+_FPS_WINDOW_S = 2.0  # seconds over which fps_in / fps_out are computed
+_STATS_REFRESH_S = 0.25  # latency percentiles are recomputed at most this often
+_REF_RTOL = 1e-6  # |c_0| below this × max |c_0| is treated as a missing reference channel
+
+
+def _json_list(a: np.ndarray | None) -> list | None:
+    """Array → nested lists of floats with NaN/inf as None (valid JSON)."""
+    if a is None:
+        return None
+    a = np.asarray(a, dtype=np.float64)
+    if np.isfinite(a).all():
+        return a.tolist()
+    return np.where(np.isfinite(a), a, None).tolist()
+
+
+@dataclass
+class Output:
+    """What the engine emits per processed frame.
+
+    ``raw`` (n_pairs,) pF; ``calibrated`` (n_pairs,) Eq. 2 against the touch reference (None until
+    a reference exists); ``touch_probs`` (n_classes,) and ``touch_cls``; ``markers_pred``,
+    ``markers_reference``, ``markers_true`` (n_markers, 3) mm; ``latency_ms`` from the frame's
+    arrival to this output; ``stats`` a snapshot of :attr:`LiveEngine.stats`.
+    """
+
+    seq: int
+    t: float
+    raw: np.ndarray
+    calibrated: np.ndarray | None = None
+    touch_probs: np.ndarray | None = None
+    touch_cls: int | None = None
+    markers_pred: np.ndarray | None = None
+    markers_reference: np.ndarray | None = None
+    markers_true: np.ndarray | None = None
+    label: int | None = None
+    latency_ms: float = 0.0
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The ``{"type": "frame", ...}`` message of the dashboard protocol
+        (``interfaces_live.md``)."""
+        touch = None
+        if self.touch_probs is not None:
+            touch = {"cls": self.touch_cls, "probs": _json_list(self.touch_probs)}
+        markers = None
+        if self.markers_pred is not None or self.markers_true is not None:
+            markers = {
+                "pred": _json_list(self.markers_pred),
+                "reference": _json_list(self.markers_reference),
+                "true": _json_list(self.markers_true),
+            }
+        return {
+            "type": "frame",
+            "seq": int(self.seq),
+            "t": float(self.t),
+            "raw": _json_list(self.raw),
+            "calibrated": _json_list(self.calibrated),
+            "touch": touch,
+            "markers": markers,
+            "label": None if self.label is None else int(self.label),
+            "latency_ms": float(self.latency_ms),
+            "stats": dict(self.stats),
+        }
+
+
+class _Reference:
+    """NaN-aware running mean of raw frames (and markers) for one reference (Eq. 2's c_0)."""
+
+    def __init__(self, n_pairs: int, n_markers: int):
+        self.c0: np.ndarray | None = None  # (n_pairs,) pF, NaN = unusable channel
+        self.markers: np.ndarray | None = None  # (n_markers, 3) mm mean over the capture
+        self.n_pairs, self.n_markers = n_pairs, n_markers
+        self.target = 0  # frames still to take; 0 = not capturing
+        self.seqs: list[int] = []
+
+    def start(self, n: int) -> None:
+        self.target = n
+        self.seqs = []
+        self._sum = np.zeros(self.n_pairs)
+        self._cnt = np.zeros(self.n_pairs)
+        self._msum = np.zeros((self.n_markers, 3))
+        self._mcnt = np.zeros((self.n_markers, 3))
+
+    @property
+    def capturing(self) -> bool:
+        return self.target > 0
+
+    def add(self, c: np.ndarray, markers: np.ndarray | None, seq: int) -> bool:
+        """Take one frame; returns True when the capture just completed."""
+        ok = np.isfinite(c)
+        self._sum[ok] += c[ok]
+        self._cnt += ok
+        if markers is not None:
+            okm = np.isfinite(markers)
+            self._msum[okm] += markers[okm]
+            self._mcnt += okm
+        self.seqs.append(seq)
+        self.target -= 1
+        if self.target:
+            return False
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c0 = self._sum / self._cnt
+            m = self._msum / self._mcnt if self._mcnt.any() else None
+        scale = np.nanmax(np.abs(c0)) if np.isfinite(c0).any() else 0.0
+        bad = ~np.isfinite(c0) | (np.abs(c0) <= _REF_RTOL * scale)
+        c0[bad] = np.nan
+        self.c0 = c0
+        self.markers = m
+        return True
+
+
+class LiveEngine:
+    """Runs touch recognition and tracking on a live source.
+
+    Parameters
+    ----------
+    source
+        A :class:`~ectskin.live.sources.FrameSource` (or any iterable of ``Frame`` with
+        ``close()`` and optional ``counters``).
+    layout
+        The sensor layout (default: ``source.layout``); its pair count must match the source's.
+    touch, track
+        Predictors with the ``TouchPredictor`` / ``TrackPredictor`` protocol of
+        :mod:`ectskin.learn.predict`, or None.
+    reference_frames
+        Frames averaged into a reference (30 = 1 s at 30 fps).
+    policy
+        ``"skip-to-newest"`` or ``"block"`` (module docstring).
+    recorder
+        A :class:`~ectskin.live.recorder.Recorder` that gets every frame, or None.
+    reference_markers
+        (n_markers, 3) mm initial marker coordinates used when the source provides no markers
+        (default: ``source.reference_markers`` if the source has it).
+    queue_size
+        Frames the reader may queue ahead of the inference loop.
+    max_lag_ms
+        With ``"skip-to-newest"``: a queued frame older than this is skipped when a newer one
+        waits.
+    """
+
+    def __init__(
+        self,
+        source,
+        layout: SensorLayout | None = None,
+        *,
+        touch=None,
+        track=None,
+        reference_frames: int = 30,
+        policy: str = "skip-to-newest",
+        recorder=None,
+        reference_markers: Any = None,
+        queue_size: int = 256,
+        max_lag_ms: float = 50.0,
+    ):
+        check_option("policy", policy, POLICIES)
+        layout = layout if layout is not None else getattr(source, "layout", None)
+        if layout is None:
+            raise EctskinError("LiveEngine needs a layout (the source has none)")
+        if not (isinstance(reference_frames, int) and reference_frames >= 1):
+            raise EctskinError(
+                f"reference_frames must be an integer >= 1, got {reference_frames!r}"
+            )
+        if not (isinstance(queue_size, int) and queue_size >= 1):
+            raise EctskinError(f"queue_size must be an integer >= 1, got {queue_size!r}")
+        self.source, self.layout = source, layout
+        self.policy = policy
+        self.recorder = recorder
+        self.reference_frames = reference_frames
+        self.queue_size = queue_size
+        if not max_lag_ms >= 0:
+            raise EctskinError(f"max_lag_ms must be >= 0, got {max_lag_ms!r}")
+        self.max_lag_s = float(max_lag_ms) / 1e3
+        n_pairs, n_markers = layout.n_pairs, layout.n_markers
+        src_pairs = getattr(source, "n_pairs", n_pairs)
+        if src_pairs != n_pairs:
+            raise EctskinError(
+                f"source {getattr(source, 'name', source)!r} gives {src_pairs} channels, layout "
+                f"{layout.name!r} has {n_pairs} pairs"
+            )
+        self.n_pairs, self.n_markers = n_pairs, n_markers
+        self.touch = touch
+        self.track = track
+        self._touch_sel = self._channels(touch, "touch model") if touch is not None else None
+        self._track_sel = self._channels(track, "tracking model") if track is not None else None
+        self.n_classes = int(getattr(touch, "n_classes", layout.n_classes))
+        if touch is not None and self.n_classes != layout.n_classes:
+            raise EctskinError(
+                f"touch model has {self.n_classes} classes, layout {layout.name!r} has "
+                f"{layout.n_classes} (no touch + {layout.n_regions} regions)"
+            )
+        self.window = 1
+        if track is not None:
+            self.window = int(track.window)
+            if int(track.n_markers) != n_markers:
+                raise EctskinError(
+                    f"tracking model predicts {track.n_markers} markers, layout {layout.name!r} "
+                    f"has {n_markers}"
+                )
+        if reference_markers is None:
+            reference_markers = getattr(source, "reference_markers", None)
+        if reference_markers is not None:
+            reference_markers = check_array(
+                "reference_markers", reference_markers, (n_markers, 3), finite=True
+            )
+        self._fallback_markers = reference_markers
+        if (
+            track is not None
+            and reference_markers is None
+            and getattr(source, "provides_markers", None) is False
+        ):
+            raise EctskinError(
+                f"tracking needs initial marker coordinates: source "
+                f"{getattr(source, 'name', source)!r} gives no markers; pass reference_markers "
+                f"(n_markers={n_markers}, 3) in mm"
+            )
+
+        # state shared between threads
+        self._lock = threading.Lock()
+        self._cond = threading.Condition(self._lock)
+        self._queue: deque = deque()
+        self._reader_done = False
+        self._stop = threading.Event()
+        self._ran = False
+        self._pending_capture: str | None = "both"
+        self._counts = {"frames": 0, "processed": 0, "dropped": 0, "wrong_channels": 0, "errors": 0}
+        self._lat = deque(maxlen=_LATENCY_WINDOW)
+        self._in_times: deque = deque()
+        self._out_times: deque = deque()
+        self._lat_cache = (math.nan, math.nan)
+        self._lat_cache_t = -math.inf
+        self._error: str | None = None
+        self.latest: Output | None = None
+        # inference-loop state
+        self._ref_touch = _Reference(n_pairs, n_markers)
+        self._ref_track = _Reference(n_pairs, n_markers)
+        self._win = np.zeros((self.window, n_pairs))
+        self._win_pos = 0
+        self._win_n = 0
+        self._init_markers: np.ndarray | None = None
+        self._warned: set[str] = set()
+
+    # ------------------------------------------------------------------ public API
+    def capture_reference(self, which: str = "both") -> None:
+        """Re-capture the reference(s) from the next ``reference_frames`` frames (thread-safe)."""
+        check_option("which", which, REFERENCE_KINDS)
+        with self._lock:
+            self._pending_capture = which
+
+    def stop(self) -> None:
+        """Ask :meth:`run` to return soon (thread-safe); closes the source."""
+        self._stop.set()
+        with self._cond:
+            self._cond.notify_all()
+        try:
+            self.source.close()
+        except Exception:  # a source that fails to close is being abandoned anyway
+            logger.debug("source close failed", exc_info=True)
+
+    @property
+    def reference_ready(self) -> bool:
+        return self._ref_touch.c0 is not None
+
+    @property
+    def stats(self) -> dict[str, Any]:
+        """Counters, latency percentiles (ms) and rates (frames/s), see ``interfaces_live.md``."""
+        return self._stats(refresh=True)
+
+    @property
+    def reference_markers(self) -> np.ndarray | None:
+        """(n_markers, 3) mm initial marker coordinates in use (None until known)."""
+        return self._init_markers if self._init_markers is not None else self._fallback_markers
+
+    def meta(self) -> dict[str, Any]:
+        """The engine's part of the dashboard's ``meta`` message (the dashboard adds the layout:
+        ``ectskin.dashboard.build_meta``)."""
+        return {
+            "reference_markers": _json_list(self.reference_markers),
+            "n_classes": self.n_classes,
+            "policy": self.policy,
+            "reference_frames": self.reference_frames,
+            "touch_model": self.touch is not None,
+            "track_model": self.track is not None,
+            "source": str(getattr(self.source, "name", type(self.source).__name__)),
+        }
+
+    def run(
+        self,
+        max_frames: int | None = None,
+        duration_s: float | None = None,
+        on_output: Callable[[Output], None] | None = None,
+    ) -> dict[str, Any]:
+        """Process frames until the source ends, ``max_frames`` frames have been read,
+        ``duration_s`` seconds have passed, or :meth:`stop` is called. Calls ``on_output(output)``
+        for every processed frame. Returns the final :attr:`stats`. An engine runs once."""
+        if self._ran:
+            raise EctskinError("a LiveEngine runs once; build a new one (with a new source)")
+        self._ran = True
+        if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
+            raise EctskinError(f"max_frames must be an integer >= 1, got {max_frames!r}")
+        if duration_s is not None and not duration_s > 0:
+            raise EctskinError(f"duration_s must be > 0, got {duration_s!r}")
+        self._t_start = time.perf_counter()
+        deadline = None if duration_s is None else self._t_start + duration_s
+        reader = threading.Thread(
+            target=self._read, args=(max_frames,), name="ectskin-reader", daemon=True
+        )
+        reader.start()
+        try:
+            while not self._stop.is_set():
+                batch, done = self._take(deadline)
+                if batch:
+                    self._handle(batch, on_output)
+                elif done:
+                    break
+                if deadline is not None and time.perf_counter() >= deadline:
+                    break
+        finally:
+            self._stop.set()
+            with self._cond:
+                self._cond.notify_all()
+            try:
+                self.source.close()
+            except Exception:
+                logger.debug("source close failed", exc_info=True)
+            reader.join(timeout=10.0)
+        if self._error:
+            raise EctskinError(self._error)
+        return self.stats
+
+    # ------------------------------------------------------------------ reader thread
+    def _read(self, max_frames: int | None) -> None:
+        n = 0
+        try:
+            for frame in self.source:
+                if self._stop.is_set():
+                    break
+                c = frame.capacitance
+                if getattr(c, "shape", None) != (self.n_pairs,):
+                    with self._lock:
+                        self._counts["wrong_channels"] += 1
+                    self._warn_once(
+                        "shape",
+                        f"frame {frame.seq}: expected {self.n_pairs} channels,"
+                        f" got shape {getattr(c, 'shape', None)}; skipped",
+                    )
+                    continue
+                if self.recorder is not None:
+                    try:
+                        self.recorder.write(frame)
+                    except EctskinError as exc:  # disk full, file removed: stop, say why
+                        self._error = str(exc)
+                        logger.error("%s", exc)
+                        break
+                with self._cond:
+                    if self.policy == "block":
+                        while len(self._queue) >= self.queue_size and not self._stop.is_set():
+                            self._cond.wait(0.1)
+                    elif len(self._queue) >= self.queue_size:
+                        self._queue.popleft()
+                        self._counts["dropped"] += 1
+                    self._queue.append(frame)
+                    self._counts["frames"] += 1
+                    _tick(self._in_times, frame.arrival)
+                    self._cond.notify_all()
+                n += 1
+                if max_frames is not None and n >= max_frames:
+                    break
+        except EctskinError as exc:
+            self._error = f"{getattr(self.source, 'name', 'source')}: {exc}"
+            logger.error("%s", self._error)
+        except Exception as exc:  # a source bug must not leave run() waiting forever
+            self._error = (
+                f"{getattr(self.source, 'name', 'source')} failed: {type(exc).__name__}: {exc}"
+            )
+            logger.exception("source failed")
+        finally:
+            with self._cond:
+                self._reader_done = True
+                self._cond.notify_all()
+
+    # ------------------------------------------------------------------ inference loop
+    def _take(self, deadline: float | None) -> tuple[list, bool]:
+        with self._cond:
+            while not self._queue and not self._reader_done and not self._stop.is_set():
+                timeout = 0.1 if deadline is None else min(0.1, deadline - time.perf_counter())
+                if timeout <= 0:
+                    break
+                self._cond.wait(timeout)
+            batch = list(self._queue)
+            self._queue.clear()
+            done = self._reader_done and not self._queue
+            self._cond.notify_all()
+        return batch, done
+
+    def _handle(self, batch: list, on_output) -> None:
+        skip = self.policy == "skip-to-newest"
+        last = len(batch) - 1
+        for i, f in enumerate(batch):
+            self._ingest(f)
+            if skip and i < last and time.perf_counter() - f.arrival > self.max_lag_s:
+                with self._lock:
+                    self._counts["dropped"] += 1
+                continue
+            out = self._process(f)
+            now = time.perf_counter()
+            out.latency_ms = (now - f.arrival) * 1e3
+            with self._lock:
+                self._counts["processed"] += 1
+                self._lat.append(out.latency_ms)
+                _tick(self._out_times, now)
+            out.stats = self._stats(refresh=False)
+            self.latest = out
+            if on_output is not None:
+                try:
+                    on_output(out)
+                except Exception:
+                    with self._lock:
+                        self._counts["errors"] += 1
+                    if "callback" not in self._warned:
+                        self._warned.add("callback")
+                        logger.exception(
+                            "on_output callback failed (further failures counted "
+                            "in stats['errors'])"
+                        )
+
+    def _ingest(self, f) -> None:
+        """Update reference captures and the raw window with one frame (every frame)."""
+        with self._lock:
+            which, self._pending_capture = self._pending_capture, None
+        if which is not None:
+            if which in ("both", "touch"):
+                self._ref_touch.start(self.reference_frames)
+            if which in ("both", "track"):
+                self._ref_track.start(self.reference_frames)
+            logger.info(
+                "capturing the %s reference from the next %d frames",
+                "touch and tracking" if which == "both" else which,
+                self.reference_frames,
+            )
+        c = f.capacitance
+        k = self.window
+        if self._win_n == 0:
+            self._win[:] = c  # pad: the first frame repeated (as datasets' pad=True)
+        self._win[self._win_pos] = c
+        self._win_pos = (self._win_pos + 1) % k
+        self._win_n += 1
+        for name, ref in (("touch", self._ref_touch), ("tracking", self._ref_track)):
+            if ref.capturing and ref.add(c, f.markers, f.seq):
+                self._reference_done(name, ref, f)
+
+    def _reference_done(self, name: str, ref: _Reference, f) -> None:
+        bad = np.flatnonzero(np.isnan(ref.c0))
+        if bad.size:
+            names = ", ".join(self.layout.pair_names[j] for j in bad[:8])
+            logger.warning(
+                "%s reference: %d channel(s) without a usable reference (%s); they "
+                "calibrate to NaN and enter the models as 0",
+                name,
+                bad.size,
+                names,
+            )
+        text = f"{name} reference captured from frames {ref.seqs[0]}..{ref.seqs[-1]}"
+        logger.info("%s", text)
+        if self.recorder is not None:
+            try:
+                self.recorder.add_event(text, t_s=f.t)
+            except EctskinError as exc:
+                logger.error("cannot record the event: %s", exc)
+        if name == "tracking":
+            m = ref.markers
+            if m is not None and self._fallback_markers is not None:
+                m = np.where(np.isfinite(m), m, self._fallback_markers)
+            elif m is None:
+                m = self._fallback_markers
+            if m is not None and not np.isfinite(m).all():
+                j = int(np.argwhere(~np.isfinite(m))[0][0])
+                self._warn_once(
+                    "occluded",
+                    f"marker {j} was not visible during the reference "
+                    "capture; its prediction is NaN",
+                )
+            if m is None and self.track is not None:
+                self._warn_once(
+                    "nomarkers",
+                    "tracking disabled: the source gave no markers "
+                    "during the reference and no reference_markers was "
+                    "passed",
+                )
+            self._init_markers = m
+
+    def _process(self, f) -> Output:
+        raw = f.capacitance
+        out = Output(seq=f.seq, t=f.t, raw=raw, label=f.label, markers_true=f.markers)
+        c0 = self._ref_touch.c0
+        if c0 is not None:
+            cal = (raw - c0) / c0  # Eq. 2: c = (c_t - c_0) / c_0
+            out.calibrated = cal
+            if self.touch is not None:
+                x = np.nan_to_num(cal, nan=0.0, posinf=0.0, neginf=0.0)
+                if self._touch_sel is not None:
+                    x = x[self._touch_sel]
+                try:
+                    probs = np.asarray(self.touch.predict(x.astype(np.float32)), dtype=np.float64)
+                    out.touch_probs = probs
+                    out.touch_cls = int(np.argmax(probs))
+                except Exception:
+                    self._model_error("touch")
+        c0t = self._ref_track.c0
+        if self.track is not None and c0t is not None and self._init_markers is not None:
+            k = self.window
+            order = (self._win_pos + np.arange(k)) % k  # oldest first
+            w = (self._win[order] - c0t) / c0t  # Eq. 2 on the window, (k, n_pairs)
+            w = np.nan_to_num(w, nan=0.0, posinf=0.0, neginf=0.0)
+            if self._track_sel is not None:
+                w = w[:, self._track_sel]
+            try:
+                out.markers_pred = np.asarray(
+                    self.track.predict(w.astype(np.float32), self._init_markers.astype(np.float32)),
+                    dtype=np.float64,
+                )
+                out.markers_reference = self._init_markers
+            except Exception:
+                self._model_error("tracking")
+        return out
+
+    # ------------------------------------------------------------------ helpers
+    def _channels(self, predictor, what: str) -> np.ndarray | None:
+        """Channel indices the predictor consumes (None = all, in layout order)."""
+        n = int(predictor.n_pairs)
+        names = [str(p) for p in getattr(predictor, "pair_names", None) or []]
+        index = {p: j for j, p in enumerate(self.layout.pair_names)}
+        known = len(names) == n and all(p in index for p in names)
+        if known:  # the model names its channels (a subset or another order): map by name
+            sel = np.array([index[p] for p in names], dtype=np.int64)
+            return None if np.array_equal(sel, np.arange(self.n_pairs)) else sel
+        if n == self.n_pairs:  # unnamed (or generically named) channels: layout order
+            return None
+        raise EctskinError(
+            f"{what} expects {n} channels, layout {self.layout.name!r} has {self.n_pairs} pairs"
+            + (f" (model channels {names[:4]}… are not the layout's pair names)" if names else "")
+        )
+
+    def _model_error(self, what: str) -> None:
+        with self._lock:
+            self._counts["errors"] += 1
+        if what not in self._warned:
+            self._warned.add(what)
+            logger.exception("%s model failed (further failures counted in stats['errors'])", what)
+
+    def _warn_once(self, key: str, message: str) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            logger.warning("%s", message)
+
+    def _stats(self, refresh: bool) -> dict[str, Any]:
+        now = time.perf_counter()
+        with self._lock:
+            counts = dict(self._counts)
+            if refresh or now - self._lat_cache_t > _STATS_REFRESH_S:
+                if self._lat:
+                    p50, p99 = np.percentile(np.fromiter(self._lat, float), [50, 99])
+                    self._lat_cache = (float(p50), float(p99))
+                self._lat_cache_t = now
+            p50, p99 = self._lat_cache
+            fps_in = _rate(self._in_times, now)
+            fps_out = _rate(self._out_times, now)
+            queued = len(self._queue)
+        src = getattr(self.source, "counters", None) or {}
+        stats = {
+            "frames": counts["frames"],
+            "processed": counts["processed"],
+            "dropped": counts["dropped"],
+            "malformed": int(src.get("malformed", 0)),
+            "wrong_channels": int(src.get("wrong_channels", 0)) + counts["wrong_channels"],
+            "disconnects": int(src.get("disconnects", 0)),
+            "reconnects": int(src.get("reconnects", 0)),
+            "seq_gaps": int(src.get("seq_gaps", 0)),
+            "errors": counts["errors"],
+            "queue": queued,
+            "latency_ms_p50": None if math.isnan(p50) else round(p50, 4),
+            "latency_ms_p99": None if math.isnan(p99) else round(p99, 4),
+            "fps_in": round(fps_in, 2),
+            "fps_out": round(fps_out, 2),
+            "policy": self.policy,
+            "reference_ready": self._ref_touch.c0 is not None,
+            "reference_capturing": self._ref_touch.capturing or self._ref_track.capturing,
+        }
+        if self.recorder is not None:
+            stats.update(self.recorder.stats)
+        return stats
+
+
+def _tick(times: deque, t: float) -> None:
+    """Append ``t`` and forget times older than the fps window."""
+    times.append(t)
+    while times and t - times[0] > _FPS_WINDOW_S:
+        times.popleft()
+
+
+def _rate(times: deque, now: float) -> float:
+    """Events per second over the last ``_FPS_WINDOW_S`` seconds (0 when idle)."""
+    while times and now - times[0] > _FPS_WINDOW_S:
+        times.popleft()
+    if len(times) < 2:
+        return 0.0
+    span = max(now - times[0], times[-1] - times[0])
+    return (len(times) - 1) / span if span > 0 else 0.0

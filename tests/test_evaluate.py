@@ -1,0 +1,179 @@
+"""Evaluation metrics on hand-computed cases, figures, and evaluate_run on a tiny trained run."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from ectskin._check import EctskinError
+from ectskin.layout import default_layout
+from ectskin.learn.evaluate import (
+    average_distance,
+    confusion_matrix,
+    format_count,
+    marker_distances,
+    region_adjacency,
+    touch_metrics,
+    track_metrics,
+    write_json_atomic,
+)
+
+
+# ----------------------------------------------------------------------------- touch
+def test_confusion_three_classes_by_hand():
+    y_true = [0, 0, 1, 1, 1, 2, 2]
+    y_pred = [0, 1, 1, 1, 2, 2, 0]
+    conf = confusion_matrix(y_true, y_pred, 3)
+    # rows = true class, columns = predicted class, counted by hand
+    assert conf.tolist() == [[1, 1, 0], [0, 2, 1], [1, 0, 1]]
+    m = touch_metrics(y_true, y_pred, 3)
+    assert m["accuracy"] == pytest.approx(4 / 7)
+    assert m["n_test_frames"] == 7
+    assert m["n_misclassified"] == 3
+    assert m["misclassified"] == "3 of 7"
+    assert m["per_class_accuracy"] == pytest.approx([0.5, 2 / 3, 0.5])
+    assert sorted((c["true"], c["pred"], c["count"]) for c in m["confusions"]) == [
+        (0, 1, 1),
+        (1, 2, 1),
+        (2, 0, 1),
+    ]
+
+
+def test_confusion_refuses_out_of_range_class():
+    with pytest.raises(EctskinError, match=r"y_pred\[1\] = 3"):
+        confusion_matrix([0, 1], [0, 3], 3)
+    with pytest.raises(EctskinError, match="shape"):
+        confusion_matrix([0, 1], [0], 3)
+
+
+def test_format_count_matches_paper_wording():
+    assert format_count(34, 28800) == "34 of 28 800"
+    assert format_count(0, 112500) == "0 of 112 500"
+    assert format_count(5, 999) == "5 of 999"
+
+
+def test_region_adjacency_of_the_paper_grid():
+    lay = default_layout()
+    adj = region_adjacency(lay)
+    assert adj.shape == (19, 19)
+    assert (adj == adj.T).all() and not adj.diagonal().any()
+    assert not adj[0].any() and not adj[:, 0].any()  # "no touch" is adjacent to nothing
+    # front grid numbered row-major from the base: 1 2 3 / 4 5 6 / 7 8 9
+    assert adj[1, 2] and adj[2, 3] and adj[1, 4] and adj[5, 8] and adj[17, 18]
+    assert not adj[1, 3]  # same row, not touching
+    assert not adj[1, 5]  # diagonal: corner only
+    assert not adj[1, 10] and not adj[9, 18]  # other face
+    # a 3 x 3 grid has 12 edge neighbours per face; 2 faces; symmetric matrix
+    assert adj.sum() == 2 * 12 * 2
+    corners = region_adjacency(lay, corners=True)
+    assert corners[1, 5] and corners[3, 5] and not corners[1, 9]
+    assert corners.sum() == 2 * (12 + 8) * 2  # plus 8 diagonal neighbours per face
+
+
+def test_touch_metrics_adjacent_confusions_and_worst_trial():
+    adj = region_adjacency(default_layout())
+    # 3 trials: region 2 (10 frames, 3 called 3), region 5 (10 frames, 1 called 9), none (10 ok)
+    y_true = np.array([2] * 10 + [5] * 10 + [0] * 10)
+    y_pred = y_true.copy()
+    y_pred[:3] = 3  # 2 -> 3: adjacent (paper's example)
+    y_pred[10] = 9  # 5 -> 9: diagonal, not adjacent
+    group = np.repeat([0, 1, 2], 10)
+    m = touch_metrics(y_true, y_pred, 19, adjacency=adj, group=group, group_names=["a", "b", "c"])
+    assert m["n_misclassified"] == 4
+    assert m["n_misclassified_adjacent"] == 3
+    assert m["all_adjacent"] is False
+    assert m["confusions"][0] == {"true": 2, "pred": 3, "count": 3, "adjacent": True}
+    assert m["confusions"][1] == {"true": 5, "pred": 9, "count": 1, "adjacent": False}
+    assert m["worst_trial"] == {"name": "a", "label": 2, "n_frames": 10, "accuracy": 0.7}
+    assert [t["accuracy"] for t in m["per_trial"]] == [0.7, 0.9, 1.0]
+    assert m["per_class_accuracy"][1] is None  # class absent from the test set
+    assert np.asarray(m["confusion"]).sum() == 30
+
+
+# ----------------------------------------------------------------------------- tracking
+def test_average_distance_two_samples_by_hand():
+    true = np.zeros((2, 2, 3))
+    pred = np.zeros((2, 2, 3))
+    pred[0, 0] = [3, 4, 0]  # distance 5
+    pred[0, 1] = [0, 0, 0]  # 0
+    pred[1, 0] = [0, 0, 1]  # 1
+    pred[1, 1] = [0, 2, 0]  # 2
+    true[1] += 10.0  # a shift common to both: distances unchanged
+    pred[1] += 10.0
+    assert marker_distances(pred, true).tolist() == [[5.0, 0.0], [1.0, 2.0]]
+    mean, std = average_distance(pred, true)
+    assert mean == pytest.approx(2.0)  # (5 + 0 + 1 + 2) / (N M = 4), Eq. 3
+    assert std == pytest.approx(math.sqrt((9 + 4 + 1 + 0) / 4))
+
+
+def test_average_distance_refuses_bad_input():
+    with pytest.raises(EctskinError, match="shape"):
+        average_distance(np.zeros((2, 5, 3)), np.zeros((2, 4, 3)))
+    true = np.zeros((2, 1, 3))
+    true[1, 0, 2] = np.nan
+    with pytest.raises(EctskinError, match="sample 1, marker 0"):
+        average_distance(np.zeros((2, 1, 3)), true)
+    with pytest.raises(EctskinError, match="no samples"):
+        average_distance(np.zeros((0, 5, 3)), np.zeros((0, 5, 3)))
+
+
+def test_track_metrics_per_marker_and_trajectory():
+    rng = np.random.default_rng(0)
+    true = rng.normal(size=(6, 2, 3)) * 50
+    err = np.zeros((6, 2, 3))
+    err[:, 0, 0] = 1.0  # marker 1 always 1 mm off
+    err[:, 1, 1] = [2, 2, 2, 4, 4, 4]  # marker 2: 2 mm in trajectory 0, 4 mm in trajectory 1
+    group = np.array([0, 0, 0, 1, 1, 1])
+    m = track_metrics(
+        true + err, true, group=group, group_names=["t0", "t1"], marker_names=["A", "B"]
+    )
+    assert m["ad_mm_mean"] == pytest.approx((6 * 1 + 3 * 2 + 3 * 4) / 12)
+    assert m["per_marker"]["A"] == {
+        "ad_mm_mean": pytest.approx(1.0),
+        "ad_mm_std": pytest.approx(0.0),
+    }
+    assert m["per_marker"]["B"]["ad_mm_mean"] == pytest.approx(3.0)
+    assert m["per_marker"]["B"]["ad_mm_std"] == pytest.approx(1.0)
+    assert m["n_test_trajectories"] == 2
+    assert m["per_trajectory"][0]["ad_mm_mean"] == pytest.approx(1.5)
+    assert m["worst_trajectory"]["name"] == "t1"
+    assert m["worst_trajectory"]["ad_mm_mean"] == pytest.approx(2.5)
+    assert m["ad_mm_max"] == pytest.approx(4.0)
+
+
+def test_write_json_atomic_converts_numpy(tmp_path):
+    p = write_json_atomic(
+        tmp_path / "m.json", {"a": np.float32(1.5), "b": np.arange(3), "c": float("nan")}
+    )
+    assert json.loads(p.read_text()) == {"a": 1.5, "b": [0, 1, 2], "c": None}
+    assert [f.name for f in tmp_path.iterdir()] == ["m.json"]  # no temp file left
+
+
+# ----------------------------------------------------------------------------- figures
+def test_figures_draw_and_return_figures(tmp_path):
+    from ectskin.viz import plot_confusion, plot_marker_trajectory, plot_tracking_examples
+
+    conf = np.diag([5, 6, 7])
+    conf[1, 2] = 2
+    fig = plot_confusion(conf)
+    texts = [t.get_text() for t in fig.axes[0].texts]
+    assert sorted(texts) == sorted(["5", "6", "7", "2"])  # non-zero cells annotated
+    assert "2 of 20" in fig.axes[0].get_title()
+    fig.savefig(tmp_path / "c.png")
+
+    true = np.zeros((6, 5, 3))
+    true[..., 2] = np.arange(5) * 24
+    pred = true + 1.0  # every marker sqrt(3) mm off
+    fig = plot_tracking_examples(pred, true, titles=[f"s{i}" for i in range(6)])
+    assert len(fig.axes) == 6
+    assert all(f"AD = {math.sqrt(3):.3f} mm" in ax.get_title() for ax in fig.axes)
+    fig.savefig(tmp_path / "t.png")
+
+    t = np.arange(30) / 30
+    fig = plot_marker_trajectory(t, true[0, :1].repeat(30, 0) + 2.0, true[0, :1].repeat(30, 0))
+    assert len(fig.axes) == 3
+    with pytest.raises(EctskinError, match="shape"):
+        plot_marker_trajectory(t, np.zeros((29, 3)), np.zeros((30, 3)))
