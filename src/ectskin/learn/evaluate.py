@@ -346,7 +346,7 @@ def read_json(path: str | Path, what: str = "file") -> Any:
 
 
 # --------------------------------------------------------------------------- runs
-#: Files ``evaluate_run`` writes into the run directory.
+#: Figures ``evaluate_run`` writes into the run directory: file name → caption.
 TOUCH_FIGURES = {"fig7_confusion.png": "Fig. 7: confusion map of the test set"}
 TRACK_FIGURES = {
     "fig9_tracking.png": "Fig. 9: tracking examples, estimated (red) vs true (blue) markers",
@@ -523,7 +523,9 @@ def evaluate_run(
         ``{"touch": {...}}`` for a TouchMLP run or ``{"track": {...}}`` for a C2DT run (see
         :func:`touch_metrics` / :func:`track_metrics`), each with ``baselines``, ``training``
         (epochs, best epoch, seconds from ``metrics.csv``), ``split`` (trial counts), the
-        ``figures`` written and ``evaluate_seconds``.
+        ``figures`` written ({file name: caption}) and ``evaluate_seconds``; tracking adds
+        ``window``, ``prior`` and ``examples`` (the 6 samples of Fig. 9 with their AD, the
+        worst of them, and the trajectory of Fig. 10).
     """
     from ectskin.learn.checkpoint import check_channels, load_checkpoint
     from ectskin.learn.datasets import split_from_names
@@ -573,7 +575,7 @@ def evaluate_run(
             from ectskin.viz.learning import plot_confusion
 
             _save(plot_confusion(np.asarray(m["confusion"])), run / "fig7_confusion.png")
-            figs.update({name: name for name in TOUCH_FIGURES})
+            figs.update(TOUCH_FIGURES)
     else:
         from ectskin.learn.datasets import track_dataset
 
@@ -656,14 +658,14 @@ def evaluate_run(
                 "marker": name,
                 "ad_mm": ad_traj,
             }
-            figs.update({name_: name_ for name_ in TRACK_FIGURES})
+            figs.update(TRACK_FIGURES)
     training = _training_summary(run)
     history = training.pop("history", None)
     if figures and history:
         from ectskin.viz.learning import plot_learning_curves
 
         _save(plot_learning_curves(history, title=f"{task}: {run.name}"), run / CURVES_FIGURE)
-        figs[CURVES_FIGURE] = CURVES_FIGURE
+        figs[CURVES_FIGURE] = "training and validation loss per epoch"
     m["training"] = {
         **training,
         **{
