@@ -115,8 +115,9 @@ def test_protocol_plan_matches_the_paper(layout):
     for p in touch:
         reg = layout.region(p.region)
         assert reg.surface == p.surface
-        assert reg.u_mm[0] < p.touch_uv_mm[0] < reg.u_mm[1]
-        assert reg.v_mm[0] < p.touch_uv_mm[1] < reg.v_mm[1]
+        for u, v in p.touch_uv_mm:
+            assert reg.u_mm[0] < u < reg.u_mm[1]
+            assert reg.v_mm[0] < v < reg.v_mm[1]
     assert plan_trials(Protocol(), layout) == plans  # deterministic for a seed
     assert plan_trials(Protocol(seed=1), layout) != plans
 
@@ -166,3 +167,17 @@ def test_live_twin_streams_touch_and_inflation():
         twin.set_touch(42)
     with pytest.raises(EctskinError, match="impossible inflation"):
         twin.set_inflation([0, 50, 0])
+
+
+def test_touch_dwells_move_the_finger_within_its_region(layout):
+    proto = Protocol(levels_ml=(0.0,), touch_trials=1, no_contact_trial=False, duration_s=3.0,
+                     touch_dwells=3, seed=2)
+    t = simulate_experiment(proto, workers=1, progress=False).trials[0]
+    points = t.meta["touch_uv_mm"]
+    assert len(points) == 3 and len({tuple(p) for p in points}) == 3
+    reg = layout.region(t.region)
+    assert all(reg.u_mm[0] < u < reg.u_mm[1] and reg.v_mm[0] < v < reg.v_mm[1] for u, v in points)
+    segments = np.array_split(np.arange(t.n_frames), 3)
+    means = [t.capacitance[s].mean(axis=0) for s in segments]
+    assert np.abs(means[0] - means[1]).max() > 2e-3  # a different placement reads differently
+    assert np.all(t.labels == t.region)

@@ -34,6 +34,7 @@ class Protocol:
     force_range_n: tuple[float, float] = (0.3, 2.0)  # (assumed) finger force range
     force_knot_s: float = 2.5  # (assumed) the force changes smoothly on this time scale
     touch_margin: float = 0.15  # touch point uniform in the region shrunk by this fraction per side
+    touch_dwells: int = 1  # finger placements per touch trial: it slides to a new point D-1 times
     lifts: bool = False  # lift the finger now and then, with per-frame contact labels
     finger_radius_mm: float = 8.0  # (assumed)
     force_nodes: int = 5  # MoM solves per touch trial (Chebyshev nodes in force)
@@ -55,6 +56,8 @@ class Protocol:
             raise EctskinError(f"protocol: force_range_n must be 0 < low < high, got {self.force_range_n}")
         if not 0 <= self.touch_margin < 0.5:
             raise EctskinError(f"protocol: touch_margin must be in [0, 0.5), got {self.touch_margin}")
+        if self.touch_dwells < 1:
+            raise EctskinError(f"protocol: touch_dwells must be >= 1, got {self.touch_dwells}")
         if self.force_nodes < 2:
             raise EctskinError(f"protocol: force_nodes must be >= 2, got {self.force_nodes}")
         if self.touch_trials == 0 and not self.no_contact_trial:
@@ -107,7 +110,7 @@ class TrialPlan:
     kind: str  # "no_contact" | "touch"
     region: int  # 0 for no contact
     surface: str | None
-    touch_uv_mm: tuple[float, float] | None
+    touch_uv_mm: tuple[tuple[float, float], ...] | None  # one point per dwell
     start_s: float  # start on the experiment clock
     marker_delay_frames: int
     occluded: bool
@@ -150,9 +153,12 @@ def plan_trials(protocol: Protocol, layout: SensorLayout) -> list[TrialPlan]:
                 counters[face] += 1
                 m = protocol.touch_margin
                 du, dv = reg.u_mm[1] - reg.u_mm[0], reg.v_mm[1] - reg.v_mm[0]
-                uv = (
-                    float(rng.uniform(reg.u_mm[0] + m * du, reg.u_mm[1] - m * du)),
-                    float(rng.uniform(reg.v_mm[0] + m * dv, reg.v_mm[1] - m * dv)),
+                uv = tuple(
+                    (
+                        float(rng.uniform(reg.u_mm[0] + m * du, reg.u_mm[1] - m * du)),
+                        float(rng.uniform(reg.v_mm[0] + m * dv, reg.v_mm[1] - m * dv)),
+                    )
+                    for _ in range(protocol.touch_dwells)
                 )
                 region, surface = reg.id, face
                 occ = touch_idx in occluded

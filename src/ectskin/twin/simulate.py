@@ -101,19 +101,21 @@ def simulate_trial(
     labels = np.zeros(n, dtype=np.int16)
     force = np.zeros(n)
     if plan.kind == "touch":
-        touch = Touch(plan.surface, plan.touch_uv_mm)
         force = force_profile(n, fps, rng, protocol)
         contact = contact_mask(n, fps, rng) if protocol.lifts else np.ones(n, dtype=bool)
         force[~contact] = 0.0
         labels[contact] = plan.region
         c_true = np.empty((n, sensor.layout.n_pairs))
-        if contact.any():
-            c_true[contact] = capacitance_over_force(
-                sensor, p, touch, force[contact], protocol.force_nodes
-            )
+        markers_true = np.empty((n, sensor.layout.n_markers, 3))
+        # one finger placement per dwell, each for an equal share of the trial
+        for uv, frames in zip(plan.touch_uv_mm, np.array_split(np.arange(n), len(plan.touch_uv_mm))):
+            touch = Touch(plan.surface, uv)
+            on = frames[contact[frames]]
+            if on.size:
+                c_true[on] = capacitance_over_force(sensor, p, touch, force[on], protocol.force_nodes)
+            markers_true[frames] = sensor.marker_positions(p, touch, force[frames])
         if (~contact).any():
             c_true[~contact] = sensor.capacitance(p, None, [0.0])[0]
-        markers_true = sensor.marker_positions(p, touch, force)  # zero force bends nothing
     else:
         c_true = np.repeat(sensor.capacitance(p, None, [0.0]), n, axis=0)
         markers_true = np.repeat(sensor.marker_positions(p, None, [0.0]), n, axis=0)
@@ -123,7 +125,7 @@ def simulate_trial(
         "kind": plan.kind,
         "state": plan.state,
         "surface": plan.surface or "",
-        "touch_uv_mm": list(plan.touch_uv_mm) if plan.touch_uv_mm else [],
+        "touch_uv_mm": [list(uv) for uv in plan.touch_uv_mm] if plan.touch_uv_mm else [],
         "marker_delay_frames": plan.marker_delay_frames,
         "occluded": plan.occluded,
         "start_s": plan.start_s,
