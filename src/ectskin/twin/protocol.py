@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ectskin._check import EctskinError
+from ectskin._check import EctskinError, check_option
 from ectskin.layout import SensorLayout
 from ectskin.twin.readout import MocapConfig, ReadoutConfig
 
@@ -33,7 +33,12 @@ class Protocol:
     seed: int = 0
     force_range_n: tuple[float, float] = (0.3, 2.0)  # (assumed) finger force range
     force_knot_s: float = 2.5  # (assumed) the force changes smoothly on this time scale
-    touch_margin: float = 0.15  # touch point uniform in the region shrunk by this fraction per side
+    # where the finger lands in its region: "aimed" = the region's centre plus the experimenter's
+    # Gaussian scatter (touch_scatter_mm, clipped to the region shrunk by touch_margin);
+    # "uniform" = anywhere in the region shrunk by touch_margin per side
+    touch_placement: str = "aimed"  # (assumed: the paper's sub-regions are marked on the robot)
+    touch_scatter_mm: float = 3.0  # (assumed) human aiming scatter, per axis
+    touch_margin: float = 0.15  # keep touches this fraction of the region size inside each edge
     touch_dwells: int = 1  # finger placements per touch trial: it slides to a new point D-1 times
     lifts: bool = False  # lift the finger now and then, with per-frame contact labels
     finger_radius_mm: float = 8.0  # (assumed)
@@ -54,6 +59,9 @@ class Protocol:
         lo, hi = self.force_range_n
         if not 0 < lo < hi:
             raise EctskinError(f"protocol: force_range_n must be 0 < low < high, got {self.force_range_n}")
+        check_option("touch_placement", self.touch_placement, ("aimed", "uniform"), source="protocol")
+        if self.touch_scatter_mm < 0:
+            raise EctskinError(f"protocol: touch_scatter_mm must be >= 0, got {self.touch_scatter_mm}")
         if not 0 <= self.touch_margin < 0.5:
             raise EctskinError(f"protocol: touch_margin must be in [0, 0.5), got {self.touch_margin}")
         if self.touch_dwells < 1:
@@ -153,13 +161,15 @@ def plan_trials(protocol: Protocol, layout: SensorLayout) -> list[TrialPlan]:
                 counters[face] += 1
                 m = protocol.touch_margin
                 du, dv = reg.u_mm[1] - reg.u_mm[0], reg.v_mm[1] - reg.v_mm[0]
-                uv = tuple(
-                    (
-                        float(rng.uniform(reg.u_mm[0] + m * du, reg.u_mm[1] - m * du)),
-                        float(rng.uniform(reg.v_mm[0] + m * dv, reg.v_mm[1] - m * dv)),
-                    )
-                    for _ in range(protocol.touch_dwells)
-                )
+                lo = np.array([reg.u_mm[0] + m * du, reg.v_mm[0] + m * dv])
+                hi = np.array([reg.u_mm[1] - m * du, reg.v_mm[1] - m * dv])
+                if protocol.touch_placement == "uniform":
+                    pts = rng.uniform(lo, hi, size=(protocol.touch_dwells, 2))
+                else:
+                    centre = np.asarray(reg.centre_mm)
+                    pts = centre + rng.normal(0.0, protocol.touch_scatter_mm, (protocol.touch_dwells, 2))
+                    pts = np.clip(pts, lo, hi)
+                uv = tuple((float(a), float(b)) for a, b in pts)
                 region, surface = reg.id, face
                 occ = touch_idx in occluded
                 touch_idx += 1
