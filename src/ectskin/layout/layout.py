@@ -461,7 +461,7 @@ def _check_overlaps(electrodes: list[Electrode], skins: dict[str, Skin], src: st
     for a in range(len(shapes)):
         for b in range(a + 1, len(shapes)):
             sa, pa, ea = shapes[a]
-            sb, pb, eb = shapes[b]
+            sb, _, eb = shapes[b]
             if sa != sb:
                 continue
             gap = _seg_distance(pa, eb.polyline_mm) - (ea.width_mm + eb.width_mm) / 2

@@ -124,7 +124,7 @@ class Manipulator:
                 continue
             v = v_ml * 1000.0  # mm^3
 
-            def residual(h: float) -> float:
+            def residual(h: float, v: float = v) -> float:
                 return 2.0 * h * a4 + 1000.0 * c.wall_compliance_ml_per_kpa * self._pressure(h) - v
 
             out[k] = brentq(residual, 0.0, v / (2.0 * a4))
@@ -210,7 +210,6 @@ class Manipulator:
         towards −y; on the back face towards +y. Moment at section z from a lateral force F at the
         touch section z_t: M(z) = F · (Z(z_t) − Z(z)) for z < z_t (lever on the deformed axis).
         """
-        c = self.config
         force = np.atleast_1d(np.asarray(force_n, dtype=np.float64))
         zs = self.axial_position(self._zgrid, inflation_ml)
         n_f = force.size

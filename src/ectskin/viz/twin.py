@@ -6,11 +6,9 @@ figure and never decide where files go: the caller saves.
 
 from __future__ import annotations
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.figure import Figure
 
 
 def plot_response(
@@ -27,10 +25,10 @@ def plot_response(
 
     ``calibrated`` is (n_frames, n_pairs), relative change (Eq. 2), plotted in %.
     """
-    fig = plt.figure(figsize=(11, 6.5), constrained_layout=True)
+    fig = Figure(figsize=(11, 6.5), layout="constrained")  # no pyplot state: nothing leaks
     gs = fig.add_gridspec(2, 4, height_ratios=[1.25, 1])
     ax = fig.add_subplot(gs[0, :])
-    colors = plt.cm.turbo(np.linspace(0, 1, calibrated.shape[1]))
+    colors = colormaps["turbo"](np.linspace(0, 1, calibrated.shape[1]))
     for k in range(calibrated.shape[1]):
         ax.plot(t_s, 100 * calibrated[:, k], color=colors[k], lw=0.9, label=pair_names[k])
     for ts, label in stages:
@@ -48,5 +46,10 @@ def plot_response(
         if j == 0:
             a.set_ylabel("c (%)")
     if show:
+        import matplotlib.pyplot as plt
+
+        manager = plt.figure().canvas.manager
+        manager.canvas.figure = fig
+        fig.set_canvas(manager.canvas)
         plt.show()
     return fig
