@@ -29,9 +29,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from ectskin.io.hdf5 import write_recording
     from ectskin.layout import default_layout, load_layout
-    from ectskin.twin import Protocol, ReadoutConfig, simulate_experiment
+    from ectskin.twin import Manipulator, Protocol, ReadoutConfig, simulate_experiment
 
     if args.workers is not None and args.workers < 1:
         raise EctskinError(f"--workers must be >= 1, got {args.workers}")
@@ -47,11 +49,7 @@ def run(args: argparse.Namespace) -> int:
     )
     layout = load_layout(args.layout) if args.layout else default_layout()
     for v in protocol.levels_ml:  # refuse impossible levels before any work
-        from ectskin.twin import Manipulator
-
         Manipulator().check_inflation([v] * protocol.n_chambers)
-    from pathlib import Path
-
     if Path(args.out).exists() and not args.force:
         raise EctskinError(f"{args.out} exists; pass --force to overwrite it")
     t0 = time.perf_counter()
