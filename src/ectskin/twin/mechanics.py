@@ -167,14 +167,16 @@ class Manipulator:
             [np.zeros((phis.size, 1)), np.cumsum(0.5 * (integrand[:, 1:] + integrand[:, :-1]) * np.diff(zg), axis=1)],
             axis=1,
         )
-        phi = self._window_x(x)
-        # bilinear interpolation in (φ, z)
+        # bilinear interpolation of the table e(φ, z), vectorised over the points
+        phi = np.ravel(self._window_x(x))
+        zz = np.ravel(z)
         fi = np.clip(phi * (phis.size - 1), 0, phis.size - 1 - 1e-9)
         i0 = fi.astype(int)
-        w = fi - i0
-        e_lo = np.array([np.interp(zz, zg, e[i]) for zz, i in zip(np.ravel(z), np.ravel(i0))])
-        e_hi = np.array([np.interp(zz, zg, e[i + 1]) for zz, i in zip(np.ravel(z), np.ravel(i0))])
-        return kappa * ((1 - np.ravel(w)) * e_lo + np.ravel(w) * e_hi).reshape(np.shape(x))
+        wi = fi - i0
+        zj = np.clip(np.searchsorted(zg, zz) - 1, 0, zg.size - 2)
+        wj = np.clip((zz - zg[zj]) / (zg[zj + 1] - zg[zj]), 0.0, 1.0)
+        e_at = lambda i: (1 - wj) * e[i, zj] + wj * e[i, zj + 1]  # noqa: E731
+        return kappa * ((1 - wi) * e_at(i0) + wi * e_at(i0 + 1)).reshape(np.shape(x))
 
     def bulge_mm(self, x, z, heights) -> np.ndarray:
         """Outward bulge b(x, z) = Σ_k h_k φ(x) ψ_k(z) of a front/back face point (mm)."""
