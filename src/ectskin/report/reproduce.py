@@ -26,6 +26,8 @@ simulate the paper's protocol (189 trials of 30 s) unless a protocol is given.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import hashlib
 import json
 import logging
@@ -336,30 +338,25 @@ def reproduce(
     check_option("profile", profile, PROFILES)
     if workers is not None and workers < 1:
         raise EctskinError(f"workers must be >= 1, got {workers}")
-    n_threads = resolve_threads(threads)
-    args = (
-        out_dir,
-        profile,
-        seed,
-        workers,
-        force,
-        protocol,
-        recording,
-        epochs,
-        ablations,
-        baselines,
-        characterize,
-        device,
-        progress,
-    )
+    with _torch_threads(resolve_threads(threads)):
+        return _reproduce(
+            out_dir, profile, seed, workers, force, protocol, recording, epochs, ablations,
+            baselines, characterize, device, progress,
+        )
+
+
+@contextmanager
+def _torch_threads(n_threads: int | None):
+    """Run the block with ``n_threads`` torch CPU threads (None: leave torch's setting)."""
     if n_threads is None:
-        return _reproduce(*args)
+        yield
+        return
     import torch
 
     before = torch.get_num_threads()
     torch.set_num_threads(n_threads)
     try:
-        return _reproduce(*args)
+        yield
     finally:
         torch.set_num_threads(before)
 
