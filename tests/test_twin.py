@@ -62,7 +62,14 @@ def test_inflation_response_matches_the_paper(char, layout):
     same = np.array([p["same_face"] for p in char["pairs"]])
     assert 0.25 <= np.abs(change).max() <= 0.60
     assert np.all(change[same] > 0)
-    assert np.mean(change[~same] < 0) >= 0.75  # the two farthest diagonals rise slightly
+    # every cross-face pair falls except the two farthest diagonals (30 mm apart across the
+    # faces), which in one homogeneous dielectric lose the screening of the wires in between
+    # faster than they move apart (docs/architecture.md, "Known deviations"): they stay within 5 %
+    x = np.array([e.polyline_mm[0, 0] for e in layout.electrodes])
+    lateral = np.abs(x[layout.pairs[:, 0]] - x[layout.pairs[:, 1]])
+    assert np.all(change[~same & (lateral < 30)] < 0)
+    assert np.all(np.abs(change[~same & (lateral >= 30)]) < 0.05)
+    assert np.mean(change[~same] < 0) >= 14 / 16
     assert change[~same].mean() < -0.05
     facing = [layout.pair_names.index(f"E{k}-E{k + 4}") for k in range(1, 5)]
     assert np.all(change[facing] < 0)  # wires facing each other across the body move apart

@@ -10,14 +10,16 @@ The deformation is composed of four parts (each documented where it is computed)
 
 1. **Axial extension** of each inflated chamber's span (small, ``axial_strain_per_ml``).
 2. **Face bulge** over each chamber footprint, both faces, shape b(x, z) = h_k φ(x) ψ_k(z) with
-   φ(x) = 1 − (2x/w)² (a clamped membrane's parabola across the chamber) and ψ_k a raised-cosine
-   window along it. The e-skin and the face wall limit stretch along z: a fraction κ
-   (``face_axial_inextensibility``) of the arc length the bulge adds along z is taken back by
-   pulling material in towards the base (κ = 0: points move only along the normal and wires
-   stretch fully; κ = 1: face arc length along z is conserved). The bulge height h_k follows from volume conservation: the injected
-   volume fills the two face bulges (2 · h · A/4 for this shape) and the compliance of the rest of
-   the chamber (``wall_compliance`` · pressure), with a membrane pressure that stiffens with
-   stretch, P(h) = k_f · h · (1 + (h/h_s)²).
+   φ(x) = 1 − |2x/w|ⁿ across the chamber (n = ``bulge_profile_exponent``: n = 2 is a membrane's
+   parabola, a large n a face that rises nearly flat, like a piston, and turns down at the side
+   walls) and ψ_k a raised-cosine window along it. The e-skin and the face wall limit stretch
+   along z: a fraction κ (``face_axial_inextensibility``) of the arc length the bulge adds along
+   z is taken back by pulling material in towards the base (κ = 0: points move only along the
+   normal and wires stretch fully; κ = 1: face arc length along z is conserved; solved exactly,
+   see ``_face_pull_in``). The bulge height h_k follows from volume conservation: the injected
+   volume fills the two face bulges (2 · h · A · n/(2(n + 1)) for this shape, A the chamber
+   footprint) and the compliance of the rest of the chamber (``wall_compliance`` · pressure),
+   with a membrane pressure that stiffens with stretch, P(h) = k_f · h · (1 + (h/h_s)²).
 3. **Dimple** under the finger: a Gaussian indentation of depth F / k_d, k_d rising with the local
    chamber pressure.
 4. **Bending** by the touch force: a clamped beam in the y–z plane, curvature κ(z) = M(z) / EI(z)
@@ -55,7 +57,12 @@ class ManipulatorConfig:
     face_stiffness_kpa_per_mm: float = 1.0  # (assumed; calibrated with wall_compliance)
     stiffening_height_mm: float = 6.0  # (assumed)
     wall_compliance_ml_per_kpa: float = 0.1  # (assumed; calibrated to the paper's ~40 %)
-    face_axial_inextensibility: float = 0.6  # (assumed; calibrated: cross-face pairs fall)
+    face_axial_inextensibility: float = 0.8  # (assumed; calibrated: cross-face pairs fall)
+    # φ(x) = 1 − |2x/w|^n across the chamber. (assumed; calibrated with face_axial_inextensibility
+    # so that every cross-face pair falls and every same-face pair rises, paper §2.2: the face
+    # wall carrying the e-skin laminate rises nearly flat; n = 2, a membrane's parabola, leaves
+    # the diagonal cross-face pairs rising; see docs/architecture.md)
+    bulge_profile_exponent: float = 8.0
     axial_strain_per_ml: float = 0.0  # (assumed) chamber span elongation per ml (off)
     # bending: EI(z) = EI0 (1 + pressure_stiffening * P(z)/kPa)
     bending_stiffness_nmm2: float = 5.4e4  # (assumed: 2 N near the tip -> ~20 mm deflection)
@@ -85,6 +92,11 @@ class Manipulator:
     def __init__(self, config: ManipulatorConfig | None = None):
         self.config = config or ManipulatorConfig()
         c = self.config
+        if not c.bulge_profile_exponent >= 1.0:
+            raise EctskinError(
+                f"manipulator: bulge_profile_exponent must be >= 1 (2 = parabola), got "
+                f"{c.bulge_profile_exponent!r}"
+            )
         self._zgrid = np.linspace(0.0, c.length_mm, c.beam_points)
 
     # ------------------------------------------------------------------ inflation
@@ -112,12 +124,14 @@ class Manipulator:
     def bulge_height_mm(self, inflation_ml) -> np.ndarray:
         """(n_chambers,) bulge height h of each face over each chamber (mm).
 
-        Volume conservation: V = 2 · h · A/3 + C_w · P(h), with A the chamber footprint and
-        A/3 the volume factor of the bulge shape (∫(1 − (2x/w)²)dx = 2w/3, ∫cos² over l = l/2).
+        Volume conservation: V = 2 · h · A·f + C_w · P(h), with A the chamber footprint and
+        f = n / (2(n + 1)) the volume factor of the bulge shape (∫(1 − |2x/w|ⁿ)dx = w·n/(n + 1),
+        ∫cos² over l = l/2; f = 1/3 for the parabola).
         """
         p = self.check_inflation(inflation_ml)
         c = self.config
-        a4 = c.chamber_size_x_mm * c.chamber_size_z_mm / 3.0
+        n = c.bulge_profile_exponent
+        a4 = c.chamber_size_x_mm * c.chamber_size_z_mm * n / (2.0 * (n + 1.0))
         out = np.zeros_like(p)
         for k, v_ml in enumerate(p):
             if v_ml <= 0:
@@ -149,34 +163,42 @@ class Manipulator:
 
     def _window_x(self, x: np.ndarray) -> np.ndarray:
         s = np.asarray(x) / self.config.chamber_size_x_mm
-        return np.where(np.abs(s) < 0.5, 1.0 - (2.0 * s) ** 2, 0.0)
+        return np.where(np.abs(s) < 0.5, 1.0 - np.abs(2.0 * s) ** self.config.bulge_profile_exponent, 0.0)
 
     def _face_pull_in(self, x: np.ndarray, z: np.ndarray, heights: np.ndarray) -> np.ndarray:
-        """Axial pull-in κ · e(x, z) of face points (mm), e the arc length added by the bulge.
+        """Axial pull-in z − ζ(x, z) of face points (mm) under the bulge.
 
-        e(x, z) = ∫_0^z (√(1 + (∂b/∂z')²) − 1) dz' along the face, with ∂b/∂z = φ(x) Σ h_k ψ_k'(z).
+        With S(ζ) = ∫_0^ζ √(1 + (∂b/∂z')²) dz' the arc length of the bulged face along z
+        (∂b/∂z = φ(x) Σ h_k ψ_k'(z)), the material point at rest position z moves to the axial
+        position ζ that solves κ S(ζ) + (1 − κ) ζ = z: κ = 1 conserves the face's arc length
+        (pure pull-in), κ = 0 moves points only along the normal (ζ = z, full stretch). The local
+        stretch along z is s / (κ s + 1 − κ) with s = √(1 + b'²) ≥ 1, so material never
+        shortens. S depends on x only through φ(x): it is tabulated over φ and interpolated.
         """
         kappa = self.config.face_axial_inextensibility
         if kappa == 0 or not np.any(heights):
             return np.zeros(np.shape(x))
         zg = self._zgrid
         g = np.gradient(np.tensordot(heights, self._chamber_window_z(zg), axes=1), zg)  # (n_z,)
-        phis = np.linspace(0.0, 1.0, 41)  # e depends on x only through φ(x): tabulate over φ
-        integrand = np.sqrt(1.0 + (phis[:, None] * g[None, :]) ** 2) - 1.0
-        e = np.concatenate(
+        phis = np.linspace(0.0, 1.0, 41)
+        integrand = np.sqrt(1.0 + (phis[:, None] * g[None, :]) ** 2)
+        arc = np.concatenate(
             [np.zeros((phis.size, 1)), np.cumsum(0.5 * (integrand[:, 1:] + integrand[:, :-1]) * np.diff(zg), axis=1)],
             axis=1,
         )
-        # bilinear interpolation of the table e(φ, z), vectorised over the points
+        mixed = kappa * arc + (1.0 - kappa) * zg[None, :]  # increasing in ζ for every φ
+        zz = np.ravel(z).astype(np.float64)
         phi = np.ravel(self._window_x(x))
-        zz = np.ravel(z)
         fi = np.clip(phi * (phis.size - 1), 0, phis.size - 1 - 1e-9)
         i0 = fi.astype(int)
         wi = fi - i0
-        zj = np.clip(np.searchsorted(zg, zz) - 1, 0, zg.size - 2)
-        wj = np.clip((zz - zg[zj]) / (zg[zj + 1] - zg[zj]), 0.0, 1.0)
-        e_at = lambda i: (1 - wj) * e[i, zj] + wj * e[i, zj + 1]  # noqa: E731
-        return kappa * ((1 - wi) * e_at(i0) + wi * e_at(i0 + 1)).reshape(np.shape(x))
+        zeta = np.empty_like(zz)
+        for i in np.unique(i0):  # invert the two bracketing rows, blend linearly in φ
+            m = i0 == i
+            lo = np.interp(zz[m], mixed[i], zg)
+            hi = np.interp(zz[m], mixed[i + 1], zg)
+            zeta[m] = (1 - wi[m]) * lo + wi[m] * hi
+        return (zz - zeta).reshape(np.shape(x))
 
     def bulge_mm(self, x, z, heights) -> np.ndarray:
         """Outward bulge b(x, z) = Σ_k h_k φ(x) ψ_k(z) of a front/back face point (mm)."""

@@ -18,7 +18,7 @@ import numpy as np
 
 from ectskin._check import EctskinError
 from ectskin.electrostatics import Panels, cylinder_panels, maxwell_capacitance, sphere_panels
-from ectskin.electrostatics.panels import rectangle_quads, strip_quads
+from ectskin.electrostatics.panels import _frame, rectangle_quads, strip_quads
 from ectskin.layout import SensorLayout
 from ectskin.twin.mechanics import Manipulator, Touch
 
@@ -172,12 +172,23 @@ class SensorModel:
         nrm = self.manipulator.surface_normal(touch.surface, uv, inflation_ml, touch, forces)[:, 0]
         out = []
         cond = self.n_electrodes
+        # the fingertip: the half of a cubed sphere facing the skin, chosen once in the sphere's
+        # own frame (pole along +z) and then rotated onto the surface normal, so that the same
+        # panels make the tip at every force (choosing them by the sign of (c − centre)·n in
+        # world axes let panels on the equator flip in and out as the normal tilted, a step
+        # of ~0.1 % in the readout)
+        unit = sphere_panels(np.zeros(3), fg.radius_mm, sphere_n or d.finger_sphere_n, cond)
+        keep = unit.centres[:, 2] < -1e-6 * fg.radius_mm
         for p, n in zip(pts, nrm):
             centre = p + n * (fg.radius_mm + fg.skin_cover_mm)
-            sphere = sphere_panels(centre, fg.radius_mm, sphere_n or d.finger_sphere_n, cond)
-            keep = (sphere.centres - centre) @ n < 0  # the fingertip: the half facing the skin
+            e1, e2 = _frame(n)
+            rot = np.stack([e1, e2, n], axis=1)  # local (x, y, z) -> world, z onto n
             tip = Panels(
-                sphere.centres[keep], sphere.u[keep], sphere.v[keep], sphere.conductor[keep], cond + 1
+                centre + unit.centres[keep] @ rot.T,
+                unit.u[keep] @ rot.T,
+                unit.v[keep] @ rot.T,
+                unit.conductor[keep],
+                cond + 1,
             )
             shaft = cylinder_panels(
                 centre,
