@@ -1,6 +1,7 @@
 """Distributed data parallel: ``train`` runs unchanged under ``torchrun --nproc_per_node 2``.
 
-One torchrun launch (gloo on CPU) trains a TouchMLP and a small C2DT. Checked: both ranks
+One torchrun launch (gloo on CPU) trains a TouchMLP and a small C2DT (and a TouchMLP with the
+robust profile, whose augmentation each rank draws for its own shard). Checked: both ranks
 finish, they saw disjoint halves of each epoch's permutation that together cover the training
 set, only rank 0 wrote files, and — with dropout off, where 2 ranks x (batch / 2) is the same
 mathematics as 1 process x batch — the weights and validation metrics match a single-process
@@ -57,6 +58,11 @@ SCRIPT = textwrap.dedent(
     result["track"] = T.train("track", tr, va, out + "/track", profile="quick", epochs=2,
                               batch_size=32, model_options=SMALL_C2DT, progress=False,
                               settings={{"samples_per_epoch": None, "val_samples": None}})
+    from test_robust import seen as seen_combos, states_data
+    tr = states_data(0, seen_combos, per=20)
+    va = states_data(1, seen_combos, per=20, no_contact=False)
+    result["robust"] = T.train("touch", tr, va, out + "/robust", profile="robust", epochs=2,
+                               batch_size=64, progress=False)
     with open(f"{{out}}/rank{{rank}}.json", "w") as fh:
         json.dump({{"result": result, "seen": seen}}, fh)
     """
@@ -132,6 +138,22 @@ def test_only_rank0_wrote_and_the_model_is_good(ddp_run):
     assert (
         ranks[0]["result"]["touch"]["best_val_loss"] == ranks[1]["result"]["touch"]["best_val_loss"]
     )
+
+
+def test_robust_profile_trains_under_ddp(ddp_run):
+    tmp, ranks = ddp_run
+    results = [r["result"]["robust"] for r in ranks]
+    assert [r["world_size"] for r in results] == [2, 2] and results[0]["epochs_run"] == 2
+    assert results[0]["best_val_metric"] == results[1]["best_val_metric"]  # all-reduced
+    cfg = json.loads((tmp / "robust" / "config.json").read_text())
+    assert cfg["recipe"]["inflation_shift_states"] == 6 and cfg["batch_per_rank"] == 32
+    assert sorted(p.name for p in (tmp / "robust").iterdir()) == [
+        "config.json",
+        "last.pt",
+        "metrics.csv",
+        "model.pt",
+        "split.json",
+    ]
 
 
 def test_ddp_matches_a_single_process_run(ddp_run, tmp_path):

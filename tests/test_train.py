@@ -87,7 +87,9 @@ def test_paper_profile_is_the_papers_settings():
     assert profile_settings("track", "quick", samples_per_epoch=None).samples_per_epoch is None
     with pytest.raises(EctskinError, match="'epochs' must be a positive integer, got 0"):
         train("touch", blobs(2, 5, seed=0), blobs(1, 5, seed=1), "unused", epochs=0)
-    with pytest.raises(EctskinError, match="allowed values are 'paper', 'quick'; got 'fast'"):
+    with pytest.raises(
+        EctskinError, match="allowed values are 'paper', 'quick', 'robust'; got 'fast'"
+    ):
         profile_settings("touch", "fast")
     with pytest.raises(EctskinError, match="'batch_size' must be a positive integer"):
         profile_settings("touch", "paper", batch_size=0)

@@ -27,6 +27,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def summary_lines(metrics: dict) -> list[str]:
     """Human-readable lines of an ``evaluate_run`` result."""
+    from ectskin.learn.evaluate import describe_recipe
+
     lines = []
     t = metrics.get("touch")
     if t:
@@ -40,6 +42,12 @@ def summary_lines(metrics: dict) -> list[str]:
             )
             + ")"
         )
+        tr = t.get("training") or {}
+        if tr.get("recipe") is not None:
+            lines.append(
+                f"  trained with profile {tr.get('profile', '?')!r}: "
+                f"{describe_recipe(tr['recipe'])}"
+            )
         for name, b in (t.get("baselines") or {}).items():
             lines.append(f"  baseline {name}: accuracy {100 * b['accuracy']:.2f} %")
     k = metrics.get("track")

@@ -39,6 +39,11 @@ def add_common_arguments(p: argparse.ArgumentParser, *, default_profile: str) ->
     p.add_argument("--seed", type=int, default=0, help="seed of simulation, splits and training")
     p.add_argument("--epochs", type=int, default=None, help="override the epochs of every training")
     p.add_argument("--no-ablations", action="store_true", help="skip the two tracking ablations")
+    p.add_argument(
+        "--no-robust",
+        action="store_true",
+        help="skip the TouchMLP trained with the robust recipe (runs/touch_robust)",
+    )
     p.add_argument("--no-baselines", action="store_true", help="skip the baselines")
     p.add_argument("--device", default=None, help="training device (default: CUDA if available)")
     p.add_argument(
@@ -80,6 +85,7 @@ def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
         force=args.force,
         epochs=args.epochs,
         ablations=not args.no_ablations,
+        robust=not args.no_robust,
         baselines=not args.no_baselines,
         device=args.device,
         threads=threads,

@@ -33,9 +33,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--profile",
-        choices=("paper", "quick"),
+        choices=("paper", "quick", "robust"),
         default="paper",
-        help="training settings: the paper's (default) or quick for a CPU",
+        help="training settings: the paper's (default), quick for a CPU, or robust (touch only: "
+        "the paper's TouchMLP with a recipe that generalises to unseen inflation/touch "
+        "combinations, see docs/architecture.md)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the split and training (default 0)")
     p.add_argument("--epochs", type=int, default=None, help="override the profile's epochs")
@@ -56,7 +58,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ectskin.learn.train import main_from_args
+    from ectskin.learn.train import main_from_args, profile_settings
 
     if args.epochs is not None and args.epochs < 1:
         raise EctskinError(f"--epochs must be >= 1, got {args.epochs}")
@@ -64,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
         raise EctskinError(f"--window must be >= 1 frame, got {args.window}")
     if args.task == "touch" and (args.no_prior or args.window != 10):
         raise EctskinError("--window and --no-prior apply to 'track' only")
+    profile_settings(args.task, args.profile)  # e.g. 'robust' exists for touch only
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise EctskinError(f"--out {out} exists and is not a folder")

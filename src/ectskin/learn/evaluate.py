@@ -424,8 +424,53 @@ def _load_data(data: Any, split: Mapping[str, Any], run: Path) -> tuple[Any, str
     return load_recording(path), str(path)
 
 
+def _run_config(run: Path) -> dict[str, Any]:
+    """The run's ``config.json`` (written by ``ectskin train``), or {} when absent or unreadable."""
+    path = run / "config.json"
+    if not path.is_file():
+        return {}
+    try:
+        cfg = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return cfg if isinstance(cfg, dict) else {}
+
+
+def describe_recipe(recipe: Mapping[str, Any] | None, metric: str = "accuracy") -> str:
+    """A phrase for a run's training recipe (``recipe`` of its config.json), e.g. "inflation
+    shift over 25 no-contact training states, mixup (Beta 0.4, 0.4), label smoothing 0.1, weights
+    of the best validation accuracy"; "the paper's recipe" for none of these."""
+    if not recipe:
+        return "the paper's recipe"
+    parts = []
+    if recipe.get("inflation_shift"):
+        n = int(recipe.get("inflation_shift_states") or 0)
+        parts.append(
+            f"inflation shift over {n} no-contact training states"
+            if n >= 2
+            else "inflation shift skipped (fewer than 2 no-contact training trials)"
+        )
+    alpha = float(recipe.get("mixup_alpha") or 0)
+    if alpha > 0:
+        parts.append(f"mixup (Beta {alpha:g}, {alpha:g})")
+    smoothing = float(recipe.get("label_smoothing") or 0)
+    if smoothing > 0:
+        parts.append(f"label smoothing {smoothing:g}")
+    if recipe.get("select") == "val_metric":
+        parts.append(f"weights of the best validation {metric}")
+    elif parts:
+        parts.append("weights of the lowest validation loss")
+    return ", ".join(parts) or "the paper's recipe"
+
+
 def _training_summary(run: Path) -> dict[str, Any]:
-    """Epochs, best epoch and total time from the run's ``metrics.csv`` (if present)."""
+    """Epochs, best epoch and total time from the run's ``metrics.csv`` (if present).
+
+    The best epoch follows the run's selection rule (``settings.select`` in ``config.json``):
+    the lowest validation loss (the paper's rule, and the default for runs without one) or the
+    best validation metric, ties broken by the lower validation loss. The run's ``recipe``
+    (``config.json``) is passed on when present.
+    """
     import csv
 
     path = run / "metrics.csv"
@@ -435,6 +480,8 @@ def _training_summary(run: Path) -> dict[str, Any]:
         rows = list(csv.DictReader(f))
     if not rows:
         return {}
+    cfg = _run_config(run)
+    select = (cfg.get("settings") or {}).get("select", "val_loss")
 
     def col(name: str) -> np.ndarray:
         try:
@@ -445,7 +492,17 @@ def _training_summary(run: Path) -> dict[str, Any]:
     val = col("val_loss")
     sec = col("seconds")
     best = int(np.nanargmin(val)) if np.isfinite(val).any() else len(rows) - 1
+    metric = col("val_metric")
+    if select == "val_metric" and np.isfinite(metric).any():
+        score = metric if cfg.get("task") == "track" else -metric  # lower is better
+        score = np.where(np.isfinite(score), score, np.inf)
+        # lexicographic: best metric, then lowest loss, then earliest (np.lexsort: last key first)
+        best = int(np.lexsort((np.arange(len(rows)), np.nan_to_num(val, nan=np.inf), score))[0])
+    out: dict[str, Any] = {"select": select} if cfg else {}
+    if isinstance(cfg.get("recipe"), dict):
+        out["recipe"] = cfg["recipe"]
     return {
+        **out,
         "epochs": len(rows),
         "best_epoch": int(col("epoch")[best]) if np.isfinite(col("epoch")[best]) else best + 1,
         "best_val_loss": float(val[best]),

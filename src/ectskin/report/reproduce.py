@@ -6,6 +6,7 @@ writes its results into ``OUT_DIR``::
     data.h5                       the simulated experiment (paper §3 protocol)
     characterize/                 Fig. 3, Fig. 4 and characterize.json of the twin
     runs/touch/                   TouchMLP run (model.pt, metrics.csv, split.json, metrics.json, Fig. 7)
+    runs/touch_robust/            the same TouchMLP, ``robust`` training profile (ours), same split
     runs/track/                   C2DT run (prior knowledge, 10 frames; Fig. 9, Fig. 10)
     runs/track_no_prior/          ablation: absolute calibration, no initial coordinates
     runs/track_window_1/          ablation: 1 frame instead of 10
@@ -21,7 +22,10 @@ profile, protocol...) is refused with an error unless ``force=True``, which redo
 Profiles: ``quick`` trains with the ``quick`` settings of :mod:`ectskin.learn.train` (the demo
 fits in ~10 minutes on a 2-core laptop; the ablations train for ``QUICK_ABLATION_EPOCHS``
 epochs), ``paper`` with the paper's (100 / 150 epochs; hours on a CPU, meant for a GPU). Both
-simulate the paper's protocol (189 trials of 30 s) unless a protocol is given.
+simulate the paper's protocol (189 trials of 30 s) unless a protocol is given. Beside the
+paper-recipe TouchMLP, both also train the same network with the ``robust`` profile of
+:mod:`ectskin.learn.train` (20 epochs; ~10-20 s on one core for the paper's protocol) on the same
+split, evaluated on the same test trials and reported as ``touch.robust`` in metrics.json.
 """
 
 from __future__ import annotations
@@ -48,29 +52,81 @@ PROFILES = ("quick", "paper")
 STATE_FILE = "reproduce.json"
 STATE_FORMAT = "ectskin.reproduce"
 
-#: run name → (task, window, prior). The first two are the paper's models, the rest ablations.
+#: run name → (task, window, prior). "touch" and "track" are the paper's models, "touch_robust"
+#: the TouchMLP trained with the robust recipe (:data:`RUN_PROFILES`), the rest ablations.
 RUNS: dict[str, tuple[str, int, bool]] = {
     "touch": ("touch", 10, True),
+    "touch_robust": ("touch", 10, True),
     "track": ("track", 10, True),
     "track_no_prior": ("track", 10, False),
     "track_window_1": ("track", 1, True),
 }
 #: ablation key in metrics.json → run name
 ABLATIONS = {"no_prior": "track_no_prior", "window_1": "track_window_1"}
+#: runs trained with a fixed profile of ectskin.learn.train instead of reproduce's ``profile``
+RUN_PROFILES = {"touch_robust": "robust"}
+#: keys of the robust run's touch metrics copied into metrics.json under ``touch.robust``
+ROBUST_KEYS = (
+    "accuracy",
+    "n_test_frames",
+    "n_misclassified",
+    "misclassified",
+    "n_misclassified_adjacent",
+    "all_adjacent",
+    "confusions",
+    "per_class_accuracy",
+    "per_trial",
+    "worst_trial",
+    "training",
+    "split",
+)
 #: epochs of the ablation trainings under the quick profile (the main runs use the profile's)
 QUICK_ABLATION_EPOCHS = 12
 
-#: figures copied into OUT_DIR/figures and shown in the report: (run, file, caption)
+#: figures copied into OUT_DIR/figures and shown in the report: (run, file, caption, copy's name)
 REPORT_FIGURES = (
-    ("touch", "fig7_confusion.png", "Fig. 7: touch confusion map of the test set (TouchMLP)"),
+    (
+        "touch",
+        "fig7_confusion.png",
+        "Fig. 7: touch confusion map of the test set (TouchMLP)",
+        "fig7_confusion.png",
+    ),
+    (
+        "touch_robust",
+        "fig7_confusion.png",
+        "Fig. 7, robust recipe (ours): touch confusion map of the same test set (TouchMLP)",
+        "fig7_confusion_robust.png",
+    ),
     (
         "track",
         "fig9_tracking.png",
         "Fig. 9: tracking examples, estimated (red) vs true (blue) markers (C2DT)",
+        "fig9_tracking.png",
     ),
-    ("track", "fig10_trajectory.png", "Fig. 10: one marker's trajectory over a test trial (C2DT)"),
-    ("touch", "learning_curves.png", "TouchMLP training and validation loss"),
-    ("track", "learning_curves.png", "C2DT training and validation loss"),
+    (
+        "track",
+        "fig10_trajectory.png",
+        "Fig. 10: one marker's trajectory over a test trial (C2DT)",
+        "fig10_trajectory.png",
+    ),
+    (
+        "touch",
+        "learning_curves.png",
+        "TouchMLP training and validation loss",
+        "touch_learning_curves.png",
+    ),
+    (
+        "touch_robust",
+        "learning_curves.png",
+        "TouchMLP, robust recipe: training (augmented) and validation loss",
+        "touch_robust_learning_curves.png",
+    ),
+    (
+        "track",
+        "learning_curves.png",
+        "C2DT training and validation loss",
+        "track_learning_curves.png",
+    ),
 )
 
 
@@ -266,20 +322,23 @@ def _run_settings(
         "task": task,
         "window": window,
         "prior": prior,
-        "profile": profile,
+        "profile": RUN_PROFILES.get(name, profile),
         "seed": seed,
         "epochs": epochs,
     }
 
 
 def _epochs_for(name: str, profile: str, epochs: Any) -> int | None:
-    """Epochs of run ``name``: ``epochs`` (int for all, or {run: int}), else the profile's
-    (ablations under ``quick``: :data:`QUICK_ABLATION_EPOCHS`)."""
+    """Epochs of run ``name``: ``epochs`` (int for all, or {run: int}; a "touch" entry also applies
+    to "touch_robust", a "track" entry to the ablations), else the profile's (ablations under
+    ``quick``: :data:`QUICK_ABLATION_EPOCHS`; "touch_robust": the robust profile's)."""
     if isinstance(epochs, Mapping):
         if name in epochs:
             return int(epochs[name])
         if name in ABLATIONS.values() and "track" in epochs:
             return int(epochs["track"])
+        if name == "touch_robust" and "touch" in epochs:
+            return int(epochs["touch"])
         epochs = None
     if epochs is not None:
         return int(epochs)
@@ -301,6 +360,7 @@ def reproduce(
     ablations: bool = True,
     baselines: bool = True,
     characterize: bool = True,
+    robust: bool = True,
     device: str | None = None,
     threads: int | str | None = "auto",
     progress: bool = True,
@@ -324,10 +384,14 @@ def reproduce(
     recording : Recording, optional
         Use this recording instead of simulating one (written to ``out_dir/data.h5``).
     epochs : int or {run name: int}, optional
-        Override the profile's epochs (run names: "touch", "track", "track_no_prior",
-        "track_window_1"; a "track" entry also applies to the ablations).
+        Override the profile's epochs (run names: "touch", "touch_robust", "track",
+        "track_no_prior", "track_window_1"; a "touch" entry also applies to "touch_robust", a
+        "track" entry to the ablations).
     ablations, baselines, characterize : bool
         Include the two tracking ablations, the baselines, the twin's characterisation.
+    robust : bool
+        Also train and evaluate the TouchMLP with the ``robust`` profile (``runs/touch_robust``,
+        ``touch.robust`` in metrics.json, ``figures/fig7_confusion_robust.png``).
     device : str, optional
         Training device (default: CUDA when available).
     threads : int, "auto" or None
@@ -341,7 +405,7 @@ def reproduce(
     with _torch_threads(resolve_threads(threads)):
         return _reproduce(
             out_dir, profile, seed, workers, force, protocol, recording, epochs, ablations,
-            baselines, characterize, device, progress,
+            baselines, characterize, robust, device, progress,
         )
 
 
@@ -394,6 +458,7 @@ def _reproduce(
     ablations,
     baselines,
     characterize,
+    robust,
     device,
     progress,
 ) -> dict[str, Any]:
@@ -426,20 +491,33 @@ def _reproduce(
     # 3. training
     from ectskin.learn.train import main_from_args
 
-    names = ["touch", "track"] + (list(ABLATIONS.values()) if ablations else [])
+    names = (
+        ["touch"]
+        + (["touch_robust"] if robust else [])
+        + ["track"]
+        + (list(ABLATIONS.values()) if ablations else [])
+    )
     train_info: dict[str, Any] = {}
     for name in names:
         task, window, prior = RUNS[name]
         n_epochs = _epochs_for(name, profile, epochs)
         settings = _run_settings(name, data_settings, profile, seed, n_epochs)
         run_dir = out / "runs" / name
+        run_profile = settings["profile"]
 
-        def fit(task=task, window=window, prior=prior, n_epochs=n_epochs, run_dir=run_dir):
+        def fit(
+            task=task,
+            window=window,
+            prior=prior,
+            n_epochs=n_epochs,
+            run_dir=run_dir,
+            run_profile=run_profile,
+        ):
             return main_from_args(
                 task,
                 data_path,
                 run_dir,
-                profile=profile,
+                profile=run_profile,
                 seed=seed,
                 epochs=n_epochs,
                 window=window,
@@ -450,7 +528,7 @@ def _reproduce(
             )
 
         log.info(
-            "train %s: %s, window %d, prior %s, profile %s", name, task, window, prior, profile
+            "train %s: %s, window %d, prior %s, profile %s", name, task, window, prior, run_profile
         )
         summary = runner.step(f"train_{name}", settings, [run_dir], fit)
         if summary is not None:
@@ -479,7 +557,7 @@ def _reproduce(
 
     # 5. metrics.json + report
     metrics = _combine(results, runner, profile, seed, protocol, data_settings, data_path)
-    figures = _copy_figures(out)
+    figures = _copy_figures(out, names)
     metrics["figures"] = {caption: rel for caption, rel in figures.items()}
     metrics["timings_s"]["total"] = time.perf_counter() - t_start
     write_json_atomic(out / "metrics.json", metrics)
@@ -517,7 +595,10 @@ def _combine(
         "created_utc": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
     }
     if "touch" in results:
-        m["touch"] = results["touch"].get("touch", {})
+        m["touch"] = dict(results["touch"].get("touch", {}))
+        if "touch_robust" in results:
+            r = results["touch_robust"].get("touch", {})
+            m["touch"]["robust"] = {k: r[k] for k in ROBUST_KEYS if k in r}
     if "track" in results:
         m["track"] = dict(results["track"].get("track", {}))
         abl = {}
@@ -558,15 +639,16 @@ def _combine(
     return m
 
 
-def _copy_figures(out: Path) -> dict[str, str]:
-    """Copy the report's figures into OUT_DIR/figures; {caption: path relative to OUT_DIR}."""
+def _copy_figures(out: Path, runs: list[str]) -> dict[str, str]:
+    """Copy the report's figures of ``runs`` into OUT_DIR/figures; {caption: path relative to
+    OUT_DIR}."""
     fig_dir = out / "figures"
     fig_dir.mkdir(exist_ok=True)
     figures: dict[str, str] = {}
-    for run, name, caption in REPORT_FIGURES:
+    for run, name, caption, copy_name in REPORT_FIGURES:
         src = out / "runs" / run / name
-        if src.is_file():
-            dst = fig_dir / (name if name.startswith("fig") else f"{run}_{name}")
+        if run in runs and src.is_file():
+            dst = fig_dir / copy_name
             shutil.copyfile(src, dst)
             figures[caption] = dst.relative_to(out).as_posix()
     return figures
