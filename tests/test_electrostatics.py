@@ -18,6 +18,7 @@ from ectskin.electrostatics import (
     Panels,
     cylinder_panels,
     cylinder_quads,
+    dielectric_sensitivity,
     ect_readout,
     edge_correction_factor,
     graded_nodes,
@@ -521,3 +522,31 @@ def test_bad_input_raises_clear_errors():
         ect_readout(K, [0, 1], [[1, 1]])
     with pytest.raises(EctskinError, match="different"):
         two_terminal_capacitance(K, 1, 1)
+
+
+def test_dielectric_sensitivity_matches_the_spherical_capacitor():
+    """First-order change of K for a dielectric shell between concentric spheres equals the
+    derivative of the analytic series formula 1/C = (1/4πε0) Σ (1/ε_k)(1/r_k − 1/r_{k+1})."""
+    a, b, r1, r2 = 5.0, 10.0, 6.5, 8.5
+    pan = Panels.concatenate(
+        [sphere_panels((0, 0, 0), a, 8, 0, n_conductors=2), sphere_panels((0, 0, 0), b, 8, 1, n_conductors=2)]
+    )
+    _, q = maxwell_capacitance(pan, 1.0, return_charges=True)
+    nr, nt, nph = 4, 24, 48  # midpoint cells of the shell r1 < r < r2
+    r = r1 + (np.arange(nr) + 0.5) * (r2 - r1) / nr
+    th = (np.arange(nt) + 0.5) * np.pi / nt
+    ph = (np.arange(nph) + 0.5) * 2 * np.pi / nph
+    R, T, P = np.meshgrid(r, th, ph, indexing="ij")
+    pts = np.c_[
+        (R * np.sin(T) * np.cos(P)).ravel(), (R * np.sin(T) * np.sin(P)).ravel(), (R * np.cos(T)).ravel()
+    ]
+    vol = (R**2 * np.sin(T)).ravel() * (r2 - r1) / nr * np.pi / nt * 2 * np.pi / nph
+    S = dielectric_sensitivity(pan, q, pts, vol, 1.0)
+    k = 4 * np.pi * EPS0_PF_PER_MM
+    C = k / (1 / a - 1 / b)
+    dC = C**2 / k * (1 / r1 - 1 / r2)  # dC/dε of the shell at ε = 1
+    assert EPS0_PF_PER_MM * S[0, 1] == pytest.approx(-dC, rel=0.01)  # mutual term: K01 = −C
+    assert EPS0_PF_PER_MM * S[0, 0] == pytest.approx(dC, rel=0.01)
+    assert np.allclose(S, S.T)
+    with pytest.raises(EctskinError, match="volumes must be"):
+        dielectric_sensitivity(pan, q, pts, vol[:-1], 1.0)

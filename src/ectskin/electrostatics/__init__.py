@@ -3,7 +3,8 @@
 * :mod:`~ectskin.electrostatics.panels` — flat parallelogram panels (:class:`Panels`) and builders
   for plates, strips (wires), spheres and cylinders.
 * :mod:`~ectskin.electrostatics.mom` — potential coefficients with exact near-field integrals,
-  the Maxwell capacitance matrix by Cholesky, and the ECT pair readout ``C_ij = −K_ij``.
+  the Maxwell capacitance matrix by Cholesky, the ECT pair readout ``C_ij = −K_ij``, and the
+  first-order sensitivity of K to a permittivity change in a volume (``dielectric_sensitivity``).
 
 Units: mm, pF, V, pC.
 """
@@ -11,7 +12,9 @@ Units: mm, pF, V, pC.
 from ectskin.electrostatics.mom import (
     EPS0_PF_PER_MM,
     NEAR_FACTOR,
+    dielectric_sensitivity,
     ect_readout,
+    field_at,
     maxwell_capacitance,
     potential_integral,
     potential_matrix,
@@ -43,8 +46,10 @@ __all__ = [
     "Panels",
     "cylinder_panels",
     "cylinder_quads",
+    "dielectric_sensitivity",
     "ect_readout",
     "edge_correction_factor",
+    "field_at",
     "graded_nodes",
     "grid_1d",
     "grid_quads",

@@ -265,6 +265,52 @@ def maxwell_capacitance(
     return (K, q) if return_charges else K
 
 
+def field_at(panels: Panels, charges, points, eps_r: float = 1.0) -> np.ndarray:
+    """(M, 3, n_columns) electric field (V/mm) at ``points`` of the panel charges.
+
+    ``charges`` is (N, n_columns) pC, e.g. the per-excitation charges of
+    :func:`maxwell_capacitance` (``return_charges=True``); each panel's charge is taken as a point
+    charge at its centre, so the points should lie at least a panel size or two from every panel.
+    """
+    if not isinstance(panels, Panels):
+        raise EctskinError(f"panels must be Panels, got {type(panels).__name__}")
+    eps_r = _positive("eps_r", eps_r)
+    q = np.asarray(charges, dtype=np.float64)
+    if q.ndim != 2 or q.shape[0] != panels.n_panels:
+        raise EctskinError(
+            f"charges must have shape ({panels.n_panels}, n_columns), got {q.shape}"
+        )
+    r = check_array("points", points, (None, 3), finite=True)
+    c = panels.centres
+    comps = [r[:, k, None] - c[None, :, k] for k in range(3)]  # (M, N) each, mm
+    d2 = comps[0] * comps[0] + comps[1] * comps[1] + comps[2] * comps[2]
+    w = 1.0 / (d2 * np.sqrt(d2))  # 1 / |r − c|³
+    E = np.stack([(dk * w) @ q for dk in comps], axis=1)  # (M, 3, n_columns), BLAS products
+    return E / (4.0 * np.pi * EPS0_PF_PER_MM * eps_r)
+
+
+def dielectric_sensitivity(panels: Panels, charges, points, volumes, eps_r: float = 1.0) -> np.ndarray:
+    """(n_columns, n_columns) ECT sensitivity ``S_ac = ∫ E_a · E_c dV`` over sample volumes, mm·(V/mm)².
+
+    First-order (linearised, "sensitivity map") change of the Maxwell capacitance matrix when the
+    relative permittivity inside the sampled volume changes by δε (uniformly):
+    ``δK = ε0 δε S`` (pF), because ``K_ac = ∫ ε ∇φ_a · ∇φ_c dV`` is stationary in the potentials
+    φ_c (conductor c at 1 V, the others at 0 V; ``E_c = −∇φ_c`` from the charges of column c).
+    An ECT pair's readout ``C_ij = −K_ij`` thus falls where δε < 0 lies between electrodes i and j
+    (E_i · E_j < 0 there). ``points`` (M, 3) mm are the centres of sample cells of ``volumes``
+    (M,) mm³.
+    """
+    vol = np.asarray(volumes, dtype=np.float64).reshape(-1)
+    E = field_at(panels, charges, points, eps_r)
+    if vol.shape[0] != E.shape[0] or np.any(~np.isfinite(vol)) or np.any(vol < 0):
+        raise EctskinError(
+            f"volumes must be {E.shape[0]} finite non-negative cell volumes (mm^3), got shape "
+            f"{vol.shape}"
+        )
+    Ew = E * vol[:, None, None]
+    return Ew.reshape(-1, E.shape[2]).T @ E.reshape(-1, E.shape[2])
+
+
 def ect_readout(K, electrodes, pairs) -> np.ndarray:
     """(n_pairs,) ECT pair capacitances ``C = −K[e_i, e_j]``, pF (paper Eq. 1).
 

@@ -242,11 +242,11 @@ class SensorLayout:
         return json.dumps(self.to_dict(), indent=1)
 
     @classmethod
-    def from_dict(cls, d: Any, source: str | None = None) -> "SensorLayout":
+    def from_dict(cls, d: Any, source: str | None = None) -> SensorLayout:
         return _parse_layout(d, source)
 
     @classmethod
-    def from_json(cls, text: str, source: str | None = None) -> "SensorLayout":
+    def from_json(cls, text: str, source: str | None = None) -> SensorLayout:
         try:
             d = json.loads(text)
         except json.JSONDecodeError as exc:

@@ -30,14 +30,13 @@ split, evaluated on the same test trials and reported as ``touch.robust`` in met
 
 from __future__ import annotations
 
-from contextlib import contextmanager
-
 import hashlib
 import json
 import logging
 import shutil
 import time
 from collections.abc import Mapping
+from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any

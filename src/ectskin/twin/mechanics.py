@@ -53,6 +53,7 @@ class ManipulatorConfig:
     chamber_size_x_mm: float = 40.0
     chamber_size_z_mm: float = 30.0
     max_volume_ml: float = 30.0  # (assumed) beyond this a chamber would burst
+    chamber_wall_mm: float = 4.0  # (assumed) silicone between each face and a chamber's cavity
     # inflation: membrane pressure P(h) = k_f h (1 + (h/h_s)^2) [kPa], wall compliance [ml/kPa]
     face_stiffness_kpa_per_mm: float = 1.0  # (assumed; calibrated with wall_compliance)
     stiffening_height_mm: float = 6.0  # (assumed)

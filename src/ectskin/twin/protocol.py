@@ -87,7 +87,7 @@ class Protocol:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "Protocol":
+    def from_dict(cls, d: dict[str, Any]) -> Protocol:
         d = dict(d)
         known = {f.name for f in fields(cls)}
         unknown = set(d) - known

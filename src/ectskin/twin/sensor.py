@@ -17,7 +17,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ectskin._check import EctskinError
-from ectskin.electrostatics import Panels, cylinder_panels, maxwell_capacitance, sphere_panels
+from ectskin.electrostatics import (
+    EPS0_PF_PER_MM,
+    Panels,
+    cylinder_panels,
+    dielectric_sensitivity,
+    maxwell_capacitance,
+    sphere_panels,
+)
 from ectskin.electrostatics.panels import _frame, rectangle_quads, strip_quads
 from ectskin.layout import SensorLayout
 from ectskin.twin.mechanics import Manipulator, Touch
@@ -43,8 +50,10 @@ class Discretisation:
     finger_sphere_n: int = 5
     finger_shaft_around: int = 12
     finger_shaft_along: int = 5
+    cavity_cell_mm: float = 4.0  # chamber cavities: cell size over the footprint
+    cavity_layers: int = 3  # ... and Gauss-Legendre nodes across the cavity (face to face)
 
-    def refined(self, factor: int = 2) -> "Discretisation":
+    def refined(self, factor: int = 2) -> Discretisation:
         """A discretisation with ``factor`` times the panel density (for convergence checks)."""
         return Discretisation(
             self.wire_panel_length_mm / factor,
@@ -54,6 +63,8 @@ class Discretisation:
             self.finger_sphere_n * factor,
             self.finger_shaft_around * factor,
             self.finger_shaft_along * factor,
+            self.cavity_cell_mm / factor,
+            self.cavity_layers * factor,
         )
 
 
@@ -109,6 +120,14 @@ class SensorModel:
     discretisation : panel sizes.
     eps_r : effective relative permittivity of silicone and air **(assumed, 2.0)**.
     finger : the grounded finger's geometry.
+    chamber_eps_r : relative permittivity inside the chamber cavities (air, 1.0), or None for one
+        homogeneous medium. The cavities (the body between the two faces, less a wall of
+        ``ManipulatorConfig.chamber_wall_mm`` at each face, over each chamber's footprint; they
+        grow as the faces bulge and follow the bending and the dimple) enter to first order, as
+        in ECT's linearised sensitivity maps: ``K ← K + ε0 (chamber_eps_r − eps_r) ∫ E_a·E_c dV``
+        (:func:`~ectskin.electrostatics.dielectric_sensitivity`, checked against the analytic
+        spherical capacitor with a dielectric shell). Air between the faces lowers the
+        cross-face pairs most; inflation adds air there.
     """
 
     def __init__(
@@ -118,13 +137,27 @@ class SensorModel:
         discretisation: Discretisation | None = None,
         eps_r: float = 2.0,
         finger: Finger | None = None,
+        chamber_eps_r: float | None = 1.0,
     ):
         self.layout = layout
         self.manipulator = manipulator or Manipulator()
         self.discretisation = discretisation or Discretisation()
         self.eps_r = float(eps_r)
         self.finger = finger or Finger()
+        if chamber_eps_r is not None and not (np.isfinite(chamber_eps_r) and chamber_eps_r >= 1.0):
+            raise EctskinError(
+                f"chamber_eps_r must be None (one homogeneous medium) or a relative permittivity "
+                f">= 1, got {chamber_eps_r!r}"
+            )
+        self.chamber_eps_r = None if chamber_eps_r is None else float(chamber_eps_r)
         d = self.discretisation
+        c = self.manipulator.config
+        if 2 * c.chamber_wall_mm >= c.thickness_mm:
+            raise EctskinError(
+                f"manipulator: chamber_wall_mm ({c.chamber_wall_mm}) leaves no cavity in a body "
+                f"{c.thickness_mm} mm thick"
+            )
+        self._cavity_uv = _cavity_grid(c, d.cavity_cell_mm)
         # rest-state quads per surface: (uv corners (n, 4, 2), conductor index (n,))
         by_surface: dict[str, tuple[list, list]] = {}
         for k, e in enumerate(layout.electrodes):
@@ -202,6 +235,44 @@ class SensorModel:
             out.append(Panels.concatenate([tip, shaft]))
         return out
 
+    def cavity_cells(self, inflation_ml, touch: Touch | None, forces) -> tuple[np.ndarray, np.ndarray]:
+        """Centres (F, M, 3) mm and volumes (F, M) mm³ of the chamber cavities' sample cells.
+
+        Each footprint cell (``cavity_cell_mm``) spans from the deformed front face to the
+        deformed back face at the same surface coordinates; the cavity is that segment less a wall
+        of ``chamber_wall_mm`` at each end, integrated across with ``cavity_layers`` Gauss-Legendre
+        nodes (the footprint with the midpoint rule).
+        """
+        forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
+        wall = self.manipulator.config.chamber_wall_mm
+        n_t = self.discretisation.cavity_layers
+        uv, area = self._cavity_uv
+        front = self.manipulator.deform("front", uv, inflation_ml, touch, forces)  # (F, n, 3)
+        back = self.manipulator.deform("back", uv, inflation_ml, touch, forces)
+        span = back - front
+        gap = np.linalg.norm(span, axis=2)  # (F, n)
+        inner = np.maximum(gap - 2.0 * wall, 0.0)
+        x, w = np.polynomial.legendre.leggauss(n_t)  # Gauss-Legendre across the cavity
+        t, w = (x + 1.0) / 2.0, w / 2.0
+        frac = (wall + t[:, None, None] * inner[None]) / gap[None]  # (n_t, F, n)
+        pts = front[None] + frac[..., None] * span[None]  # (n_t, F, n, 3)
+        vol = area * w[:, None, None] * inner[None]  # (n_t, F, n)
+        return (
+            pts.transpose(1, 0, 2, 3).reshape(forces.size, -1, 3),
+            vol.transpose(1, 0, 2).reshape(forces.size, -1),
+        )
+
+    def _readout(self, panels: Panels, cells: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+        """(n_pairs,) C_ij = −K_ij of one panel set, with the cavities' first-order term."""
+        if self.chamber_eps_r is None or self.chamber_eps_r == self.eps_r:
+            K = maxwell_capacitance(panels, self.eps_r)
+        else:
+            K, q = maxwell_capacitance(panels, self.eps_r, return_charges=True)
+            n = self.n_electrodes
+            S = dielectric_sensitivity(panels, q[:, :n], cells[0], cells[1], self.eps_r)
+            K = K[:n, :n] + EPS0_PF_PER_MM * (self.chamber_eps_r - self.eps_r) * S
+        return -K[self._pairs[:, 0], self._pairs[:, 1]]
+
     # ------------------------------------------------------------------ readout
     def capacitance(
         self, inflation_ml, touch: Touch | None = None, forces=0.0, *, with_finger: bool = True
@@ -213,23 +284,22 @@ class SensorModel:
         out of the electrostatics: the bending-only part of a touch response.
         """
         forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
-        if not with_finger and touch is not None:
-            out = np.empty((forces.size, len(self._pairs)))
-            for f, pe in enumerate(self.electrode_panels(inflation_ml, touch, forces)):
-                K = maxwell_capacitance(_without_finger(pe, self.n_electrodes), self.eps_r)
-                out[f] = -K[self._pairs[:, 0], self._pairs[:, 1]]
-            return out
         if touch is None:
             panels = self.electrode_panels(inflation_ml, None, forces[:1])
-            K = maxwell_capacitance(_without_finger(panels[0], self.n_electrodes), self.eps_r)
-            row = -K[self._pairs[:, 0], self._pairs[:, 1]]
+            cells = self.cavity_cells(inflation_ml, None, forces[:1])
+            row = self._readout(_without_finger(panels[0], self.n_electrodes), (cells[0][0], cells[1][0]))
             return np.repeat(row[None, :], forces.size, axis=0)
+        pts, vols = self.cavity_cells(inflation_ml, touch, forces)
         electrodes = self.electrode_panels(inflation_ml, touch, forces)
-        fingers = self.finger_panels(inflation_ml, touch, forces)
         out = np.empty((forces.size, len(self._pairs)))
+        if not with_finger:
+            for f, pe in enumerate(electrodes):
+                out[f] = self._readout(_without_finger(pe, self.n_electrodes), (pts[f], vols[f]))
+            return out
+        fingers = self.finger_panels(inflation_ml, touch, forces)
         for f, (pe, pf) in enumerate(zip(electrodes, fingers)):
             try:
-                K = maxwell_capacitance(Panels.concatenate([pe, pf]), self.eps_r)
+                out[f] = self._readout(Panels.concatenate([pe, pf]), (pts[f], vols[f]))
             except EctskinError:
                 # a coarse fingertip panel very close to a fine wire-end panel can make the
                 # collocation matrix indefinite: refine the fingertip and solve again
@@ -237,8 +307,7 @@ class SensorModel:
                 pf = self.finger_panels(
                     inflation_ml, touch, forces[f : f + 1], sphere_n=2 * self.discretisation.finger_sphere_n
                 )[0]
-                K = maxwell_capacitance(Panels.concatenate([pe, pf]), self.eps_r)
-            out[f] = -K[self._pairs[:, 0], self._pairs[:, 1]]
+                out[f] = self._readout(Panels.concatenate([pe, pf]), (pts[f], vols[f]))
         return out
 
     def marker_positions(self, inflation_ml, touch: Touch | None = None, forces=0.0) -> np.ndarray:
@@ -252,6 +321,21 @@ class SensorModel:
             uv = np.asarray([self.layout.markers[k].uv_mm for k in idx])
             out[:, idx] = self.manipulator.deform(surface, uv, inflation_ml, touch, forces)
         return out
+
+
+def _cavity_grid(c, cell_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rest surface coordinates (n, 2) of the cells covering every chamber footprint, and the
+    footprint area of one cell (mm²)."""
+    nx = max(1, int(np.ceil(c.chamber_size_x_mm / cell_mm)))
+    nz = max(1, int(np.ceil(c.chamber_size_z_mm / cell_mm)))
+    hx, hz = c.chamber_size_x_mm / nx, c.chamber_size_z_mm / nz
+    xs = -c.chamber_size_x_mm / 2 + (np.arange(nx) + 0.5) * hx
+    cells = []
+    for zc in c.chamber_centres_z_mm:
+        zs = zc - c.chamber_size_z_mm / 2 + (np.arange(nz) + 0.5) * hz
+        X, Z = np.meshgrid(xs, zs)
+        cells.append(np.c_[X.ravel(), Z.ravel()])
+    return np.concatenate(cells), hx * hz
 
 
 def _without_finger(panels: Panels, n_electrodes: int) -> Panels:

@@ -148,12 +148,17 @@ _WORKER: dict = {}
 
 
 def _init_worker(layout_json: str, manip: dict, disc: dict, eps_r: float, finger: dict,
-                 protocol: dict, limit_threads: bool = True) -> None:
+                 protocol: dict, chamber_eps_r: float | None, limit_threads: bool = True) -> None:
     if limit_threads:  # one BLAS thread per worker process: the workers are the parallelism
         _WORKER["limits"] = threadpool_limits(1)
     layout = SensorLayout.from_json(layout_json)
     _WORKER["sensor"] = SensorModel(
-        layout, Manipulator(ManipulatorConfig(**manip)), Discretisation(**disc), eps_r, Finger(**finger)
+        layout,
+        Manipulator(ManipulatorConfig(**manip)),
+        Discretisation(**disc),
+        eps_r,
+        Finger(**finger),
+        chamber_eps_r=chamber_eps_r,
     )
     _WORKER["protocol"] = Protocol.from_dict(protocol)
 
@@ -170,6 +175,7 @@ def simulate_experiment(
     manipulator: ManipulatorConfig | None = None,
     discretisation: Discretisation | None = None,
     eps_r: float = 2.0,
+    chamber_eps_r: float | None = 1.0,
     workers: int | None = None,
     progress: bool = True,
 ) -> Recording:
@@ -195,6 +201,7 @@ def simulate_experiment(
         float(eps_r),
         asdict(finger),
         protocol.to_dict(),
+        chamber_eps_r,
     )
     log.info("simulating %d trials x %d frames with %d worker(s)", len(plans), protocol.n_frames, workers)
     jobs = [(p, drift_phase) for p in plans]
@@ -222,5 +229,6 @@ def simulate_experiment(
         "discretisation": asdict(discretisation),
         "finger": asdict(finger),
         "eps_r": float(eps_r),
+        "chamber_eps_r": chamber_eps_r,
     }
     return Recording(layout=layout, trials=trials, frame_rate_hz=protocol.frame_rate_hz, meta=meta)
