@@ -26,8 +26,8 @@ Profiles (:data:`PROFILES`):
 * ``robust`` (touch only; ours, not the paper's) — the paper's TouchMLP, unchanged, trained with
   a recipe that generalises to unseen (inflation state, touch placement) combinations. On the
   twin's paper-protocol data with a trial-exclusive split the paper's recipe fits the training
-  trials exactly (best validation loss at epoch 1 for seeds 0 and 1) and reaches 81-90 %; this
-  one reached 96.8, 96.9 and 99.9 % for seeds 0-2 (20 epochs, ~11 s on one core). Per training
+  trials exactly (best validation loss at epoch 1 for seeds 0 and 1) and reaches 74-92 %; this
+  one reached 97.1, 93.8 and 96.2 % for seeds 0-2 (20 epochs, ~11 s on one core). Per training
   frame it adds an *inflation shift*, the difference between the mean no-contact frames of two
   training inflation states drawn at random ("the same touch seen at another inflation"; see
   :func:`no_contact_means`, :func:`augment_touch_batch`), then mixes the batch up (mixup,
