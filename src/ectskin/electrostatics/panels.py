@@ -592,7 +592,7 @@ def sphere_panels(
 
 
 # ---------------------------------------------------------------------- cylinder
-def _frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def orthonormal_frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors e1, e2 with (e1, e2, axis) right-handed and orthonormal."""
     helper = np.array([1.0, 0, 0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])
     e1 = np.cross(helper, axis)
@@ -628,7 +628,7 @@ def cylinder_quads(
     if not length > 0:
         raise EctskinError(f"cylinder: p0 and p1 must differ, both are {a.tolist()}")
     axis = (b - a) / length
-    e1, e2 = _frame(axis)
+    e1, e2 = orthonormal_frame(axis)
     phi = np.linspace(0.0, 2.0 * np.pi, n_around + 1)
     z = np.linspace(0.0, length, n_along + 1)
     i, j = np.meshgrid(np.arange(n_around), np.arange(n_along), indexing="ij")

@@ -25,7 +25,7 @@ from ectskin.electrostatics import (
     maxwell_capacitance,
     sphere_panels,
 )
-from ectskin.electrostatics.panels import _frame, rectangle_quads, strip_quads
+from ectskin.electrostatics.panels import orthonormal_frame, rectangle_quads, strip_quads
 from ectskin.layout import SensorLayout
 from ectskin.twin.mechanics import Manipulator, Touch
 
@@ -214,7 +214,7 @@ class SensorModel:
         keep = unit.centres[:, 2] < -1e-6 * fg.radius_mm
         for p, n in zip(pts, nrm):
             centre = p + n * (fg.radius_mm + fg.skin_cover_mm)
-            e1, e2 = _frame(n)
+            e1, e2 = orthonormal_frame(n)
             rot = np.stack([e1, e2, n], axis=1)  # local (x, y, z) -> world, z onto n
             tip = Panels(
                 centre + unit.centres[keep] @ rot.T,
@@ -262,9 +262,13 @@ class SensorModel:
             vol.transpose(1, 0, 2).reshape(forces.size, -1),
         )
 
-    def _readout(self, panels: Panels, cells: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    @property
+    def _with_cavities(self) -> bool:
+        return self.chamber_eps_r is not None and self.chamber_eps_r != self.eps_r
+
+    def _readout(self, panels: Panels, cells: tuple[np.ndarray | None, np.ndarray | None]) -> np.ndarray:
         """(n_pairs,) C_ij = −K_ij of one panel set, with the cavities' first-order term."""
-        if self.chamber_eps_r is None or self.chamber_eps_r == self.eps_r:
+        if not self._with_cavities:
             K = maxwell_capacitance(panels, self.eps_r)
         else:
             K, q = maxwell_capacitance(panels, self.eps_r, return_charges=True)
@@ -284,12 +288,17 @@ class SensorModel:
         out of the electrostatics: the bending-only part of a touch response.
         """
         forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
+        n_rows = forces.size
         if touch is None:
-            panels = self.electrode_panels(inflation_ml, None, forces[:1])
-            cells = self.cavity_cells(inflation_ml, None, forces[:1])
-            row = self._readout(_without_finger(panels[0], self.n_electrodes), (cells[0][0], cells[1][0]))
-            return np.repeat(row[None, :], forces.size, axis=0)
-        pts, vols = self.cavity_cells(inflation_ml, touch, forces)
+            forces = forces[:1]  # one solve: without contact the force changes nothing
+        if self._with_cavities:
+            pts, vols = self.cavity_cells(inflation_ml, touch, forces)
+        else:
+            pts, vols = [None] * forces.size, [None] * forces.size
+        if touch is None:
+            panels = self.electrode_panels(inflation_ml, None, forces)
+            row = self._readout(_without_finger(panels[0], self.n_electrodes), (pts[0], vols[0]))
+            return np.repeat(row[None, :], n_rows, axis=0)
         electrodes = self.electrode_panels(inflation_ml, touch, forces)
         out = np.empty((forces.size, len(self._pairs)))
         if not with_finger:
