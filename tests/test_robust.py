@@ -299,8 +299,11 @@ def test_selection_by_validation_accuracy_not_loss(tmp_path, monkeypatch):
         s = train("touch", tr, va, run, profile=profile, epochs=4, progress=False)
         assert s["best_epoch"] == want
         assert (s["best_val_loss"], s["best_val_metric"]) == script[want - 1]
-        assert read_checkpoint(run / "model.pt")["extra"]["epoch"] == want
-        assert _training_summary(run)["best_epoch"] == want
+        kept = read_checkpoint(run / "model.pt")["extra"]
+        assert kept["epoch"] == want
+        summary = _training_summary(run, kept)  # as evaluate calls it
+        assert summary["best_epoch"] == want
+        assert (summary["best_val_loss"], summary["best_val_metric"]) == script[want - 1]
 
 
 def test_inflation_shift_is_skipped_with_a_warning_without_two_rest_trials(tmp_path, caplog):

@@ -463,13 +463,14 @@ def describe_recipe(recipe: Mapping[str, Any] | None, metric: str = "accuracy") 
     return ", ".join(parts) or "the paper's recipe"
 
 
-def _training_summary(run: Path) -> dict[str, Any]:
+def _training_summary(run: Path, kept: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Epochs, best epoch and total time from the run's ``metrics.csv`` (if present).
 
-    The best epoch follows the run's selection rule (``settings.select`` in ``config.json``):
-    the lowest validation loss (the paper's rule, and the default for runs without one) or the
-    best validation metric, ties broken by the lower validation loss. The run's ``recipe``
-    (``config.json``) is passed on when present.
+    The best epoch, validation loss and metric are those of the kept weights, read from the
+    checkpoint's metadata (``kept``: its ``extra``, written by ``train`` with ``epoch``,
+    ``val_loss``, ``val_metric``), so they follow whatever rule chose them; without that
+    metadata, the epoch of the lowest validation loss (the paper's rule). The run's selection
+    rule and ``recipe`` (``config.json``) are passed on when present.
     """
     import csv
 
@@ -481,7 +482,6 @@ def _training_summary(run: Path) -> dict[str, Any]:
     if not rows:
         return {}
     cfg = _run_config(run)
-    select = (cfg.get("settings") or {}).get("select", "val_loss")
 
     def col(name: str) -> np.ndarray:
         try:
@@ -490,24 +490,31 @@ def _training_summary(run: Path) -> dict[str, Any]:
             return np.full(len(rows), np.nan)
 
     val = col("val_loss")
-    sec = col("seconds")
-    best = int(np.nanargmin(val)) if np.isfinite(val).any() else len(rows) - 1
-    metric = col("val_metric")
-    if select == "val_metric" and np.isfinite(metric).any():
-        score = metric if cfg.get("task") == "track" else -metric  # lower is better
-        score = np.where(np.isfinite(score), score, np.inf)
-        # lexicographic: best metric, then lowest loss, then earliest (np.lexsort: last key first)
-        best = int(np.lexsort((np.arange(len(rows)), np.nan_to_num(val, nan=np.inf), score))[0])
-    out: dict[str, Any] = {"select": select} if cfg else {}
+    out: dict[str, Any] = {}
+    if cfg:
+        out["select"] = (cfg.get("settings") or {}).get("select", "val_loss")
     if isinstance(cfg.get("recipe"), dict):
         out["recipe"] = cfg["recipe"]
+    kept = kept or {}
+    if all(k in kept for k in ("epoch", "val_loss", "val_metric")):
+        best = {
+            "best_epoch": int(kept["epoch"]),
+            "best_val_loss": float(kept["val_loss"]),
+            "best_val_metric": float(kept["val_metric"]),
+        }
+    else:
+        i = int(np.nanargmin(val)) if np.isfinite(val).any() else len(rows) - 1
+        epoch = col("epoch")[i]
+        best = {
+            "best_epoch": int(epoch) if np.isfinite(epoch) else i + 1,
+            "best_val_loss": float(val[i]),
+            "best_val_metric": float(col("val_metric")[i]),
+        }
     return {
         **out,
         "epochs": len(rows),
-        "best_epoch": int(col("epoch")[best]) if np.isfinite(col("epoch")[best]) else best + 1,
-        "best_val_loss": float(val[best]),
-        "best_val_metric": float(col("val_metric")[best]),
-        "seconds": float(np.nansum(sec)),
+        **best,
+        "seconds": float(np.nansum(col("seconds"))),
         "history": {k: col(k).tolist() for k in ("epoch", "train_loss", "val_loss")},
     }
 
@@ -716,7 +723,7 @@ def evaluate_run(
                 "ad_mm": ad_traj,
             }
             figs.update(TRACK_FIGURES)
-    training = _training_summary(run)
+    training = _training_summary(run, payload.get("extra"))
     history = training.pop("history", None)
     if figures and history:
         from ectskin.viz.learning import plot_learning_curves
