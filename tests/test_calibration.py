@@ -1,4 +1,4 @@
-"""Paper Eq. 2 and the choice of the reference state (ectskin.learn.calibration)."""
+"""Paper Eq. 2 and the choice of the reference state (ectskin.io.calibration)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from ectskin import EctskinError
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import default_layout
-from ectskin.learn.calibration import (
+from ectskin.io.calibration import (
     calibrate,
     check_reference,
     is_no_contact,

@@ -755,7 +755,7 @@ def _build_recording(
     return rec
 
 
-#: Same rule as ectskin.learn.calibration.REFERENCE_RTOL (io does not import learn).
+#: Same rule as ectskin.io.calibration.REFERENCE_RTOL (io does not import learn).
 _REFERENCE_RTOL = 1e-6
 
 

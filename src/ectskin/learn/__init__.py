@@ -5,7 +5,6 @@ Modules (import them directly; this package imports nothing heavy on purpose, so
 ``import ectskin.learn`` stays cheap and does not pull in torch):
 
 ==========================  ==============================================================
-``learn.calibration``       Eq. 2, c = (c_t - c_0) / c_0 against a reference state
 ``learn.datasets``          TouchData / TrackData, trial-exclusive splits, Normalizer
 ``learn.models``            TouchMLP (touch classes) and C2DT (marker coordinates)
 ``learn.checkpoint``        self-describing model files (config + weights + normaliser)

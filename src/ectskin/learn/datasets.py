@@ -1,7 +1,7 @@
 """Learning data from recordings: calibrated touch frames, tracking windows, splits, normalisation.
 
 * :func:`touch_dataset` → :class:`TouchData`: one sample per frame, the frame's calibrated
-  readouts (paper Eq. 2 against the rest state, see :mod:`ectskin.learn.calibration`) and its
+  readouts (paper Eq. 2 against the rest state, see :mod:`ectskin.io.calibration`) and its
   touch class (0 = no touch, 1..n_regions).
 * :func:`track_dataset` → :class:`TrackData`: one sample per frame of every tracking trial, the
   window of the last ``k`` calibrated frames (oldest first) ending at that frame, the marker
@@ -32,7 +32,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from ectskin._check import EctskinError
 from ectskin.io.recording import Recording, Trial
-from ectskin.learn.calibration import calibrate, is_no_contact, touch_reference
+from ectskin.io.calibration import calibrate, is_no_contact, touch_reference
 
 log = logging.getLogger(__name__)
 
@@ -260,7 +260,7 @@ def touch_dataset(
     ----------
     rec : Recording
     reference : "auto" | "rest" | "meta" | (n_pairs,) array
-        The reference state c_0 of Eq. 2 (see :func:`ectskin.learn.calibration.touch_reference`);
+        The reference state c_0 of Eq. 2 (see :func:`ectskin.io.calibration.touch_reference`);
         "auto" = the mean readout of the uninflated, untouched trial (or per-trial references of
         a generic import).
     trials : sequence of names or indices, optional

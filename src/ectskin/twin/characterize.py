@@ -14,19 +14,19 @@ the measured signal (readout noise and quantisation included).
 
 from __future__ import annotations
 
-import json
 import logging
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from ectskin._files import save_figure_atomic, write_json_atomic
+from ectskin.io.calibration import relative_change
 from ectskin.layout import SensorLayout, default_layout
 from ectskin.twin.mechanics import Touch
 from ectskin.twin.readout import ReadoutConfig, readout
 from ectskin.twin.sensor import SensorModel
+from ectskin.viz.twin import plot_response
 
 log = logging.getLogger(__name__)
 
@@ -70,8 +70,8 @@ def characterize(
     c0 = sensor.capacitance(rest)[0]
     c_full = sensor.capacitance(p_full)[0]
     c_part = sensor.capacitance(p_touch)[0]
-    change_full = (c_full - c0) / c0
-    change_part = (c_part - c0) / c0
+    change_full = relative_change(c_full, c0)  # Eq. 2
+    change_part = relative_change(c_part, c0)
     same = layout.same_surface
     names = [e.name for e in layout.electrodes]
     pairs = [
@@ -93,9 +93,9 @@ def characterize(
                 "region": reg.id,
                 "surface": reg.surface,
                 "uv_mm": list(reg.centre_mm),
-                "change": ((c_t - c0) / c0).tolist(),
-                "touch_only_change": ((c_t - c_part) / c_part).tolist(),
-                "bending_only_change": ((c_b - c_part) / c_part).tolist(),
+                "change": relative_change(c_t, c0).tolist(),
+                "touch_only_change": relative_change(c_t, c_part).tolist(),
+                "bending_only_change": relative_change(c_b, c_part).tolist(),
             }
         )
     result = {
@@ -116,14 +116,12 @@ def characterize(
             (r.id for r in layout.regions if r.surface == "front"), layout.regions[0].id
         )
         _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, same, seed)
-        _atomic_json(out / "characterize.json", result)
+        write_json_atomic(out / "characterize.json", result)
         log.info("characterisation written to %s", out)
     return result
 
 
 def _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, same, seed):
-    from ectskin.viz.twin import plot_response
-
     layout = sensor.layout
     fps = 30.0
     rng = np.random.default_rng([seed, 4])
@@ -140,11 +138,11 @@ def _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, s
     meas = readout(c_ramp, t, rng, cfg, phase)
     c0 = meas[: int(3 * fps)].mean(axis=0)
     fig = plot_response(
-        t, (meas - c0) / c0, list(layout.pair_names), selected,
+        t, relative_change(meas, c0), list(layout.pair_names), selected,
         title=f"inflation to p = {tuple(p_full.tolist())} ml",
         stages=[(3.0, "inflate"), (15.0, "hold")],
     )
-    fig.savefig(out / "fig3_inflation.png", dpi=120)
+    save_figure_atomic(fig, out / "fig3_inflation.png", dpi=120)
 
     # Fig. 4: rest 3 s, inflate to p_touch over 9 s, hold, touch region with a force ramp
     t = np.arange(int(30 * fps)) / fps
@@ -160,22 +158,9 @@ def _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, s
     meas = readout(c, t, rng, cfg, phase)
     c0 = meas[: int(3 * fps)].mean(axis=0)
     fig = plot_response(
-        t, (meas - c0) / c0, list(layout.pair_names), selected,
+        t, relative_change(meas, c0), list(layout.pair_names), selected,
         title=f"two-stage: inflate to {tuple(p_touch.tolist())} ml, then touch region {region}",
         stages=[(3.0, "inflate"), (16.0, "touch"), (26.0, "release")],
     )
-    fig.savefig(out / "fig4_touch.png", dpi=120)
+    save_figure_atomic(fig, out / "fig4_touch.png", dpi=120)
 
-
-def _atomic_json(path: Path, obj) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(obj, fh, indent=1)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise

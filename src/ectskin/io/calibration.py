@@ -1,5 +1,10 @@
 """Calibrated capacitance, paper Eq. 2: c = (c_t − c_0) / c_0, against an explicit reference c_0.
 
+This is the only place Eq. 2 is written: :func:`relative_change` is the bare kernel (the twin's
+characterisation and the live engine call it), :func:`calibrate` the checked version that
+datasets use. It lives in ``io`` because calibrating a recording is part of bringing it in, and
+every layer above (twin characterisation, learning, live) uses it.
+
 The paper calibrates every readout against a *reference state*: the uninflated, untouched
 manipulator for touch recognition, and the first frame of each trajectory for deformation tracking
 ("prior knowledge", §4.2). This module holds Eq. 2 itself and the choice of the touch reference;
@@ -97,6 +102,17 @@ def check_reference(
     return ref
 
 
+def relative_change(c_t: np.ndarray, c_0: np.ndarray) -> np.ndarray:
+    """Paper Eq. 2 without checks: ``(c_t − c_0) / c_0`` in float64, broadcasting ``c_0``.
+
+    ``c_t`` is (..., n_pairs) pF, ``c_0`` (n_pairs,) or of ``c_t``'s shape. A NaN in either
+    propagates; callers check the reference first (:func:`check_reference`) or mask channels.
+    """
+    c_t = np.asarray(c_t, dtype=np.float64)
+    c_0 = np.asarray(c_0, dtype=np.float64)
+    return (c_t - c_0) / c_0
+
+
 def calibrate(
     frames: np.ndarray,
     reference: np.ndarray,
@@ -150,7 +166,7 @@ def calibrate(
             f"{source}: frame {i}, {_channel(j, pair_names)} is {c_t[i, j]}; calibrated readouts "
             f"must be finite (drop masked frames, e.g. touch_dataset(..., nonfinite='drop'))"
         )
-    c = (c_t - c_0) / c_0  # Eq. 2
+    c = relative_change(c_t, c_0)  # Eq. 2
     # float32 cannot hold everything float64 can: refuse an overflow rather than return inf.
     big = finite & (np.abs(c) > np.finfo(np.float32).max)
     if big.any():

@@ -1,0 +1,133 @@
+"""Atomic file writes and JSON conversion: one policy for every result file ectskin writes.
+
+Every result, checkpoint, report and figure is written through :func:`atomic_write`: the bytes go
+to a hidden temporary file ``.<name>.tmp-<pid>`` in the target's folder, are flushed to disk
+(``fsync``) and renamed onto the target with ``os.replace``. A reader sees the old file or the new
+one, never half of one; on any error the temporary file is removed and the target is untouched.
+
+JSON policy (:func:`to_jsonable`): NumPy scalars and arrays become numbers and lists, tuples
+become lists, paths become strings, dataclasses and objects with ``to_dict()`` become dicts, and
+a non-finite float (NaN, ±inf) becomes ``null``: strict JSON has no NaN, and every JSON file
+ectskin writes can be read by any JSON parser. Readers treat ``null`` as "not available".
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, is_dataclass
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from ectskin._check import EctskinError
+
+TMP_MARK = ".tmp-"
+
+
+def temp_path(path: Path) -> Path:
+    """The hidden temporary sibling ``.<name>.tmp-<pid>`` that an atomic write of ``path`` uses."""
+    return path.with_name(f".{path.name}{TMP_MARK}{os.getpid()}")
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], Any]) -> Path:
+    """Call ``write(fh)`` on a binary temporary file, fsync it and rename it onto ``path``.
+
+    The parent folder is created. On any exception the temporary file is removed, ``path`` is left
+    as it was, and an ``OSError`` (disk full, permissions) becomes one :class:`EctskinError` that
+    names the file.
+    """
+    path = Path(os.fspath(path))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = temp_path(path)
+    try:
+        with open(tmp, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise EctskinError(f"{path}: cannot write ({exc.strerror or exc})") from None
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    data = text.encode("utf-8")
+    return atomic_write(path, lambda fh: fh.write(data))
+
+
+def to_jsonable(obj: Any) -> Any:
+    """``obj`` as plain JSON values under the module's policy (non-finite floats → ``None``)."""
+    if is_dataclass(obj) and not isinstance(obj, type):
+        return to_jsonable(asdict(obj))
+    if isinstance(obj, Mapping):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return to_jsonable(obj.item())
+    if isinstance(obj, Path):
+        return str(obj)
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if hasattr(obj, "to_dict") and callable(obj.to_dict):
+        return to_jsonable(obj.to_dict())
+    if hasattr(obj, "ndim") and getattr(obj, "ndim", None) == 0 and hasattr(obj, "item"):
+        return to_jsonable(obj.item())  # a 0-d tensor
+    return obj
+
+
+def json_text(obj: Any, *, indent: int | None = 1, compact: bool = False) -> str:
+    """Strict JSON text of ``obj`` under the module's policy (``compact`` for network messages)."""
+    if compact:
+        return json.dumps(to_jsonable(obj), allow_nan=False, separators=(",", ":"))
+    return json.dumps(to_jsonable(obj), indent=indent, allow_nan=False) + "\n"
+
+
+def write_json_atomic(path: str | os.PathLike, obj: Any) -> Path:
+    """Write ``obj`` as indented strict JSON to ``path`` atomically."""
+    return write_text_atomic(path, json_text(obj))
+
+
+def read_json(path: str | os.PathLike, what: str = "file") -> Any:
+    """Read a JSON file, turning a missing or malformed file into one clear EctskinError."""
+    path = Path(os.fspath(path))
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise EctskinError(f"{path}: {what} not found") from None
+    except UnicodeDecodeError:
+        raise EctskinError(f"{path}: {what} is not UTF-8 text") from None
+    except OSError as exc:
+        raise EctskinError(f"{path}: cannot read {what}: {exc.strerror}") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise EctskinError(
+            f"{path}: {what} is not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
+        ) from None
+
+
+def read_json_object(path: str | os.PathLike, what: str = "file") -> dict[str, Any]:
+    """:func:`read_json` of a file that must hold a JSON object (a dict)."""
+    obj = read_json(path, what)
+    if not isinstance(obj, dict):
+        raise EctskinError(
+            f"{path}: {what} must hold a JSON object, found a JSON {type(obj).__name__}"
+        )
+    return obj
+
+
+def save_figure_atomic(fig: Any, path: str | os.PathLike, *, dpi: int = 110) -> Path:
+    """``fig.savefig`` to ``path`` atomically; the format follows ``path``'s suffix."""
+    path = Path(os.fspath(path))
+    fmt = path.suffix.lstrip(".") or "png"
+    return atomic_write(path, lambda fh: fig.savefig(fh, dpi=dpi, format=fmt))

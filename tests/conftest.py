@@ -1,0 +1,104 @@
+"""Shared fixtures and factories of the test suite.
+
+* ``torch`` runs single-threaded in every test (results depend on the thread count; one thread is
+  also the fast choice on the 2-core CI machine). Set once here, never at import time in a file.
+* ``layout``: the paper's default layout.
+* ``make_recording``: a factory of small synthetic recordings (states × regions, optional
+  markers with occlusions), the one to use unless a test needs values of its own (the HDF5
+  round-trip's special floats, the recorder's irregular timestamps).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+import pytest
+
+from ectskin.io.recording import Recording, Trial
+from ectskin.layout import default_layout
+
+LAYOUT = default_layout()
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _torch_one_thread():
+    try:
+        import torch
+    except ImportError:  # pragma: no cover - torch is a dependency
+        yield
+        return
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="session")
+def layout():
+    return LAYOUT
+
+
+def synthetic_recording(
+    n_frames: int = 12,
+    seed: int = 0,
+    *,
+    states: Sequence[tuple[float, ...]] = ((0.0, 0.0, 0.0), (20.0, 0.0, 10.0)),
+    regions: Iterable[int] = (2, 11, 7),
+    markers: bool = True,
+    occluded: Iterable[str] = ("s1_r2",),
+    no_markers: Iterable[str] = ("s1_r11",),
+    layout=LAYOUT,
+) -> Recording:
+    """Per inflation state a no-contact trial ``s{k}_rest`` and touch trials ``s{k}_r{region}``.
+
+    Readouts are a per-pair base (0.5-2 pF) scaled by the state (×(1 + 0.2 k)) and the region
+    (×(1 + 0.02 r)) plus 1 fF noise, so a class is recoverable from one frame; markers are random
+    walks around a line of markers 10 mm apart. ``occluded`` trials have one NaN marker in the
+    middle frame; ``no_markers`` trials have none.
+    """
+    rng = np.random.default_rng(seed)
+    p, m = layout.n_pairs, layout.n_markers
+    base = rng.uniform(0.5, 2.0, p)
+    occluded, no_markers = set(occluded), set(no_markers)
+    t = np.arange(n_frames) / 30
+    trials = []
+    for s, infl in enumerate(states):
+        scale = 1.0 + 0.2 * s
+        trials.append(
+            Trial(
+                f"s{s}_rest",
+                base * scale + rng.normal(0, 1e-3, (n_frames, p)),
+                t,
+                np.zeros(n_frames),
+                inflation=infl,
+                markers=rng.normal(0, 1, (n_frames, m, 3)) if markers else None,
+                meta={"kind": "no_contact"},
+            )
+        )
+        for r in regions:
+            walk = 10 * np.arange(m)[None, :, None] + np.cumsum(
+                rng.normal(0, 0.3, (n_frames, m, 3)), 0
+            )
+            name = f"s{s}_r{r}"
+            if name in occluded:
+                walk[n_frames // 2, 1, :] = np.nan
+            trials.append(
+                Trial(
+                    name,
+                    base * scale * (1 + 0.02 * r) + rng.normal(0, 1e-3, (n_frames, p)),
+                    t,
+                    np.full(n_frames, r),
+                    inflation=infl,
+                    region=r,
+                    markers=None if (name in no_markers or not markers) else walk,
+                    meta={"kind": "touch"},
+                )
+            )
+    return Recording(layout, trials, 30.0)
+
+
+@pytest.fixture
+def make_recording():
+    """The :func:`synthetic_recording` factory."""
+    return synthetic_recording
