@@ -1,13 +1,37 @@
-"""Recordings: the in-memory data objects and their on-disk formats (HDF5, imports)."""
+"""Recordings: the in-memory data objects and their on-disk formats (HDF5, imports).
 
-from ectskin.io.hdf5 import (
-    RecordingWriter,
-    list_trials,
-    read_layout,
-    read_recording,
-    write_recording,
-)
+:func:`read_recording` is the one entry point for a recording file of any supported type: it
+dispatches on the file's suffix (HDF5 ``.h5``/``.hdf5`` → :mod:`ectskin.io.hdf5`; generic
+``.npz``/``.csv`` → :mod:`ectskin.io.generic`).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ectskin._check import EctskinError
+from ectskin.io import hdf5
+from ectskin.io.generic import load_generic
+from ectskin.io.hdf5 import RecordingWriter, list_trials, read_layout, write_recording
 from ectskin.io.recording import Recording, Trial
+
+#: Suffixes :func:`read_recording` takes, by reader.
+GENERIC_SUFFIXES = (".npz", ".csv")
+
+
+def read_recording(path: str | os.PathLike, **kwargs) -> Recording:
+    """The :class:`Recording` in ``path``: HDF5 (any other suffix) or a generic ``.npz``/``.csv``.
+
+    Keyword arguments go to the reader (e.g. ``allow_partial`` for HDF5).
+    """
+    path = Path(os.fspath(path))
+    if not path.exists():
+        raise EctskinError(f"{path}: no such data file")
+    if path.suffix.lower() in GENERIC_SUFFIXES:
+        return load_generic(path, **kwargs)
+    return hdf5.read_recording(path, **kwargs)
+
 
 __all__ = [
     "Recording",
