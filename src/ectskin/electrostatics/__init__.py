@@ -1,7 +1,8 @@
 """Electrostatics: capacitance of conductors by the method of moments (paper Eq. 1).
 
-* :mod:`~ectskin.electrostatics.panels` — flat parallelogram panels (:class:`Panels`) and builders
-  for plates, strips (wires), spheres and cylinders.
+* :mod:`~ectskin.electrostatics.panels` — flat parallelogram panels (:class:`Panels`).
+* :mod:`~ectskin.electrostatics.meshing` — builders of panels for plates, strips (wires),
+  spheres and cylinders, with the edge correction of coarse strips.
 * :mod:`~ectskin.electrostatics.mom` — potential coefficients with exact near-field integrals,
   the Maxwell capacitance matrix by Cholesky, the ECT pair readout ``C_ij = −K_ij``, and the
   first-order sensitivity of K to a permittivity change in a volume (``dielectric_sensitivity``).
@@ -9,21 +10,9 @@
 Units: mm, pF, V, pC.
 """
 
-from ectskin.electrostatics.mom import (
-    EPS0_PF_PER_MM,
-    NEAR_FACTOR,
-    dielectric_sensitivity,
-    ect_readout,
-    field_at,
-    maxwell_capacitance,
-    potential_integral,
-    potential_matrix,
-    two_terminal_capacitance,
-)
-from ectskin.electrostatics.panels import (
+from ectskin.electrostatics.meshing import (
     STRIP_PANEL_LENGTH_MM,
     STRIP_PANELS_ACROSS,
-    Panels,
     cylinder_panels,
     cylinder_quads,
     edge_correction_factor,
@@ -37,6 +26,18 @@ from ectskin.electrostatics.panels import (
     strip_panels,
     strip_quads,
 )
+from ectskin.electrostatics.mom import (
+    EPS0_PF_PER_MM,
+    NEAR_FACTOR,
+    dielectric_sensitivity,
+    ect_readout,
+    field_at,
+    maxwell_capacitance,
+    potential_integral,
+    potential_matrix,
+    two_terminal_capacitance,
+)
+from ectskin.electrostatics.panels import Panels
 
 __all__ = [
     "EPS0_PF_PER_MM",

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
+from ectskin.layout.geometry import pad_touches, polyline_distance, sample_polyline
 
 SURFACES = ("front", "back", "right", "left")
 LAYOUT_SCHEMA = "ectskin.layout"
@@ -351,7 +352,9 @@ def _parse_layout(d: Any, src: str | None) -> SensorLayout:
         try:
             poly = np.asarray(_get(e, "polyline_mm", src, f), dtype=np.float64)
         except (TypeError, ValueError):
-            raise EctskinError(f"{_loc(src, f + '.polyline_mm')} must be [[u, v], ...] numbers")
+            raise EctskinError(
+                f"{_loc(src, f + '.polyline_mm')} must be [[u, v], ...] numbers"
+            ) from None
         if poly.ndim != 2 or poly.shape[1] != 2 or poly.shape[0] < 2:
             raise EctskinError(
                 f"{_loc(src, f + '.polyline_mm')}: expected at least 2 points of (u, v), "
@@ -453,49 +456,17 @@ def _check_overlaps(electrodes: list[Electrode], skins: dict[str, Skin], src: st
     shapes = []
     for e in electrodes:
         surface = skins[e.skin].surface
-        pts = []
-        for a, b in zip(e.polyline_mm[:-1], e.polyline_mm[1:]):
-            n = max(2, int(np.ceil(np.linalg.norm(b - a) / 0.25)) + 1)
-            pts.append(a + (b - a) * np.linspace(0, 1, n)[:, None])
-        shapes.append((surface, np.concatenate(pts), e))
+        shapes.append((surface, sample_polyline(e.polyline_mm, step_mm=0.25), e))
     for a in range(len(shapes)):
         for b in range(a + 1, len(shapes)):
             sa, pa, ea = shapes[a]
             sb, _, eb = shapes[b]
             if sa != sb:
                 continue
-            gap = _seg_distance(pa, eb.polyline_mm) - (ea.width_mm + eb.width_mm) / 2
-            pad_hit = _rect_hits(ea, eb) or _rect_hits(eb, ea)
+            gap = polyline_distance(pa, eb.polyline_mm) - (ea.width_mm + eb.width_mm) / 2
+            pad_hit = pad_touches(ea, eb) or pad_touches(eb, ea)
             if gap <= 0 or pad_hit:
                 raise EctskinError(
                     f"{_loc(src, 'electrodes')}: electrodes {ea.name!r} and {eb.name!r} overlap on "
                     f"surface {sa!r} (wires or pads touch); they would short together"
                 )
-
-
-def _seg_distance(points: np.ndarray, poly: np.ndarray) -> float:
-    best = np.inf
-    for a, b in zip(poly[:-1], poly[1:]):
-        ab = b - a
-        t = np.clip(((points - a) @ ab) / (ab @ ab), 0, 1)
-        d = np.linalg.norm(points - (a + t[:, None] * ab), axis=1)
-        best = min(best, float(d.min()))
-    return best
-
-
-def _rect_hits(e: Electrode, other: Electrode) -> bool:
-    """Does the pad of ``e`` touch the wire or the pad of ``other``?"""
-    c = np.asarray(e.pad_centre_mm)
-    h = np.asarray(e.pad_size_mm) / 2
-    # pad vs pad: axis-aligned rectangles
-    oc = np.asarray(other.pad_centre_mm)
-    oh = np.asarray(other.pad_size_mm) / 2
-    if np.all(np.abs(c - oc) < h + oh):
-        return True
-    # pad vs wire: sample the wire, inflate the pad by half the wire width
-    pts = np.concatenate(
-        [a + (b - a) * np.linspace(0, 1, 50)[:, None] for a, b in zip(other.polyline_mm[:-1], other.polyline_mm[1:])]
-    )
-    inside = np.all(np.abs(pts - c) < h + other.width_mm / 2, axis=1)
-    # a wire may start at its own pad; only another electrode's pad counts
-    return bool(inside.any())

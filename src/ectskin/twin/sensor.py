@@ -25,7 +25,7 @@ from ectskin.electrostatics import (
     maxwell_capacitance,
     sphere_panels,
 )
-from ectskin.electrostatics.panels import orthonormal_frame, rectangle_quads, strip_quads
+from ectskin.electrostatics.meshing import orthonormal_frame, rectangle_quads, strip_quads
 from ectskin.layout import SensorLayout
 from ectskin.twin.mechanics import Manipulator, Touch
 
@@ -37,7 +37,7 @@ class Discretisation:
     """Panel sizes of the method of moments.
 
     Charge crowds at the free edges of strips and pads. Strips are cut into cosine-graded cells
-    across and meshed wider by :func:`~ectskin.electrostatics.panels.edge_correction_factor` so
+    across and meshed wider by :func:`~ectskin.electrostatics.meshing.edge_correction_factor` so
     they carry the true strip's charge; their free ends are refined to ``end_panel_fraction`` of
     the width. Doubling every density from these defaults changes the readout by < 1 %
     (``tests/test_twin.py``).

@@ -63,7 +63,10 @@ def test_face_points_follow_the_bulge_and_wires_stretch():
     # the crest reaches the bulge height (material is pulled towards the base, so take the max)
     assert infl[:, 1].max() - rest[30, 1] == pytest.approx(m.bulge_height_mm([0, 20, 0])[1], rel=1e-3)
     assert infl[30, 2] < rest[30, 2]  # pulled in along z
-    length = lambda p: np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1))
+
+    def length(p):
+        return np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1))
+
     assert length(infl) > 1.02 * length(rest)  # stretched along the wire
     back = m.deform("back", [[0, 60]], [0, 20, 0])[0, 0]
     assert back[1] == pytest.approx(-10 - (infl[30, 1] - 10), rel=1e-9)  # both faces bulge alike

@@ -1,0 +1,66 @@
+"""Run every benchmark in turn and collect their JSON results (``make bench``).
+
+Usage::
+
+    python benchmarks/run_all.py [--out bench-results] [--quick]
+
+Each benchmark runs in its own process (one at a time: they measure speed, so they must not share
+the cores) and writes ``OUT/<name>.json``; ``OUT/summary.json`` lists what ran, its exit code and
+its wall time. ``--quick`` passes smaller sizes, for checking that the benchmarks still run; the
+figures in ``BENCHMARKS.md`` come from full runs. The exit code is non-zero if any benchmark
+failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+#: name → (script, extra arguments of a full run, extra arguments of a --quick run)
+BENCHMARKS = {
+    "bench_twin": ("bench_twin.py", [], ["--levels", "0", "--workers", "1"]),
+    "bench_train": (
+        "bench_train.py",
+        [],
+        ["--touch-epochs", "2", "--touch-frames", "5000", "--c2dt-steps", "3", "--calls", "50"],
+    ),
+    "bench_live": ("bench_live.py", [], ["--frames", "500", "--paced-seconds", "1"]),
+}
+
+
+def run(out: Path, quick: bool, only: list[str] | None) -> int:
+    out.mkdir(parents=True, exist_ok=True)
+    summary = {}
+    failed = 0
+    for name, (script, full_args, quick_args) in BENCHMARKS.items():
+        if only and name not in only:
+            continue
+        cmd = [sys.executable, str(HERE / script), "--out", str(out / f"{name}.json")]
+        cmd += quick_args if quick else full_args
+        print(f"== {name}: {' '.join(cmd[1:])}", flush=True)
+        t0 = time.perf_counter()
+        rc = subprocess.call(cmd)
+        summary[name] = {"rc": rc, "seconds": round(time.perf_counter() - t0, 1), "cmd": cmd[1:]}
+        failed += rc != 0
+    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    print(json.dumps(summary, indent=1))
+    return 1 if failed else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("bench-results"))
+    ap.add_argument("--quick", action="store_true", help="small sizes: check they run")
+    ap.add_argument("--only", nargs="*", choices=sorted(BENCHMARKS), help="run only these")
+    args = ap.parse_args(argv)
+    return run(args.out, args.quick, args.only)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
