@@ -7,6 +7,7 @@ records every frame (``--record``) and writes every output as JSON lines (``--js
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import sys
@@ -16,8 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from ectskin._check import EctskinError
-from ectskin.live.engine import POLICIES
-from ectskin.live.sources import SOURCE_SPECS
+from ectskin.dashboard import serve
+from ectskin.layout import load_layout
+from ectskin.live.engine import POLICIES, LiveEngine
+from ectskin.live.recorder import Recorder
+from ectskin.live.sources import SOURCE_SPECS, open_source
 
 HELP = "run the trained models on a live source (optionally with the web dashboard)"
 log = logging.getLogger(__name__)
@@ -74,23 +78,24 @@ def _load_markers(path: str) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ectskin.layout import load_layout
-    from ectskin.live.engine import LiveEngine
-    from ectskin.live.recorder import Recorder
-    from ectskin.live.sources import open_source
-
     if args.threads < 1:
         raise EctskinError(f"--threads must be >= 1, got {args.threads}")
-    touch = track = None
-    if args.touch_model or args.track_model:
-        import torch
+    with contextlib.ExitStack() as stack:
+        touch = track = None
+        if args.touch_model or args.track_model:
+            # torch is imported only when a model is given: a run without models, and every
+            # other `ectskin` command, starts without it
+            from ectskin.learn.predict import TouchPredictor, TrackPredictor
+            from ectskin.learn.threads import torch_threads
 
-        from ectskin.learn.predict import TouchPredictor, TrackPredictor
+            stack.enter_context(torch_threads(args.threads))
+            touch = TouchPredictor.from_run(args.touch_model) if args.touch_model else None
+            track = TrackPredictor.from_run(args.track_model) if args.track_model else None
+        return _run(args, touch, track)
 
-        torch.set_num_threads(args.threads)
 
-        touch = TouchPredictor.from_run(args.touch_model) if args.touch_model else None
-        track = TrackPredictor.from_run(args.track_model) if args.track_model else None
+def _run(args: argparse.Namespace, touch, track) -> int:
+    """The command with its models loaded (``touch``/``track`` may be None)."""
     if args.record and Path(args.record).exists() and not args.force:
         raise EctskinError(f"{args.record} exists; pass --force to overwrite it")
     ref_markers = _load_markers(args.reference_markers) if args.reference_markers else None
@@ -155,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
 def _writer(jsonl):
     if jsonl is None:
         return None
+    # to_json_dict() already applies the JSON policy (non-finite -> None): dump it as is
     return lambda out: jsonl.write(json.dumps(out.to_json_dict(), allow_nan=False) + "\n")
 
 
@@ -192,7 +198,6 @@ def _console(engine, run_kwargs, jsonl, status: bool) -> dict:
 
 
 def _serve(engine, args, run_kwargs, jsonl) -> dict:
-    from ectskin.dashboard import serve
 
     if jsonl is not None:
         log.warning("--jsonl is ignored with --dashboard (the dashboard consumes the outputs)")

@@ -6,6 +6,8 @@ import argparse
 import logging
 import time
 
+from ectskin.layout import load_layout
+from ectskin.live.recorder import record_main
 from ectskin.live.sources import SOURCE_SPECS
 
 HELP = "record frames from a live source (replay, sim, lsl, serial, tcp) to HDF5"
@@ -46,9 +48,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ectskin.layout import load_layout
-    from ectskin.live.recorder import record_main
-
     layout = load_layout(args.layout) if args.layout else None
     last = [time.monotonic(), 0]
 

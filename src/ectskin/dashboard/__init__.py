@@ -1,4 +1,10 @@
-"""Live dashboard: a web page fed by the live engine (FastAPI + websocket, see ``app.py``).
+"""Live dashboard: a web page fed by the live engine (FastAPI + websocket).
+
+Modules by job: :mod:`~ectskin.dashboard.hub` (the engine → clients hand-over and rate limit),
+:mod:`~ectskin.dashboard.messages` (the ``meta`` message, strict JSON encoding),
+:mod:`~ectskin.dashboard.security` (Origin check, public-bind warning),
+:mod:`~ectskin.dashboard.app` (the FastAPI routes and the websocket stream),
+:mod:`~ectskin.dashboard.server` (socket, engine thread, uvicorn).
 
 Typical use::
 
@@ -14,6 +20,9 @@ FastAPI and uvicorn come with the ``live`` extra (``pip install 'ectskin[live]'`
 imported only when an app is built.
 """
 
-from ectskin.dashboard.app import DashboardServer, Hub, build_meta, create_app, serve
+from ectskin.dashboard.app import create_app
+from ectskin.dashboard.hub import Hub
+from ectskin.dashboard.messages import build_meta
+from ectskin.dashboard.server import DashboardServer, serve
 
 __all__ = ["DashboardServer", "Hub", "build_meta", "create_app", "serve"]

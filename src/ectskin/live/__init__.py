@@ -1,17 +1,20 @@
 """Live operation: frame sources, crash-safe recording and the inference engine.
 
 * :mod:`ectskin.live.sources` — :class:`Frame` and the sources (replay, twin, LSL, serial, TCP)
-  behind one iterator interface; :func:`open_source` parses ``replay:FILE``, ``sim``,
-  ``lsl:NAME``, ``serial:PORT[@BAUD]``, ``tcp:HOST:PORT``.
+  behind one iterator interface, one module each; :func:`open_source` parses ``replay:FILE``,
+  ``sim``, ``lsl:NAME``, ``serial:PORT[@BAUD]``, ``tcp:HOST:PORT``.
 * :mod:`ectskin.live.recorder` — :class:`Recorder` (every frame to HDF5, flushed ≤ 0.25 s) and
   :func:`record_main` (``ectskin record``).
-* :mod:`ectskin.live.engine` — :class:`LiveEngine`: reference capture, calibration (paper Eq. 2),
-  touch and tracking predictors, latency and drop accounting; emits :class:`Output`.
+* :mod:`ectskin.live.engine` — :class:`LiveEngine`: reference capture
+  (:mod:`~ectskin.live.reference`), calibration (paper Eq. 2), touch and tracking predictors
+  (:mod:`~ectskin.live.predictors`), latency and drop accounting (:mod:`~ectskin.live.meter`);
+  emits :class:`Output` (:mod:`~ectskin.live.output`).
 
 Optional dependencies (pyserial, pylsl) are imported only when such a source is opened.
 """
 
-from ectskin.live.engine import POLICIES, LiveEngine, Output
+from ectskin.live.engine import POLICIES, LiveEngine
+from ectskin.live.output import Output
 from ectskin.live.recorder import Recorder, record_main
 from ectskin.live.sources import (
     Frame,

@@ -30,12 +30,10 @@ coordinates are the mean markers of the reference frames when the source provide
 ``reference_markers`` (e.g. the twin's rest pose). A channel whose reference is missing or zero is
 calibrated to NaN (shown as null) and fed to the models as 0 (no change).
 
-Latency is ``perf_counter()`` from the frame's arrival (``Frame.arrival``) to its output.
-
-Run torch single-threaded for live use (``torch.set_num_threads(1)``, as ``ectskin live`` does):
-the models are tiny, and on a busy 2-core machine torch's extra intra-op threads starved the
-reader and recorder threads, stalling inference for 0.3–1 s (measured; 1 thread: p50 ≈ 2.4 ms,
-max < 10 ms at 60 frames/s with recording).
+Latency is ``perf_counter()`` from the frame's arrival (``Frame.arrival``) to its output. Run
+torch single-threaded (``ectskin live`` does, through :func:`ectskin.learn.threads.torch_threads`):
+the models are tiny, and extra intra-op threads compete with the reader and recorder threads and
+stall inference on a small machine.
 """
 
 from __future__ import annotations
@@ -46,128 +44,22 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ectskin._check import EctskinError, check_array, check_option
+from ectskin.io.calibration import relative_change
 from ectskin.layout import SensorLayout
+from ectskin.live.meter import Meter
+from ectskin.live.output import Output, json_list
+from ectskin.live.predictors import bind_predictors
+from ectskin.live.reference import ReferenceCapture
 
 logger = logging.getLogger(__name__)
 
 POLICIES = ("skip-to-newest", "block")
 REFERENCE_KINDS = ("both", "touch", "track")
-_LATENCY_WINDOW = 1000  # processed frames over which p50/p99 are computed
-_FPS_WINDOW_S = 2.0  # seconds over which fps_in / fps_out are computed
-_STATS_REFRESH_S = 0.25  # latency percentiles are recomputed at most this often
-_REF_RTOL = 1e-6  # |c_0| below this × max |c_0| is treated as a missing reference channel
-
-
-def _json_list(a: np.ndarray | None) -> list | None:
-    """Array → nested lists of floats with NaN/inf as None (valid JSON)."""
-    if a is None:
-        return None
-    a = np.asarray(a, dtype=np.float64)
-    if np.isfinite(a).all():
-        return a.tolist()
-    return np.where(np.isfinite(a), a, None).tolist()
-
-
-@dataclass
-class Output:
-    """What the engine emits per processed frame.
-
-    ``raw`` (n_pairs,) pF; ``calibrated`` (n_pairs,) Eq. 2 against the touch reference (None until
-    a reference exists); ``touch_probs`` (n_classes,) and ``touch_cls``; ``markers_pred``,
-    ``markers_reference``, ``markers_true`` (n_markers, 3) mm; ``latency_ms`` from the frame's
-    arrival to this output; ``stats`` a snapshot of :attr:`LiveEngine.stats`.
-    """
-
-    seq: int
-    t: float
-    raw: np.ndarray
-    calibrated: np.ndarray | None = None
-    touch_probs: np.ndarray | None = None
-    touch_cls: int | None = None
-    markers_pred: np.ndarray | None = None
-    markers_reference: np.ndarray | None = None
-    markers_true: np.ndarray | None = None
-    label: int | None = None
-    latency_ms: float = 0.0
-    stats: dict[str, Any] = field(default_factory=dict)
-
-    def to_json_dict(self) -> dict[str, Any]:
-        """The ``{"type": "frame", ...}`` message of the dashboard protocol
-        (``interfaces_live.md``)."""
-        touch = None
-        if self.touch_probs is not None:
-            touch = {"cls": self.touch_cls, "probs": _json_list(self.touch_probs)}
-        markers = None
-        if self.markers_pred is not None or self.markers_true is not None:
-            markers = {
-                "pred": _json_list(self.markers_pred),
-                "reference": _json_list(self.markers_reference),
-                "true": _json_list(self.markers_true),
-            }
-        return {
-            "type": "frame",
-            "seq": int(self.seq),
-            "t": float(self.t),
-            "raw": _json_list(self.raw),
-            "calibrated": _json_list(self.calibrated),
-            "touch": touch,
-            "markers": markers,
-            "label": None if self.label is None else int(self.label),
-            "latency_ms": float(self.latency_ms),
-            "stats": dict(self.stats),
-        }
-
-
-class _Reference:
-    """NaN-aware running mean of raw frames (and markers) for one reference (Eq. 2's c_0)."""
-
-    def __init__(self, n_pairs: int, n_markers: int):
-        self.c0: np.ndarray | None = None  # (n_pairs,) pF, NaN = unusable channel
-        self.markers: np.ndarray | None = None  # (n_markers, 3) mm mean over the capture
-        self.n_pairs, self.n_markers = n_pairs, n_markers
-        self.target = 0  # frames still to take; 0 = not capturing
-        self.seqs: list[int] = []
-
-    def start(self, n: int) -> None:
-        self.target = n
-        self.seqs = []
-        self._sum = np.zeros(self.n_pairs)
-        self._cnt = np.zeros(self.n_pairs)
-        self._msum = np.zeros((self.n_markers, 3))
-        self._mcnt = np.zeros((self.n_markers, 3))
-
-    @property
-    def capturing(self) -> bool:
-        return self.target > 0
-
-    def add(self, c: np.ndarray, markers: np.ndarray | None, seq: int) -> bool:
-        """Take one frame; returns True when the capture just completed."""
-        ok = np.isfinite(c)
-        self._sum[ok] += c[ok]
-        self._cnt += ok
-        if markers is not None:
-            okm = np.isfinite(markers)
-            self._msum[okm] += markers[okm]
-            self._mcnt += okm
-        self.seqs.append(seq)
-        self.target -= 1
-        if self.target:
-            return False
-        with np.errstate(invalid="ignore", divide="ignore"):
-            c0 = self._sum / self._cnt
-            m = self._msum / self._mcnt if self._mcnt.any() else None
-        scale = np.nanmax(np.abs(c0)) if np.isfinite(c0).any() else 0.0
-        bad = ~np.isfinite(c0) | (np.abs(c0) <= _REF_RTOL * scale)
-        c0[bad] = np.nan
-        self.c0 = c0
-        self.markers = m
-        return True
 
 
 class LiveEngine:
@@ -241,22 +133,9 @@ class LiveEngine:
         self.n_pairs, self.n_markers = n_pairs, n_markers
         self.touch = touch
         self.track = track
-        self._touch_sel = self._channels(touch, "touch model") if touch is not None else None
-        self._track_sel = self._channels(track, "tracking model") if track is not None else None
-        self.n_classes = int(getattr(touch, "n_classes", layout.n_classes))
-        if touch is not None and self.n_classes != layout.n_classes:
-            raise EctskinError(
-                f"touch model has {self.n_classes} classes, layout {layout.name!r} has "
-                f"{layout.n_classes} (no touch + {layout.n_regions} regions)"
-            )
-        self.window = 1
-        if track is not None:
-            self.window = int(track.window)
-            if int(track.n_markers) != n_markers:
-                raise EctskinError(
-                    f"tracking model predicts {track.n_markers} markers, layout {layout.name!r} "
-                    f"has {n_markers}"
-                )
+        bound = bind_predictors(layout, touch, track)
+        self._touch_sel, self._track_sel = bound.touch_channels, bound.track_channels
+        self.n_classes, self.window = bound.n_classes, bound.window
         if reference_markers is None:
             reference_markers = getattr(source, "reference_markers", None)
         if reference_markers is not None:
@@ -284,16 +163,12 @@ class LiveEngine:
         self._ran = False
         self._pending_capture: str | None = "both"
         self._counts = {"frames": 0, "processed": 0, "dropped": 0, "wrong_channels": 0, "errors": 0}
-        self._lat = deque(maxlen=_LATENCY_WINDOW)
-        self._in_times: deque = deque()
-        self._out_times: deque = deque()
-        self._lat_cache = (math.nan, math.nan)
-        self._lat_cache_t = -math.inf
+        self._meter = Meter()
         self._error: str | None = None
         self.latest: Output | None = None
         # inference-loop state
-        self._ref_touch = _Reference(n_pairs, n_markers)
-        self._ref_track = _Reference(n_pairs, n_markers)
+        self._ref_touch = ReferenceCapture(n_pairs, n_markers)
+        self._ref_track = ReferenceCapture(n_pairs, n_markers)
         self._win = np.zeros((self.window, n_pairs))
         self._win_pos = 0
         self._win_n = 0
@@ -312,10 +187,7 @@ class LiveEngine:
         self._stop.set()
         with self._cond:
             self._cond.notify_all()
-        try:
-            self.source.close()
-        except Exception:  # a source that fails to close is being abandoned anyway
-            logger.debug("source close failed", exc_info=True)
+        self._close_source()
 
     @property
     def reference_ready(self) -> bool:
@@ -323,7 +195,7 @@ class LiveEngine:
 
     @property
     def stats(self) -> dict[str, Any]:
-        """Counters, latency percentiles (ms) and rates (frames/s), see ``interfaces_live.md``."""
+        """Counters, latency percentiles (ms) and rates (frames/s); the ``stats`` of every output."""
         return self._stats(refresh=True)
 
     @property
@@ -335,7 +207,7 @@ class LiveEngine:
         """The engine's part of the dashboard's ``meta`` message (the dashboard adds the layout:
         ``ectskin.dashboard.build_meta``)."""
         return {
-            "reference_markers": _json_list(self.reference_markers),
+            "reference_markers": json_list(self.reference_markers),
             "n_classes": self.n_classes,
             "policy": self.policy,
             "reference_frames": self.reference_frames,
@@ -379,10 +251,7 @@ class LiveEngine:
             self._stop.set()
             with self._cond:
                 self._cond.notify_all()
-            try:
-                self.source.close()
-            except Exception:
-                logger.debug("source close failed", exc_info=True)
+            self._close_source()
             reader.join(timeout=10.0)
         if self._error:
             raise EctskinError(self._error)
@@ -421,7 +290,7 @@ class LiveEngine:
                         self._counts["dropped"] += 1
                     self._queue.append(frame)
                     self._counts["frames"] += 1
-                    _tick(self._in_times, frame.arrival)
+                    self._meter.frame_in(frame.arrival)
                     self._cond.notify_all()
                 n += 1
                 if max_frames is not None and n >= max_frames:
@@ -467,8 +336,7 @@ class LiveEngine:
             out.latency_ms = (now - f.arrival) * 1e3
             with self._lock:
                 self._counts["processed"] += 1
-                self._lat.append(out.latency_ms)
-                _tick(self._out_times, now)
+                self._meter.frame_out(now, out.latency_ms)
             out.stats = self._stats(refresh=False)
             self.latest = out
             if on_output is not None:
@@ -509,16 +377,13 @@ class LiveEngine:
             if ref.capturing and ref.add(c, f.markers, f.seq):
                 self._reference_done(name, ref, f)
 
-    def _reference_done(self, name: str, ref: _Reference, f) -> None:
+    def _reference_done(self, name: str, ref: ReferenceCapture, f) -> None:
         bad = np.flatnonzero(np.isnan(ref.c0))
         if bad.size:
             names = ", ".join(self.layout.pair_names[j] for j in bad[:8])
             logger.warning(
                 "%s reference: %d channel(s) without a usable reference (%s); they "
-                "calibrate to NaN and enter the models as 0",
-                name,
-                bad.size,
-                names,
+                "calibrate to NaN and enter the models as 0", name, bad.size, names
             )
         text = f"{name} reference captured from frames {ref.seqs[0]}..{ref.seqs[-1]}"
         logger.info("%s", text)
@@ -528,24 +393,19 @@ class LiveEngine:
             except EctskinError as exc:
                 logger.error("cannot record the event: %s", exc)
         if name == "tracking":
-            m = ref.markers
-            if m is not None and self._fallback_markers is not None:
-                m = np.where(np.isfinite(m), m, self._fallback_markers)
-            elif m is None:
-                m = self._fallback_markers
+            m = ref.initial_markers(self._fallback_markers)
             if m is not None and not np.isfinite(m).all():
                 j = int(np.argwhere(~np.isfinite(m))[0][0])
                 self._warn_once(
                     "occluded",
-                    f"marker {j} was not visible during the reference "
-                    "capture; its prediction is NaN",
+                    f"marker {j} was not visible during the reference capture; its prediction "
+                    "is NaN",
                 )
             if m is None and self.track is not None:
                 self._warn_once(
                     "nomarkers",
-                    "tracking disabled: the source gave no markers "
-                    "during the reference and no reference_markers was "
-                    "passed",
+                    "tracking disabled: the source gave no markers during the reference and no "
+                    "reference_markers was passed",
                 )
             self._init_markers = m
 
@@ -554,7 +414,7 @@ class LiveEngine:
         out = Output(seq=f.seq, t=f.t, raw=raw, label=f.label, markers_true=f.markers)
         c0 = self._ref_touch.c0
         if c0 is not None:
-            cal = (raw - c0) / c0  # Eq. 2: c = (c_t - c_0) / c_0
+            cal = relative_change(raw, c0)  # Eq. 2; NaN where the reference channel is unusable
             out.calibrated = cal
             if self.touch is not None:
                 x = np.nan_to_num(cal, nan=0.0, posinf=0.0, neginf=0.0)
@@ -570,7 +430,7 @@ class LiveEngine:
         if self.track is not None and c0t is not None and self._init_markers is not None:
             k = self.window
             order = (self._win_pos + np.arange(k)) % k  # oldest first
-            w = (self._win[order] - c0t) / c0t  # Eq. 2 on the window, (k, n_pairs)
+            w = relative_change(self._win[order], c0t)  # Eq. 2 on the window, (k, n_pairs)
             w = np.nan_to_num(w, nan=0.0, posinf=0.0, neginf=0.0)
             if self._track_sel is not None:
                 w = w[:, self._track_sel]
@@ -585,21 +445,11 @@ class LiveEngine:
         return out
 
     # ------------------------------------------------------------------ helpers
-    def _channels(self, predictor, what: str) -> np.ndarray | None:
-        """Channel indices the predictor consumes (None = all, in layout order)."""
-        n = int(predictor.n_pairs)
-        names = [str(p) for p in getattr(predictor, "pair_names", None) or []]
-        index = {p: j for j, p in enumerate(self.layout.pair_names)}
-        known = len(names) == n and all(p in index for p in names)
-        if known:  # the model names its channels (a subset or another order): map by name
-            sel = np.array([index[p] for p in names], dtype=np.int64)
-            return None if np.array_equal(sel, np.arange(self.n_pairs)) else sel
-        if n == self.n_pairs:  # unnamed (or generically named) channels: layout order
-            return None
-        raise EctskinError(
-            f"{what} expects {n} channels, layout {self.layout.name!r} has {self.n_pairs} pairs"
-            + (f" (model channels {names[:4]}… are not the layout's pair names)" if names else "")
-        )
+    def _close_source(self) -> None:
+        try:
+            self.source.close()
+        except Exception:  # a source that fails to close is being abandoned anyway
+            logger.debug("source close failed", exc_info=True)
 
     def _model_error(self, what: str) -> None:
         with self._lock:
@@ -617,14 +467,8 @@ class LiveEngine:
         now = time.perf_counter()
         with self._lock:
             counts = dict(self._counts)
-            if refresh or now - self._lat_cache_t > _STATS_REFRESH_S:
-                if self._lat:
-                    p50, p99 = np.percentile(np.fromiter(self._lat, float), [50, 99])
-                    self._lat_cache = (float(p50), float(p99))
-                self._lat_cache_t = now
-            p50, p99 = self._lat_cache
-            fps_in = _rate(self._in_times, now)
-            fps_out = _rate(self._out_times, now)
+            p50, p99 = self._meter.latency_ms(now, refresh)
+            fps_in, fps_out = self._meter.rates(now)
             queued = len(self._queue)
         src = getattr(self.source, "counters", None) or {}
         stats = {
@@ -650,19 +494,3 @@ class LiveEngine:
             stats.update(self.recorder.stats)
         return stats
 
-
-def _tick(times: deque, t: float) -> None:
-    """Append ``t`` and forget times older than the fps window."""
-    times.append(t)
-    while times and t - times[0] > _FPS_WINDOW_S:
-        times.popleft()
-
-
-def _rate(times: deque, now: float) -> float:
-    """Events per second over the last ``_FPS_WINDOW_S`` seconds (0 when idle)."""
-    while times and now - times[0] > _FPS_WINDOW_S:
-        times.popleft()
-    if len(times) < 2:
-        return 0.0
-    span = max(now - times[0], times[-1] - times[0])
-    return (len(times) - 1) / span if span > 0 else 0.0

@@ -31,7 +31,9 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
+from ectskin.io.hdf5 import RecordingWriter
 from ectskin.layout import SensorLayout
+from ectskin.live.sources import open_source
 
 logger = logging.getLogger(__name__)
 
@@ -66,8 +68,6 @@ class Recorder:
         trial_prefix: str = "live",
         trial_info: Callable[[str], dict[str, Any]] | None = None,
     ):
-        from ectskin.io.hdf5 import RecordingWriter
-
         if not flush_interval_s > 0:
             raise EctskinError(f"flush_interval_s must be > 0, got {flush_interval_s!r}")
         self.path = Path(path)
@@ -193,8 +193,8 @@ class Recorder:
     # ------------------------------------------------------------------ writer thread
     def _run(self) -> None:
         # Wake once per flush interval (or when flush()/close() asks), not once per frame: a
-        # thread woken 300 times a second competes with the reader and inference threads for the
-        # GIL and delayed inference by several ms per frame (measured).
+        # thread woken at the frame rate competes with the reader and inference threads for the
+        # GIL and delays inference.
         closing = False
         while not closing:
             self._wake.wait(self.flush_interval_s)
@@ -360,8 +360,6 @@ def record_main(
     Returns a summary: frames recorded, trials, seconds, the source's counters and whether it
     was interrupted. ``on_frame(frame)`` is called after each frame is queued (progress).
     """
-    from ectskin.live.sources import open_source
-
     if duration_s is not None and not duration_s > 0:
         raise EctskinError(f"duration must be > 0 seconds, got {duration_s!r}")
     out_path = Path(out_path)

@@ -15,7 +15,7 @@ from ectskin.twin.mechanics import Touch
 from ectskin.twin.protocol import Protocol
 from ectskin.twin.readout import mocap, readout
 from ectskin.twin.sensor import SensorModel
-from ectskin.twin.simulate import _chebyshev_nodes
+from ectskin.twin.simulate import chebyshev_nodes
 
 _FORCE_MAX_N = 3.0
 
@@ -79,7 +79,7 @@ class LiveTwin:
             else:
                 k = self.protocol.force_nodes
                 lo, hi = 0.05, _FORCE_MAX_N
-                nodes = _chebyshev_nodes(lo, hi, k)
+                nodes = chebyshev_nodes(lo, hi, k)
                 c_nodes = self.sensor.capacitance(p, self._touch, nodes)
                 coef = np.polynomial.chebyshev.chebfit((2 * nodes - lo - hi) / (hi - lo), c_nodes, k - 1)
                 self._cache[key] = lambda f, coef=coef: np.polynomial.chebyshev.chebval(

@@ -66,7 +66,8 @@ def contact_mask(n_frames: int, frame_rate_hz: float, rng: np.random.Generator) 
     return mask
 
 
-def _chebyshev_nodes(lo: float, hi: float, k: int) -> np.ndarray:
+def chebyshev_nodes(lo: float, hi: float, k: int) -> np.ndarray:
+    """(k,) Chebyshev nodes of the first kind on [lo, hi] (the interpolation nodes in force)."""
     x = np.cos(np.pi * (2 * np.arange(k) + 1) / (2 * k))
     return 0.5 * (lo + hi) + 0.5 * (hi - lo) * x
 
@@ -81,7 +82,7 @@ def capacitance_over_force(
     lo, hi = float(forces.min()), float(forces.max())
     if hi - lo < 1e-9:
         return np.repeat(sensor.capacitance(inflation, touch, [lo]), forces.size, axis=0)
-    nodes = _chebyshev_nodes(lo, hi, n_nodes)
+    nodes = chebyshev_nodes(lo, hi, n_nodes)
     c_nodes = sensor.capacitance(inflation, touch, nodes)  # (K, n_pairs)
     x_nodes = (2 * nodes - (lo + hi)) / (hi - lo)
     coef = chebyshev.chebfit(x_nodes, c_nodes, n_nodes - 1)

@@ -21,6 +21,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ectskin.dashboard import DashboardServer
+from ectskin.io.hdf5 import RecordingWriter
+from ectskin.layout import default_layout
+from ectskin.live import LiveEngine, open_source
+
 pytestmark = pytest.mark.browser
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -28,11 +33,6 @@ if not CHROMIUM.exists():
     pytest.skip(f"{CHROMIUM} is not installed (apt-get install chromium)", allow_module_level=True)
 sync_api = pytest.importorskip("playwright.sync_api")
 pytest.importorskip("fastapi")
-
-from ectskin.dashboard import DashboardServer
-from ectskin.io.hdf5 import RecordingWriter
-from ectskin.layout import default_layout
-from ectskin.live import LiveEngine, open_source
 
 LAYOUT = default_layout()
 RATE_HZ = 30.0
@@ -74,12 +74,15 @@ def _side(region: int) -> float:
     return 1.0 if LAYOUT.region(region).surface == "front" else -1.0
 
 
-def make_recording(path: Path) -> Path:
+def write_patterned_recording(path: Path) -> Path:
     """Write the synthetic recording with the crash-safe writer (as ``ectskin record`` does)."""
     rng = np.random.default_rng(0)
     base = 1.0 + rng.uniform(0.0, 1.0, LAYOUT.n_pairs)  # pF
     t = np.arange(FRAMES_PER_TRIAL) / RATE_HZ
-    noise = lambda: rng.normal(0.0, 1e-4, (FRAMES_PER_TRIAL, LAYOUT.n_pairs))
+
+    def noise() -> np.ndarray:
+        return rng.normal(0.0, 1e-4, (FRAMES_PER_TRIAL, LAYOUT.n_pairs))
+
     with RecordingWriter(path, LAYOUT, RATE_HZ) as w:
         w.start_trial("rest", inflation=(0, 0, 0), region=0)
         w.append(base * (1 + noise()), t, np.zeros(FRAMES_PER_TRIAL, dtype=int),
@@ -138,7 +141,7 @@ def _launch(p):
 
 
 def test_page_follows_a_replayed_recording(tmp_path):
-    rec = make_recording(tmp_path / "synthetic.h5")
+    rec = write_patterned_recording(tmp_path / "synthetic.h5")
     source = open_source(f"replay:{rec}", speed=2.0, loop=True)
     engine = LiveEngine(source, touch=TemplateTouch(), track=TemplateTrack(), reference_frames=30)
     errors: list[str] = []

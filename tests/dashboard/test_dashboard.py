@@ -25,7 +25,9 @@ with warnings.catch_warnings():  # starlette 1.x: "use httpx2"; httpx is what CI
 
 from ectskin._check import EctskinError
 from ectskin.dashboard import DashboardServer, Hub, build_meta, create_app
-from ectskin.dashboard.app import STATIC_DIR, TokenBucket, _sanitize, to_json_text
+from ectskin.dashboard.app import STATIC_DIR
+from ectskin.dashboard.hub import TokenBucket
+from ectskin.dashboard.messages import encode
 from ectskin.layout import default_layout
 
 LAYOUT = default_layout()
@@ -33,7 +35,7 @@ REST = np.array([[25.0, 0.0, z] for z in (24, 48, 72, 96, 120)])
 
 
 def make_output(k: int, layout=LAYOUT, *, nan_channel: int | None = None) -> dict:
-    """A frame message as ``Output.to_json_dict()`` gives it (interfaces_live.md)."""
+    """A frame message as ``Output.to_json_dict()`` gives it."""
     n, c = layout.n_pairs, layout.n_classes
     raw = 1.0 + 0.01 * np.arange(n) + 0.001 * k
     if nan_channel is not None:
@@ -158,9 +160,9 @@ def test_meta_takes_reference_markers_from_the_engine(engine):
 def test_non_finite_numbers_become_null():
     obj = {"a": np.array([1.0, np.nan, np.inf]), "b": np.float32(2.5), "c": [float("-inf")],
            "d": np.int64(3)}
-    assert json.loads(to_json_text(obj)) == {"a": [1.0, None, None], "b": 2.5, "c": [None],
-                                             "d": 3}
-    assert _sanitize({"x": (1, np.nan)}) == {"x": [1, None]}
+    assert json.loads(encode(obj)) == {"a": [1.0, None, None], "b": 2.5, "c": [None], "d": 3}
+    assert json.loads(encode({"x": (1, np.nan)})) == {"x": [1, None]}
+    assert encode({"a": [1.5, None]}) == '{"a":[1.5,null]}'  # compact
 
 
 # --------------------------------------------------------------------------- rate limit
@@ -274,7 +276,7 @@ def test_page_loads_nothing_from_elsewhere():
 def test_api_meta(client, hub):
     r = client.get("/api/meta")
     assert r.status_code == 200
-    assert r.json() == json.loads(to_json_text(hub.meta()))
+    assert r.json() == json.loads(encode(hub.meta()))
     assert r.json()["pair_names"] == list(LAYOUT.pair_names)
 
 
