@@ -11,6 +11,8 @@ Subcommands (thin wrappers over :mod:`ectskin.io.capmeter`, :mod:`ectskin.io.mot
     ectskin import generic data.npz -o rec.h5              # NPZ / CSV in the generic format
 
 The file formats are described in ``docs/instrument-import.md`` and ``docs/import-format.md``.
+The library is imported inside the functions that use it: ``ectskin --help`` imports every command
+module, and should not load h5py and the readers for that.
 """
 
 from __future__ import annotations
@@ -177,82 +179,103 @@ def _print_mocap(mc) -> None:
 
 
 # --------------------------------------------------------------------------- run
+def _run_capacitance(args: argparse.Namespace) -> None:
+    from ectskin.io.align import build_recording
+
+    cap = _read_capacitance(args, args.file)
+    _print_capacitance(cap)
+    if args.out:
+        rec = build_recording(cap, None, _layout(args), trial_name=args.trial_name,
+                              inflation=_inflation(args), region=args.region)
+        _write(rec, args)
+
+
+def _run_mocap(args: argparse.Namespace) -> None:
+    _print_mocap(_read_mocap(args, args.file))
+
+
+def _build_from_manifest(args: argparse.Namespace):
+    from ectskin.io.align import build_recording_from_manifest
+
+    per_trial = {"--mocap": args.mocap, "--trial-name": args.trial_name,
+                 "--region": args.region or None, "--inflation": args.inflation.strip(),
+                 "--markers": args.markers}
+    given = [k for k, v in per_trial.items() if v]
+    if given:
+        raise EctskinError(
+            f"{', '.join(given)} describe one trial; with --manifest give them per trial "
+            f"in the manifest (docs/instrument-import.md)"
+        )
+    layout = _layout(args) if args.layout else None
+    rec = build_recording_from_manifest(
+        args.manifest, layout, strict=None if args.strict else False
+    )
+    for t in rec.trials:
+        d = t.meta.get("delay_s")
+        extra = f", delay {d * 1e3:+.1f} ms ({t.meta['delay_source']})" if d is not None else ""
+        print(f"trial {t.name}: {t.n_frames} frames{extra}")
+    return rec
+
+
+def _build_one_trial(args: argparse.Namespace):
+    from ectskin.io.align import build_recording
+
+    layout = _layout(args)
+    cap = _read_capacitance(args, args.capacitance, n_pairs=layout.n_pairs)
+    _print_capacitance(cap)
+    mocap = None
+    if args.mocap:
+        mocap = _read_mocap(args, args.mocap)
+        _print_mocap(mocap)
+    delay = args.delay
+    if delay != "auto":
+        try:
+            delay = float(delay)
+        except ValueError:
+            raise EctskinError(
+                f"--delay must be 'auto' or a number of seconds, got {args.delay!r}"
+            ) from None
+    rec = build_recording(
+        cap, mocap, layout, delay=delay, trial_name=args.trial_name,
+        inflation=_inflation(args), region=args.region, max_delay_s=args.max_delay,
+        delay_method=args.delay_method, clock=args.clock, max_gap_frames=args.max_gap_frames,
+    )
+    t = rec.trials[0]
+    if "delay_s" in t.meta:
+        score = t.meta.get("delay_score")
+        how = (
+            f"estimated by {t.meta['delay_method']}, score {score:.3f}, contrast "
+            f"{t.meta['delay_contrast']:.3f}"
+            if score is not None
+            else "given"
+        )
+        print(f"delay {t.meta['delay_s'] * 1e3:+.1f} ms ({how}); markers lag when > 0")
+    return rec
+
+
+def _run_build(args: argparse.Namespace) -> None:
+    rec = _build_from_manifest(args) if args.manifest else _build_one_trial(args)
+    _write(rec, args)
+
+
+def _run_generic(args: argparse.Namespace) -> None:
+    from ectskin.io.generic import load_generic
+
+    rec = load_generic(args.file, frame_rate_hz=args.frame_rate, layout=args.layout)
+    _write(rec, args)
+
+
+_RUNS = {
+    "capacitance": _run_capacitance,
+    "mocap": _run_mocap,
+    "build": _run_build,
+    "generic": _run_generic,
+}
+
+
 def run(args: argparse.Namespace) -> int:
     kind = args.import_kind
-    if kind == "capacitance":
-        cap = _read_capacitance(args, args.file)
-        _print_capacitance(cap)
-        if args.out:
-            from ectskin.io.align import build_recording
-
-            rec = build_recording(cap, None, _layout(args), trial_name=args.trial_name,
-                                  inflation=_inflation(args), region=args.region)
-            _write(rec, args)
-        return 0
-    if kind == "mocap":
-        _print_mocap(_read_mocap(args, args.file))
-        return 0
-    if kind == "build":
-        from ectskin.io.align import build_recording, build_recording_from_manifest
-
-        if args.manifest:
-            per_trial = {"--mocap": args.mocap, "--trial-name": args.trial_name,
-                         "--region": args.region or None, "--inflation": args.inflation.strip(),
-                         "--markers": args.markers}
-            given = [k for k, v in per_trial.items() if v]
-            if given:
-                raise EctskinError(
-                    f"{', '.join(given)} describe one trial; with --manifest give them per trial "
-                    f"in the manifest (docs/instrument-import.md)"
-                )
-            layout = _layout(args) if args.layout else None
-            rec = build_recording_from_manifest(
-                args.manifest, layout, strict=None if args.strict else False
-            )
-            for t in rec.trials:
-                d = t.meta.get("delay_s")
-                extra = (
-                    f", delay {d * 1e3:+.1f} ms ({t.meta['delay_source']})" if d is not None else ""
-                )
-                print(f"trial {t.name}: {t.n_frames} frames{extra}")
-        else:
-            layout = _layout(args)
-            cap = _read_capacitance(args, args.capacitance, n_pairs=layout.n_pairs)
-            _print_capacitance(cap)
-            mocap = None
-            if args.mocap:
-                mocap = _read_mocap(args, args.mocap)
-                _print_mocap(mocap)
-            delay = args.delay
-            if delay != "auto":
-                try:
-                    delay = float(delay)
-                except ValueError:
-                    raise EctskinError(
-                        f"--delay must be 'auto' or a number of seconds, got {args.delay!r}"
-                    ) from None
-            rec = build_recording(
-                cap, mocap, layout, delay=delay, trial_name=args.trial_name,
-                inflation=_inflation(args), region=args.region, max_delay_s=args.max_delay,
-                delay_method=args.delay_method, clock=args.clock,
-                max_gap_frames=args.max_gap_frames,
-            )
-            t = rec.trials[0]
-            if "delay_s" in t.meta:
-                score = t.meta.get("delay_score")
-                how = (
-                    f"estimated by {t.meta['delay_method']}, score {score:.3f}, contrast "
-                    f"{t.meta['delay_contrast']:.3f}"
-                    if score is not None
-                    else "given"
-                )
-                print(f"delay {t.meta['delay_s'] * 1e3:+.1f} ms ({how}); markers lag when > 0")
-        _write(rec, args)
-        return 0
-    if kind == "generic":
-        from ectskin.io.generic import load_generic
-
-        rec = load_generic(args.file, frame_rate_hz=args.frame_rate, layout=args.layout)
-        _write(rec, args)
-        return 0
-    raise EctskinError(f"unknown import kind {kind!r}")
+    if kind not in _RUNS:
+        raise EctskinError(f"unknown import kind {kind!r}")
+    _RUNS[kind](args)
+    return 0

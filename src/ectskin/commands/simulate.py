@@ -1,10 +1,15 @@
-"""``ectskin simulate OUT.h5``: run the paper's experiment (or a variant) in the digital twin."""
+"""``ectskin simulate OUT.h5``: run the paper's experiment (or a variant) in the digital twin.
+
+The twin and the HDF5 writer are imported inside :func:`run`: ``ectskin --help`` imports every
+command module, and should not load them for that.
+"""
 
 from __future__ import annotations
 
 import argparse
 import logging
 import time
+from pathlib import Path
 
 from ectskin._check import EctskinError, parse_floats
 
@@ -29,8 +34,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from ectskin.io.hdf5 import write_recording
     from ectskin.layout import default_layout, load_layout
     from ectskin.twin import Manipulator, Protocol, ReadoutConfig, simulate_experiment

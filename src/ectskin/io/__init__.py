@@ -3,6 +3,17 @@
 :func:`read_recording` is the one entry point for a recording file of any supported type: it
 dispatches on the file's suffix (HDF5 ``.h5``/``.hdf5`` → :mod:`ectskin.io.hdf5`; generic
 ``.npz``/``.csv`` → :mod:`ectskin.io.generic`).
+
+Modules, by job:
+
+* :mod:`~ectskin.io.recording`: :class:`Recording` and :class:`Trial`, checked at construction;
+* :mod:`~ectskin.io.hdf5`: the recording file format (schema, reader, batch and append writers);
+* :mod:`~ectskin.io.generic`: recordings from other sources in a documented NPZ/CSV layout;
+* :mod:`~ectskin.io.capmeter`, :mod:`~ectskin.io.motive`: instrument exports (capacitance meter,
+  OptiTrack Motive), one package per vendor format, on the shared text helpers of
+  :mod:`~ectskin.io.text`;
+* :mod:`~ectskin.io.align`: the delay between the two instruments, and a recording built from them;
+* :mod:`~ectskin.io.calibration`: paper Eq. 2 and the choice of the reference state.
 """
 
 from __future__ import annotations

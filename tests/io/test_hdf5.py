@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 
 from ectskin import EctskinError
-from ectskin.io import hdf5
 from ectskin.io.hdf5 import (
     RecordingWriter,
     list_trials,
@@ -24,18 +23,13 @@ from ectskin.io.hdf5 import (
     read_recording,
     write_recording,
 )
+from ectskin.io.hdf5 import write as hdf5_write
 from ectskin.io.recording import Recording, Trial
-from ectskin.layout import default_layout
 
-DOCS = Path(__file__).resolve().parents[1] / "docs" / "recording-format.md"
-
-
-@pytest.fixture(scope="module")
-def layout():
-    return default_layout()
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "recording-format.md"
 
 
-def make_recording(layout, seed: int = 0) -> Recording:
+def special_recording(layout, seed: int = 0) -> Recording:
     """Four trials: markers with occlusions, an empty trial, one without markers, one with force.
 
     The capacitance holds values that only a bit-exact store keeps: NaN with a payload, -0.0,
@@ -108,7 +102,7 @@ def assert_same_recording(a: Recording, b: Recording) -> None:
 
 # ------------------------------------------------------------------------------- round trip
 def test_round_trip_is_bit_exact(tmp_path, layout):
-    rec = make_recording(layout)
+    rec = special_recording(layout)
     path = write_recording(rec, tmp_path / "rec.h5")
     assert path == tmp_path / "rec.h5"
     back = read_recording(path)
@@ -130,7 +124,7 @@ def test_docs_snippet_reads_the_file_without_ectskin(tmp_path, layout):
     code = re.search(r"```python\n(.*?)```", section, re.DOTALL).group(1)
     namespace: dict = {}
     exec(compile(code, str(DOCS), "exec"), namespace)  # noqa: S102 (our own docs)
-    rec = make_recording(layout, seed=1)
+    rec = special_recording(layout, seed=1)
     path = write_recording(rec, tmp_path / "rec.h5")
     trials, layout_dict, pair_names = namespace["load"](path)
     assert layout_dict == layout.to_dict()
@@ -150,7 +144,7 @@ def test_docs_snippet_reads_the_file_without_ectskin(tmp_path, layout):
 
 
 def test_list_trials_and_read_layout_load_no_frames(tmp_path, layout, monkeypatch):
-    rec = make_recording(layout)
+    rec = special_recording(layout)
     path = write_recording(rec, tmp_path / "rec.h5")
     read_names: list[str] = []
     original = h5py.Dataset.__getitem__
@@ -174,7 +168,7 @@ def test_list_trials_and_read_layout_load_no_frames(tmp_path, layout, monkeypatc
 
 
 def test_read_selected_trials_in_requested_order(tmp_path, layout):
-    rec = make_recording(layout)
+    rec = special_recording(layout)
     path = write_recording(rec, tmp_path / "rec.h5")
     sub = read_recording(path, trials=["trial_0003", "trial_0000"])
     assert [t.name for t in sub.trials] == ["trial_0003", "trial_0000"]
@@ -184,7 +178,7 @@ def test_read_selected_trials_in_requested_order(tmp_path, layout):
 
 
 def test_meta_with_numpy_values_is_stored_as_json(tmp_path, layout):
-    rec = make_recording(layout)
+    rec = special_recording(layout)
     rec.meta = {"n": np.int64(3), "p": np.array([0.0, 10.0]), "x": np.float32(0.5)}
     back = read_recording(write_recording(rec, tmp_path / "rec.h5"))
     assert back.meta == {"n": 3, "p": [0.0, 10.0], "x": 0.5}
@@ -192,22 +186,22 @@ def test_meta_with_numpy_values_is_stored_as_json(tmp_path, layout):
 
 # ------------------------------------------------------------------------ writing safely
 def test_write_refuses_to_overwrite_unless_asked(tmp_path, layout):
-    path = write_recording(make_recording(layout, seed=0), tmp_path / "rec.h5")
+    path = write_recording(special_recording(layout, seed=0), tmp_path / "rec.h5")
     before = path.read_bytes()
     with pytest.raises(EctskinError, match=re.escape(str(path)) + ".*overwrite=True"):
-        write_recording(make_recording(layout, seed=1), path)
+        write_recording(special_recording(layout, seed=1), path)
     assert path.read_bytes() == before
-    write_recording(make_recording(layout, seed=1), path, overwrite=True)
-    assert_same_recording(read_recording(path), make_recording(layout, seed=1))
+    write_recording(special_recording(layout, seed=1), path, overwrite=True)
+    assert_same_recording(read_recording(path), special_recording(layout, seed=1))
 
 
 @pytest.mark.parametrize("existing", [False, True])
 def test_write_is_atomic_when_it_fails_midway(tmp_path, layout, monkeypatch, existing):
     path = tmp_path / "rec.h5"
     if existing:
-        write_recording(make_recording(layout, seed=5), path)
+        write_recording(special_recording(layout, seed=5), path)
     before = path.read_bytes() if existing else None
-    original = hdf5._write_frames
+    original = hdf5_write._write_frames
     calls = []
 
     def crash(fds, lay, trials, starts):
@@ -215,22 +209,22 @@ def test_write_is_atomic_when_it_fails_midway(tmp_path, layout, monkeypatch, exi
         calls.append(1)
         raise RuntimeError("simulated crash while writing frames")
 
-    monkeypatch.setattr(hdf5, "_write_frames", crash)
+    monkeypatch.setattr(hdf5_write, "_write_frames", crash)
     with pytest.raises(RuntimeError, match="simulated crash"):
-        write_recording(make_recording(layout), path, overwrite=True)
+        write_recording(special_recording(layout), path, overwrite=True)
     assert calls, "the failure was not injected"
     assert sorted(p.name for p in tmp_path.iterdir()) == (["rec.h5"] if existing else [])
     if existing:
         assert path.read_bytes() == before
-        assert_same_recording(read_recording(path), make_recording(layout, seed=5))
+        assert_same_recording(read_recording(path), special_recording(layout, seed=5))
 
 
 def test_write_refuses_bad_metadata_before_touching_disk(tmp_path, layout):
-    rec = make_recording(layout)
+    rec = special_recording(layout)
     rec.trials[2].meta = {"fn": object()}
     with pytest.raises(EctskinError, match="trial 'trial_0002': meta must hold JSON-able"):
         write_recording(rec, tmp_path / "rec.h5")
-    rec = make_recording(layout)
+    rec = special_recording(layout)
     rec.meta["events"] = [{"t_s": 1.0, "trial": "nope", "text": "x"}]
     with pytest.raises(EctskinError, match=r"events.*names no trial.*'nope'"):
         write_recording(rec, tmp_path / "rec.h5")
@@ -313,7 +307,7 @@ MALFORMED = {
 @pytest.mark.parametrize("case", list(MALFORMED))
 def test_malformed_file_gives_one_clear_error(tmp_path, layout, case):
     damage, message = MALFORMED[case]
-    path = write_recording(make_recording(layout), tmp_path / "bad.h5")
+    path = write_recording(special_recording(layout), tmp_path / "bad.h5")
     damage(path)
     with pytest.raises(EctskinError) as info:
         read_recording(path)
@@ -325,18 +319,18 @@ def test_malformed_file_gives_one_clear_error(tmp_path, layout, case):
             list_trials(path, allow_partial=True)
 
 
-def test_missing_file_and_directory(tmp_path):
+def test_missing_file_and_directory(tmp_path, layout):
     with pytest.raises(EctskinError, match="no such file"):
         read_recording(tmp_path / "nope.h5")
     with pytest.raises(EctskinError, match="is a directory"):
         read_recording(tmp_path)
     with pytest.raises(EctskinError, match="does not exist"):
-        write_recording(make_recording(default_layout()), tmp_path / "no" / "dir.h5")
+        write_recording(special_recording(layout), tmp_path / "no" / "dir.h5")
 
 
 def test_partial_file_returns_committed_rows_only(tmp_path, layout):
     """Rows beyond /committed (an interrupted flush) are not part of the recording."""
-    rec = make_recording(layout)
+    rec = special_recording(layout)
     path = write_recording(rec, tmp_path / "rec.h5")
     # As if the writer was killed after committing 45 frames and 3 trials: trial_0002 (starts at
     # frame 40) has 5 committed frames, trial_0003 was never committed.
@@ -357,7 +351,7 @@ def test_partial_file_returns_committed_rows_only(tmp_path, layout):
 # ------------------------------------------------------------------------ append-mode writer
 def test_writer_round_trip_equals_write_recording(tmp_path, layout):
     """Frames appended one by one and in batches read back bit-exactly, like write_recording."""
-    rec = make_recording(layout)
+    rec = special_recording(layout)
     path = tmp_path / "live.h5"
     with RecordingWriter(
         path,
@@ -461,12 +455,11 @@ def test_writer_refuses_existing_file(tmp_path, layout):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["live.h5"]  # no temp file left
 
 
-def test_writer_flushes_on_its_interval(tmp_path, layout, monkeypatch):
+def test_writer_flushes_on_its_interval(tmp_path, layout):
     """Frames reach the file once flush_interval_s has passed, not before."""
     clock = [100.0]
-    monkeypatch.setattr(hdf5, "_clock", lambda: clock[0])
     path = tmp_path / "live.h5"
-    w = RecordingWriter(path, layout, 30.0, flush_interval_s=1.0)
+    w = RecordingWriter(path, layout, 30.0, flush_interval_s=1.0, clock=lambda: clock[0])
     w.start_trial("t")
 
     def on_disk():

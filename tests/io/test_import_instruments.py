@@ -26,14 +26,14 @@ from ectskin.io.align import (
 from ectskin.io.capmeter import (
     canonical_pair_order,
     parse_clock,
-    parse_number,
     parse_pair_name,
     read_capmeter_csv,
 )
 from ectskin.io.motive import read_motive_csv
+from ectskin.io.text import parse_number
 from ectskin.layout import default_layout
 
-DATA = Path(__file__).parent / "data" / "instruments"
+DATA = Path(__file__).parents[1] / "data" / "instruments"
 CAP_BOM = DATA / "capmeter_bom_fF.csv"
 CAP_SEMI = DATA / "capmeter_semicolon_clock.csv"
 MOTIVE = DATA / "motive_meters_30fps.csv"

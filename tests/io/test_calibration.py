@@ -6,8 +6,6 @@ import numpy as np
 import pytest
 
 from ectskin import EctskinError
-from ectskin.io.recording import Recording, Trial
-from ectskin.layout import default_layout
 from ectskin.io.calibration import (
     calibrate,
     check_reference,
@@ -15,6 +13,8 @@ from ectskin.io.calibration import (
     rest_trials,
     touch_reference,
 )
+from ectskin.io.recording import Recording, Trial
+from ectskin.layout import default_layout
 
 LAYOUT = default_layout()
 P = LAYOUT.n_pairs

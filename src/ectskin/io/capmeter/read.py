@@ -1,0 +1,190 @@
+"""``read_capmeter_csv``: read text → parse the header → parse the rows → cross-check → result."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from ectskin._check import EctskinError, check_option
+from ectskin.io.capmeter.data import N_FIRST_LINES, CapmeterData, MaskReport
+from ectskin.io.capmeter.header import Header, parse_header
+from ectskin.io.capmeter.rows import Table, parse_rows
+from ectskin.io.capmeter.units import (
+    CAPACITANCE_UNITS,
+    CLOCK_UNITS,
+    TIME_UNITS,
+    canonical_pair_order,
+)
+from ectskin.io.text import RowErrors, csv_rows, detect_delimiter, read_text
+
+log = logging.getLogger(__name__)
+
+
+def read_capmeter_csv(
+    path: str | Path,
+    *,
+    n_pairs: int | None = None,
+    strict: bool = True,
+    time_unit: str | None = None,
+    value_unit: str | None = None,
+    delimiter: str | None = None,
+    pair_order: str = "auto",
+    relative_tolerance: float = 2e-3,
+) -> CapmeterData:
+    """Read a capacitance-meter CSV export (layout in ``docs/instrument-import.md``).
+
+    Parameters
+    ----------
+    path : the CSV file.
+    n_pairs : if given, the number of channels the file must hold (e.g. ``layout.n_pairs``).
+    strict : True: a malformed row or unparseable cell is an error. False: the row is skipped /
+        the cell masked, and both are listed in ``mask_report``.
+    time_unit : ``"s"``, ``"ms"`` or ``"hh:mm:ss"``, for files whose time column states no unit.
+    value_unit : capacitance unit (``"pF"``, ``"fF"``) of channel columns that state none.
+    delimiter : ``","``, ``";"`` or ``"\\t"``; None detects it from the data lines.
+    pair_order : ``"auto"``: if every channel name reads as an electrode pair (``C12``, ``E1-E2``)
+        and together they are all pairs of n electrodes, columns are put in the ECT order
+        (1,2),(1,3)…(n-1,n); ``"file"``: keep the file's column order.
+    relative_tolerance : largest relative disagreement between the reference implied by the
+        relative-change column, ``C / (1 + dC/C)``, and its median before a row counts as a
+        mismatch (reported, not an error).
+
+    Returns
+    -------
+    CapmeterData with timestamps in s (shape (n_frames,)), values in pF (n_frames, n_channels),
+    NaN where a cell was masked.
+    """
+    _check_arguments(time_unit, value_unit, delimiter, pair_order)
+    src = str(path)
+    lines = read_text(path, "capacitance-meter").splitlines()
+    if not any(ln.strip() for ln in lines):
+        raise EctskinError(f"{src}: the file is empty")
+    delim = delimiter or detect_delimiter(lines)
+    decimal_comma = delim != ","
+    rows = list(csv_rows(lines, src, delimiter=delim))
+    header = parse_header(
+        rows,
+        src,
+        delimiter=delim,
+        decimal_comma=decimal_comma,
+        time_unit=time_unit,
+        value_unit=value_unit,
+    )
+    errors = RowErrors(src, strict, log)
+    table = parse_rows(rows[header.data_start :], header, errors, decimal_comma)
+    _check_relative(table, header, relative_tolerance, src)
+    return _result(table, header, src, pair_order, n_pairs)
+
+
+def _check_arguments(
+    time_unit: str | None, value_unit: str | None, delimiter: str | None, pair_order: str
+) -> None:
+    check_option("pair_order", pair_order, ("auto", "file"))
+    if delimiter is not None:
+        check_option("delimiter", delimiter, (",", ";", "\t"))
+    if (
+        time_unit is not None
+        and time_unit.lower() not in TIME_UNITS
+        and time_unit.lower() not in CLOCK_UNITS
+    ):
+        raise EctskinError(
+            f"Invalid value for 'time_unit': allowed values are 's', 'ms', 'hh:mm:ss'; "
+            f"got {time_unit!r}"
+        )
+    if value_unit is not None and value_unit.lower() not in CAPACITANCE_UNITS:
+        raise EctskinError(
+            f"Invalid value for 'value_unit': allowed values are 'aF', 'fF', 'pF', 'nF'; "
+            f"got {value_unit!r}"
+        )
+
+
+def _check_relative(table: Table, header: Header, tolerance: float, src: str) -> None:
+    """Cross-check each relative-change column: C / (1 + r) must be one constant reference.
+
+    Rows that disagree with the median reference by more than ``tolerance`` are counted in the
+    channel's mask report (and logged), never an error.
+    """
+    rel_index = {name: k for k, name in enumerate(header.relative)}
+    for k, c in enumerate(header.values):
+        rc = header.relative.get(c.base)
+        if rc is None:
+            continue
+        ch = table.report.channels[c.base]
+        r = table.relative[:, rel_index[c.base]]
+        if not np.isfinite(rc.factor):
+            log.info("%s: %r has no known unit; relative change not cross-checked", src, rc.header)
+            continue
+        v = table.values[:, k]
+        ok = np.isfinite(r) & np.isfinite(v) & (np.abs(1 + r) > 1e-9)
+        if not ok.any():
+            continue
+        implied = v[ok] / (1 + r[ok])
+        ref = np.median(implied)
+        bad = np.abs(implied - ref) > tolerance * abs(ref)
+        ch.relative_checked = True
+        ch.relative_mismatch = int(bad.sum())
+        ch.relative_first_lines = [int(x) for x in table.lines[ok][bad][:N_FIRST_LINES]]
+        if bad.any():
+            log.warning(
+                "%s: channel %r: relative-change column %r disagrees with the value on %d row(s), "
+                "first at line %d",
+                src,
+                c.base,
+                rc.header,
+                int(bad.sum()),
+                ch.relative_first_lines[0],
+            )
+
+
+def _result(
+    table: Table, header: Header, src: str, pair_order: str, n_pairs: int | None
+) -> CapmeterData:
+    """The :class:`CapmeterData`, channels in the ECT pair order when ``pair_order="auto"``."""
+    names = [c.base for c in header.values]
+    units = tuple(c.unit or "" for c in header.values)
+    values, report, pairs = table.values, table.report, None
+    if pair_order == "auto":
+        canon = canonical_pair_order(names)
+        if canon is not None:
+            pairs, order = canon
+            if np.any(order != np.arange(len(order))):
+                log.info("%s: channels reordered into the ECT pair order (1,2),(1,3)...", src)
+            values = values[:, order]
+            names = [names[k] for k in order]
+            units = tuple(units[k] for k in order)
+            report.channels = {nm: report.channels[nm] for nm in names}
+        else:
+            log.debug("%s: channel names are not all pairs of n electrodes; file order", src)
+    if n_pairs is not None and len(names) != n_pairs:
+        raise EctskinError(
+            f"{src}: expected {n_pairs} capacitance channels (one per electrode pair), found "
+            f"{len(names)}: {', '.join(names)}"
+        )
+    _log_masks(report, src)
+    return CapmeterData(
+        path=src,
+        timestamps=table.times,
+        values=values,
+        channels=tuple(names),
+        units=units,
+        lines=table.lines,
+        mask_report=report,
+        time_unit=header.time_unit or "hh:mm:ss",
+        pairs=pairs,
+        meta=header.meta,
+    )
+
+
+def _log_masks(report: MaskReport, src: str) -> None:
+    for name in report.masked_channels:
+        c = report.channels[name]
+        log.warning(
+            "%s: channel %r: %d cell(s) masked (%s), first at line %d",
+            src,
+            name,
+            c.n_masked,
+            ", ".join(f"{k} {v}" for k, v in c.counts.items()),
+            c.first_lines[0],
+        )

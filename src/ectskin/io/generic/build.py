@@ -1,0 +1,315 @@
+"""Build the :class:`Recording` of a generic file from its parsed fields: the layout (given or
+virtual), one trial per group, references, timestamps and the frame rate."""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from ectskin._check import EctskinError
+from ectskin.io.calibration import REFERENCE_RTOL
+from ectskin.io.generic.fields import Fields
+from ectskin.io.recording import Recording, Trial
+from ectskin.layout import SensorLayout
+
+log = logging.getLogger(__name__)
+
+
+def virtual_layout(
+    n_channels: int, n_regions: int = 0, n_markers: int = 0, marker_names: list[str] | None = None
+) -> SensorLayout:
+    """A layout of virtual electrodes whose pairs can carry ``n_channels`` channels.
+
+    n electrodes with n the smallest integer ≥ 2 such that n(n−1)/2 ≥ n_channels: vertical wires
+    15 mm long, 1 mm wide, 10 mm apart on one virtual skin (surface "front"), pads 2 × 2 mm below
+    them; ``n_regions`` strip regions 1..n_regions; ``n_markers`` markers on the right face.
+    """
+    if n_channels < 1:
+        raise EctskinError(f"virtual layout: need at least one channel, got {n_channels}")
+    n = 2
+    while n * (n - 1) // 2 < n_channels:
+        n += 1
+    width_mm = 10.0 * n
+    names = marker_names or [f"M{j + 1}" for j in range(n_markers)]
+    d = {
+        "schema": "ectskin.layout",
+        "version": 1,
+        "name": f"generic-{n}-virtual-electrodes",
+        "skins": [
+            {"name": "virtual", "surface": "front", "u_mm": [0.0, width_mm], "v_mm": [0.0, 30.0]}
+        ],
+        "electrodes": [
+            {
+                "name": f"V{k + 1}",
+                "skin": "virtual",
+                "polyline_mm": [[10.0 * k + 5.0, 10.0], [10.0 * k + 5.0, 25.0]],
+                "width_mm": 1.0,
+                "pad": {"centre_mm": [10.0 * k + 5.0, 5.0], "size_mm": [2.0, 2.0]},
+            }
+            for k in range(n)
+        ],
+        "regions": [
+            {
+                "id": r + 1,
+                "surface": "front",
+                "u_mm": [0.0, width_mm],
+                "v_mm": [30.0 * r / n_regions, 30.0 * (r + 1) / n_regions],
+            }
+            for r in range(n_regions)
+        ],
+        "markers": [
+            {"name": str(names[j]), "surface": "right", "uv_mm": [0.0, 10.0 * j]}
+            for j in range(n_markers)
+        ],
+    }
+    return SensorLayout.from_dict(d, source="virtual layout")
+
+
+def build_recording(
+    f: Fields, layout: SensorLayout | None, frame_rate_hz: float | None, fmt: str
+) -> Recording:
+    """One trial per group (in order of first appearance) on ``layout`` (None: virtual)."""
+    n, m = f.readouts.shape
+    if f.labels is None and f.markers is None:
+        raise EctskinError(
+            f"{f.source}: no labels: give touch classes ('labels' / column 'label') and/or marker "
+            f"coordinates ('markers' / columns 'm:<marker>.x|.y|.z')"
+        )
+    layout = _layout(f, layout)
+    groups = _Groups(f.group)
+    ref_by_key, per_frame_ref = _references(f, groups)
+    _check_timestamps(f, groups)
+    rate = _frame_rate(f, frame_rate_hz, groups)
+    trials = [
+        _trial(f, groups, k, layout.n_pairs, rate, ref_by_key, per_frame_ref) for k in groups.order
+    ]
+    rec_meta: dict[str, Any] = {
+        "source": "generic",
+        "format": fmt,
+        "file": f.source,
+        "channel_names": list(f.channel_names),
+    }
+    if f.marker_names is not None:
+        rec_meta["marker_names"] = list(f.marker_names)
+    if layout.n_pairs > m:
+        rec_meta["unmeasured_pairs"] = list(range(m, layout.n_pairs))
+    if per_frame_ref is not None:
+        rec_meta["readout_unit"] = "ratio to the per-frame reference"
+    rec = Recording(layout=layout, trials=trials, frame_rate_hz=rate, meta=rec_meta)
+    log.info(
+        "%s: %d frames, %d channels, %d trials, %d markers, classes up to %d",
+        f.source,
+        n,
+        m,
+        rec.n_trials,
+        0 if f.markers is None else f.markers.shape[1],
+        0 if f.labels is None else int(f.labels.max()),
+    )
+    return rec
+
+
+def _layout(f: Fields, layout: SensorLayout | None) -> SensorLayout:
+    """``layout`` checked against the file, or a virtual layout built from it."""
+    src, m = f.source, f.readouts.shape[1]
+    n_markers = 0 if f.markers is None else f.markers.shape[1]
+    n_classes_max = 0 if f.labels is None else int(f.labels.max())
+    if layout is None:
+        layout = virtual_layout(m, n_classes_max, n_markers, f.marker_names)
+        if layout.n_pairs != m:
+            log.info(
+                "%s: %d channels is not n(n-1)/2: virtual layout of %d electrodes (%d pairs), "
+                "pairs %d..%d unmeasured",
+                src,
+                m,
+                layout.n_electrodes,
+                layout.n_pairs,
+                m,
+                layout.n_pairs - 1,
+            )
+        return layout
+    if m != layout.n_pairs:
+        raise EctskinError(
+            f"{src}: {m} readout channels, but layout {layout.name!r} has "
+            f"{layout.n_electrodes} electrodes = {layout.n_pairs} pairs"
+        )
+    if f.markers is not None and n_markers != layout.n_markers:
+        raise EctskinError(
+            f"{src}: {n_markers} markers, but layout {layout.name!r} has {layout.n_markers}"
+        )
+    if n_classes_max > layout.n_regions:
+        i = int(np.argmax(f.labels > layout.n_regions))
+        raise EctskinError(
+            f"{src}: label at {f.row(i)} is {f.labels[i]}, layout {layout.name!r} has "
+            f"classes 0..{layout.n_regions}"
+        )
+    return layout
+
+
+class _Groups:
+    """The frames' groups: sorted keys, and per key its first row and its rows in file order."""
+
+    def __init__(self, group: np.ndarray):
+        keys, first, inverse = np.unique(group, return_index=True, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        self.keys = keys
+        self.first = first
+        self.order = np.argsort(first, kind="stable")  # key indices by first appearance
+        # rows of each key, in file order (one sort instead of a scan per group)
+        counts = np.bincount(inverse, minlength=keys.size)
+        self.members = np.split(np.argsort(inverse, kind="stable"), np.cumsum(counts)[:-1])
+
+    @property
+    def size(self) -> int:
+        return self.keys.size
+
+
+def _references(f: Fields, groups: _Groups) -> tuple[dict[int, np.ndarray], np.ndarray | None]:
+    """Per-trial references by key index, or the per-frame reference when one changes within a
+    trial (the readouts are then stored as ratios to it)."""
+    ref, n = f.reference, f.readouts.shape[0]
+    if ref is None:
+        return {}, None
+    keys, first, members = groups.keys, groups.first, groups.members
+    if ref.ndim == 1:
+        _check_reference(ref[None, :], f, lambda i: "field 'reference'")
+        return {k: ref for k in range(keys.size)}, None
+    if ref.shape[0] == n:
+        _check_reference(ref, f, lambda i: f"reference at {f.row(i)}")
+        const = np.ones(keys.size, dtype=bool)
+        for k in range(keys.size):
+            rows = ref[members[k]]
+            const[k] = bool(np.all(rows == rows[0]))
+        if const.all():
+            return {k: ref[int(first[k])] for k in range(keys.size)}, None
+        log.info(
+            "%s: the reference changes within a trial: readouts are stored as ratios "
+            "c_t / c_0 (reference 1)",
+            f.source,
+        )
+        return {}, ref
+    if ref.shape[0] == keys.size:
+        _check_reference(ref, f, lambda i: f"reference of group {keys[i].item()!r}")
+        return {k: ref[k] for k in range(keys.size)}, None
+    raise EctskinError(
+        f"{f.source}: reference has {ref.shape[0]} rows; expected {keys.size} (one per group, "
+        f"in sorted group order) or {n} (one per frame)"
+    )
+
+
+def _check_reference(ref: np.ndarray, f: Fields, where: Callable[[int], str]) -> None:
+    """Refuse a reference (rows × m) with a non-finite, zero or tiny value (Eq. 2 divides by it),
+    naming the row (``where``) and the channel; "tiny" as in
+    :data:`ectskin.io.calibration.REFERENCE_RTOL`."""
+    scale = np.max(np.abs(np.where(np.isfinite(ref), ref, 0.0)), axis=1)
+    bad = ~np.isfinite(ref) | (np.abs(ref) <= REFERENCE_RTOL * scale[:, None])
+    if bad.any():
+        i, j = (int(v) for v in np.argwhere(bad)[0])
+        raise EctskinError(
+            f"{f.source}: {where(i)}, channel {f.channel_names[j]!r} is {ref[i, j]}; Eq. 2 "
+            f"divides by the reference, expected a finite, non-zero readout"
+        )
+
+
+def _check_timestamps(f: Fields, groups: _Groups) -> None:
+    """Timestamps finite and increasing inside every group."""
+    if f.timestamps is None:
+        return
+    src = f.source
+    if not np.all(np.isfinite(f.timestamps)):
+        i = int(np.argmax(~np.isfinite(f.timestamps)))
+        raise EctskinError(f"{src}: timestamp at {f.row(i)} is {f.timestamps[i]}")
+    for k in groups.order:
+        idx = groups.members[k]
+        t = f.timestamps[idx]
+        step = np.diff(t)
+        if np.any(step <= 0):
+            b = int(np.argmax(step <= 0))
+            raise EctskinError(
+                f"{src}: group {groups.keys[k].item()!r}: timestamps must increase within a "
+                f"group; {f.row(int(idx[b + 1]))} has {t[b + 1]} s after {t[b]} s at "
+                f"{f.row(int(idx[b]))}"
+            )
+
+
+def _frame_rate(f: Fields, frame_rate_hz: float | None, groups: _Groups) -> float:
+    """The caller's rate, else the file's, else 1 / the median timestamp step within groups."""
+    src = f.source
+    if frame_rate_hz is None:
+        frame_rate_hz = f.frame_rate_hz
+    if frame_rate_hz is None:
+        if f.timestamps is None:
+            raise EctskinError(
+                f"{src}: no timestamps and no frame rate: give timestamps ('timestamps' / column "
+                f"'time_s'), a frame_rate_hz field, or load_generic(..., frame_rate_hz=...)"
+            )
+        steps = np.concatenate([np.diff(f.timestamps[idx]) for idx in groups.members])
+        steps = steps[np.isfinite(steps) & (steps > 0)]
+        if steps.size == 0:
+            raise EctskinError(
+                f"{src}: cannot infer the frame rate from the timestamps (no group has two "
+                f"increasing timestamps); pass frame_rate_hz"
+            )
+        frame_rate_hz = 1.0 / float(np.median(steps))
+        log.info("%s: frame rate %.4g Hz from the median timestamp step", src, frame_rate_hz)
+    try:
+        rate = float(frame_rate_hz)
+    except (TypeError, ValueError):
+        rate = math.nan
+    if not (math.isfinite(rate) and rate > 0):
+        raise EctskinError(f"{src}: frame_rate_hz must be a number > 0, got {frame_rate_hz!r}")
+    return rate
+
+
+def _trial(
+    f: Fields,
+    groups: _Groups,
+    k: int,
+    n_pairs: int,
+    frame_rate_hz: float,
+    ref_by_key: dict[int, np.ndarray],
+    per_frame_ref: np.ndarray | None,
+) -> Trial:
+    """The trial of group ``k`` (key index): readouts padded to ``n_pairs`` with NaN."""
+    m = f.readouts.shape[1]
+    idx = groups.members[k]
+    key = groups.keys[k].item()
+    name = f"group_{key}" if isinstance(key, int) else str(key)
+    meta: dict[str, Any] = {"group": key}
+    cap = np.full((idx.size, n_pairs), np.nan)
+    values = f.readouts[idx]
+    if per_frame_ref is not None:
+        values = values / per_frame_ref[idx]  # Eq. 2 then reads (c_t/c_0 − 1) / 1
+        meta["reference"] = [1.0] * m + [None] * (n_pairs - m)
+        meta["reference_kind"] = "per_frame_ratio"
+    elif ref_by_key:
+        meta["reference"] = [float(v) for v in ref_by_key[int(k)]] + [None] * (n_pairs - m)
+        meta["reference_kind"] = "per_trial"
+    cap[:, :m] = values
+    if f.timestamps is not None:
+        t = f.timestamps[idx]
+        meta["t0_s"] = float(t[0])
+        ts = t - t[0]
+    else:
+        ts = np.arange(idx.size) / frame_rate_hz
+    if f.labels is not None:
+        lab = f.labels[idx]
+        nz = lab[lab > 0]
+        region = int(np.bincount(nz).argmax()) if nz.size else 0
+        meta["kind"] = "touch" if nz.size else "no_contact"
+    else:
+        lab = np.zeros(idx.size, dtype=np.int64)
+        region = 0
+        meta["kind"] = "tracking"
+    return Trial(
+        name=name,
+        capacitance=cap,
+        timestamps=ts,
+        labels=lab,
+        region=region,
+        markers=None if f.markers is None else f.markers[idx],
+        meta=meta,
+    )

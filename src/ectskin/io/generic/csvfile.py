@@ -1,0 +1,249 @@
+"""Read a generic ``.csv`` recording: one row per frame, columns named by role
+(``docs/import-format.md``).
+
+The file is streamed once: group ids are kept as text and every other column goes into one flat
+float64 buffer, so a big file costs 8 bytes per numeric cell rather than a Python string per cell.
+"""
+
+from __future__ import annotations
+
+import math
+from array import array
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ectskin._check import EctskinError
+from ectskin.io.generic.fields import CSV_COLUMNS, Fields, class_labels
+from ectskin.io.text import csv_rows, parse_float
+
+
+@dataclass
+class _Scan:
+    """The rows of one CSV file as they are read: header, roles, and the flat buffers."""
+
+    src: str
+    meta: dict[str, str] = field(default_factory=dict)  # "# key: value" lines above the header
+    header: list[str] | None = None
+    header_line: int = 0
+    cols: dict[str, Any] = field(default_factory=dict)  # see _csv_columns
+    numeric: list[int] = field(default_factory=list)  # columns parsed as numbers (all but group)
+    flat: array = field(default_factory=lambda: array("d"))
+    groups: list[str] = field(default_factory=list)
+    lines: array = field(default_factory=lambda: array("q"))
+
+    def add(self, line: int, cells: list[str]) -> None:
+        """Take one CSV row: a blank or comment line, the header, or a data row."""
+        if not cells or all(not c.strip() for c in cells):
+            return
+        if cells[0].lstrip().startswith("#"):
+            if self.header is None:
+                self._comment(",".join(cells).lstrip()[1:])
+            return
+        if self.header is None:
+            self.header = [c.strip() for c in cells]
+            self.header_line = line
+            self.cols = _csv_columns(self.header, self.src, line)
+            self.numeric = [j for j in range(len(self.header)) if j != self.cols["group"]]
+            return
+        if len(cells) != len(self.header):
+            raise EctskinError(
+                f"{self.src}: line {line} has {len(cells)} cells, the header "
+                f"(line {self.header_line}) has {len(self.header)}"
+            )
+        g = cells[self.cols["group"]].strip()
+        if not g:
+            raise EctskinError(
+                f"{self.src}: line {line}, column 'group': empty cell, expected a group id"
+            )
+        self.groups.append(g)
+        values = tuple(cells[j] for j in self.numeric)
+        try:
+            self.flat.extend(array("d", map(float, values)))
+        except ValueError:
+            self.flat.extend(self._slow_row(values, line))
+        self.lines.append(line)
+
+    def _comment(self, text: str) -> None:
+        """``# frame_rate_hz: 30`` (or ``=``) above the header → meta["frame_rate_hz"]."""
+        for sep in (":", "="):
+            if sep in text:
+                key, value = text.split(sep, 1)
+                self.meta[key.strip().lower()] = value.strip()
+                break
+
+    def _slow_row(self, values: tuple[str, ...], line: int) -> array:
+        """Parse one row cell by cell: NaN for allowed empty cells, else a precise error."""
+        out = array("d")
+        for j, cell in zip(self.numeric, values):
+            number = parse_float(cell)
+            if number is not None:
+                out.append(number)
+                continue
+            name = self.header[j]
+            desc, empty_ok = _csv_kind(name)
+            if cell.strip():
+                raise EctskinError(
+                    f"{self.src}: line {line}, column {name!r}: expected {desc}, found {cell!r}"
+                )
+            if not empty_ok:
+                raise EctskinError(
+                    f"{self.src}: line {line}, column {name!r}: empty cell, expected {desc}"
+                )
+            out.append(math.nan)
+        return out
+
+
+def read_csv(path: Path) -> Fields:
+    """The fields of a generic CSV file (columns in ``CSV_COLUMNS``)."""
+    scan = _scan(path)
+    header, cols, src = scan.header, scan.cols, scan.src
+    lines = scan.lines
+
+    def row(i: int) -> str:
+        return f"line {lines[i]}"
+
+    n = len(scan.groups)
+    table = np.frombuffer(scan.flat, dtype=np.float64).reshape(n, len(scan.numeric)).copy()
+    pos = {j: p for p, j in enumerate(scan.numeric)}
+
+    def column(j: int) -> np.ndarray:
+        return table[:, pos[j]]
+
+    readouts = np.stack([column(j) for j in cols["c"]], axis=1)
+    if np.isinf(readouts).any():
+        i, j = (int(v) for v in np.argwhere(np.isinf(readouts))[0])
+        raise EctskinError(f"{src}: {row(i)}, column {header[cols['c'][j]]!r} is {readouts[i, j]}")
+    labels = None
+    if "label" in cols:
+        labels = class_labels(column(cols["label"]), n, src, "column 'label'", row)
+    markers = None
+    marker_names = None
+    if cols["m"]:
+        marker_names = list(cols["m"])
+        markers = np.stack(
+            [np.stack([column(j) for j in cols["m"][name]], axis=1) for name in marker_names],
+            axis=1,
+        )
+        if np.isinf(markers).any():
+            i = int(np.argwhere(np.isinf(markers))[0][0])
+            raise EctskinError(f"{src}: {row(i)}: a marker coordinate is inf")
+    reference = None
+    if cols["ref"]:
+        reference = np.stack([column(j) for j in cols["ref"]], axis=1)
+    timestamps = column(cols["time_s"]) if "time_s" in cols else None
+    return Fields(
+        src,
+        readouts,
+        _group_ids(scan.groups),
+        labels,
+        markers,
+        reference,
+        timestamps,
+        _frame_rate(scan.meta, src),
+        [header[j][2:] for j in cols["c"]],
+        marker_names,
+        row,
+    )
+
+
+def _scan(path: Path) -> _Scan:
+    src = str(path)
+    scan = _Scan(src)
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as fh:
+            for line, cells in csv_rows(fh, src):
+                scan.add(line, cells)
+    except UnicodeDecodeError:
+        raise EctskinError(f"{src}: not UTF-8 text (is it a CSV file?)") from None
+    except OSError as exc:
+        raise EctskinError(f"{src}: cannot read ({exc.strerror})") from None
+    if scan.header is None:
+        raise EctskinError(f"{src}: empty file, expected a header row with columns {CSV_COLUMNS}")
+    if not scan.groups:
+        raise EctskinError(f"{src}: no data rows after the header (line {scan.header_line})")
+    return scan
+
+
+def _group_ids(groups: list[str]) -> np.ndarray:
+    """Integer ids when every group reads as an integer, else the texts."""
+    try:
+        return np.asarray([int(v) for v in groups], dtype=np.int64)
+    except (ValueError, OverflowError):
+        return np.asarray(groups, dtype=str)
+
+
+def _frame_rate(meta: dict[str, str], src: str) -> float | None:
+    if "frame_rate_hz" not in meta:
+        return None
+    try:
+        return float(meta["frame_rate_hz"])
+    except ValueError:
+        raise EctskinError(
+            f"{src}: '# frame_rate_hz' must be a number, got {meta['frame_rate_hz']!r}"
+        ) from None
+
+
+def _csv_kind(name: str) -> tuple[str, bool]:
+    """What a numeric CSV column holds (for messages) and whether an empty cell means NaN."""
+    if name.startswith("c:"):
+        return "a number (empty = masked)", True
+    if name.startswith("m:"):
+        return "a coordinate in mm (empty = occluded)", True
+    if name.startswith("ref:"):
+        return "a reference readout", False
+    if name == "label":
+        return "a class number", False
+    return "a time in s", False
+
+
+def _csv_columns(header: list[str], src: str, line: int) -> dict[str, Any]:
+    """Column indices by role: group, time_s, label, c (list), ref (list), m (name → [x, y, z])."""
+    seen: dict[str, int] = {}
+    for j, h in enumerate(header):
+        if h in seen:
+            raise EctskinError(f"{src}: line {line}: duplicate column {h!r}")
+        seen[h] = j
+    cols: dict[str, Any] = {"c": [], "ref": [], "m": {}}
+    refs: dict[str, int] = {}
+    for j, h in enumerate(header):
+        if h in ("group", "time_s", "label"):
+            cols[h] = j
+        elif h.startswith("c:") and len(h) > 2:
+            cols["c"].append(j)
+        elif h.startswith("ref:") and len(h) > 4:
+            refs[h[4:]] = j
+        elif h.startswith("m:") and h[-2:] in (".x", ".y", ".z") and len(h) > 4:
+            cols["m"].setdefault(h[2:-2], {})[h[-1]] = j
+        else:
+            raise EctskinError(f"{src}: line {line}: unknown column {h!r}; expected {CSV_COLUMNS}")
+    if "group" not in cols:
+        raise EctskinError(
+            f"{src}: line {line}: missing column 'group' (a group id per frame: the trials)"
+        )
+    if not cols["c"]:
+        raise EctskinError(
+            f"{src}: line {line}: no readout columns; name them 'c:<channel>' (e.g. 'c:E1-E2')"
+        )
+    if refs:
+        names = [header[j][2:] for j in cols["c"]]
+        missing = [c for c in names if c not in refs]
+        extra = [r for r in refs if r not in names]
+        if missing or extra:
+            raise EctskinError(
+                f"{src}: line {line}: reference columns must match the readout columns one to "
+                f"one ('ref:<channel>' for every 'c:<channel>'); missing {missing}, unmatched "
+                f"{extra}"
+            )
+        cols["ref"] = [refs[c] for c in names]
+    for name, axes in cols["m"].items():
+        missing = [a for a in "xyz" if a not in axes]
+        if missing:
+            raise EctskinError(
+                f"{src}: line {line}: marker {name!r} lacks column(s) "
+                f"{', '.join(f'm:{name}.{a}' for a in missing)}"
+            )
+        cols["m"][name] = [axes["x"], axes["y"], axes["z"]]
+    return cols

@@ -1,0 +1,185 @@
+"""Read a generic ``.npz`` recording: named arrays, one row per frame (``docs/import-format.md``)."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ectskin._check import EctskinError
+from ectskin.io.generic.fields import NPZ_FIELDS, Fields, class_labels
+
+
+def _row(i: int) -> str:
+    return f"row {i}"
+
+
+def read_npz(path: Path) -> Fields:
+    """The fields of an ``.npz`` archive, each checked against the readouts' shape."""
+    src = str(path)
+    raw = _load(path, src)
+    readouts = _readouts(raw["readouts"], src)
+    n, m = readouts.shape
+    group = raw["group"]
+    if group is None:
+        raise EctskinError(f"{src}: missing field 'group' (a group id per frame: the trials)")
+    group = _group_ids(group, n, src)
+    labels, markers = _labels_and_markers(raw["labels"], raw["markers"], n, src)
+    reference = raw["reference"]
+    if reference is not None:
+        reference = _numeric(reference, src, "reference")
+        if reference.ndim not in (1, 2) or reference.shape[-1] != m:
+            raise EctskinError(
+                f"{src}: field 'reference' must have shape ({m},), (n_groups, {m}) or ({n}, {m}), "
+                f"got {reference.shape}"
+            )
+    timestamps = raw["timestamps"]
+    if timestamps is not None:
+        timestamps = _numeric(timestamps, src, "timestamps")
+        if timestamps.shape != (n,):
+            raise EctskinError(
+                f"{src}: field 'timestamps' must have shape ({n},) (one per frame, s), got "
+                f"{timestamps.shape}"
+            )
+    frame_rate = _frame_rate(raw["frame_rate_hz"], src)
+    channel_names = _names(raw["channel_names"], m, src, "channel_names") or [
+        f"ch{j + 1}" for j in range(m)
+    ]
+    marker_names = None
+    if markers is not None:
+        marker_names = _names(raw["marker_names"], markers.shape[1], src, "marker_names")
+    elif raw["marker_names"] is not None:
+        raise EctskinError(f"{src}: field 'marker_names' is given but there are no markers")
+    return Fields(
+        src,
+        readouts,
+        group,
+        labels,
+        markers,
+        reference,
+        timestamps,
+        frame_rate,
+        channel_names,
+        marker_names,
+        _row,
+    )
+
+
+def _load(path: Path, src: str) -> dict[str, np.ndarray | None]:
+    """Every field of :data:`NPZ_FIELDS` (None where absent); unknown fields are refused."""
+    try:
+        npz = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise EctskinError(f"{src}: not a readable .npz archive ({exc})") from None
+    if not isinstance(npz, np.lib.npyio.NpzFile):
+        raise EctskinError(f"{src}: holds a single array, expected an .npz archive of named fields")
+    with npz:
+        unknown = [k for k in npz.files if k not in NPZ_FIELDS]
+        if unknown:
+            raise EctskinError(
+                f"{src}: unknown field(s) {unknown}; allowed fields are {', '.join(NPZ_FIELDS)}"
+            )
+        return {k: _field(npz, k, src) for k in NPZ_FIELDS}
+
+
+def _field(npz: Any, name: str, src: str) -> np.ndarray | None:
+    if name not in npz.files:
+        return None
+    try:
+        return npz[name]
+    except ValueError as exc:  # object arrays need pickle, which we never allow
+        raise EctskinError(
+            f"{src}: field {name!r} cannot be read without pickle ({exc}); store strings "
+            f"as a fixed-width array, e.g. np.asarray(names, dtype=str)"
+        ) from None
+    except (OSError, zipfile.BadZipFile, EOFError) as exc:
+        raise EctskinError(f"{src}: field {name!r} is corrupt ({exc})") from None
+
+
+def _readouts(readouts: np.ndarray | None, src: str) -> np.ndarray:
+    if readouts is None:
+        raise EctskinError(f"{src}: missing field 'readouts' (frames × channels)")
+    readouts = _numeric(readouts, src, "readouts")
+    if readouts.ndim != 2 or readouts.shape[0] == 0 or readouts.shape[1] == 0:
+        raise EctskinError(
+            f"{src}: field 'readouts' must have shape (n_frames, n_channels) with both > 0, "
+            f"got {readouts.shape}"
+        )
+    if np.isinf(readouts).any():
+        i, j = (int(v) for v in np.argwhere(np.isinf(readouts))[0])
+        raise EctskinError(f"{src}: field 'readouts' row {i}, channel {j} is {readouts[i, j]}")
+    return readouts
+
+
+def _labels_and_markers(
+    labels: np.ndarray | None, markers: np.ndarray | None, n: int, src: str
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Classes (n,) and marker coordinates (n, M, 3); 3-D ``labels`` are taken as markers."""
+    if labels is not None and np.ndim(labels) == 3:
+        if markers is not None:
+            raise EctskinError(
+                f"{src}: field 'labels' holds coordinates (3-D) and 'markers' is given too; "
+                f"put classes in 'labels' (n_frames,) and coordinates in 'markers'"
+            )
+        markers, labels = labels, None
+        marker_field = "labels"
+    else:
+        marker_field = "markers"
+    if labels is not None:
+        labels = class_labels(_numeric(labels, src, "labels"), n, src, "labels", _row)
+    if markers is not None:
+        markers = _numeric(markers, src, marker_field)
+        if markers.ndim != 3 or markers.shape[0] != n or markers.shape[2] != 3:
+            raise EctskinError(
+                f"{src}: field {marker_field!r} must have shape ({n}, n_markers, 3) (mm), got "
+                f"{markers.shape}"
+            )
+        if np.isinf(markers).any():
+            i = int(np.argwhere(np.isinf(markers))[0][0])
+            raise EctskinError(f"{src}: field {marker_field!r} row {i} holds inf")
+    return labels, markers
+
+
+def _frame_rate(fr: np.ndarray | None, src: str) -> float | None:
+    if fr is None:
+        return None
+    if fr.size != 1:
+        raise EctskinError(f"{src}: field 'frame_rate_hz' must be one number, got shape {fr.shape}")
+    return float(_numeric(fr, src, "frame_rate_hz").reshape(()))
+
+
+def _numeric(a: np.ndarray, src: str, name: str) -> np.ndarray:
+    if a.dtype.kind not in "biuf":
+        raise EctskinError(f"{src}: field {name!r} must be numeric, found dtype {a.dtype}")
+    return a.astype(np.float64)
+
+
+def _names(a: np.ndarray | None, count: int, src: str, name: str) -> list[str] | None:
+    if a is None:
+        return None
+    if a.shape != (count,):
+        raise EctskinError(f"{src}: field {name!r} must hold {count} names, got shape {a.shape}")
+    names = [str(v) for v in a.tolist()]
+    if len(set(names)) != len(names):
+        raise EctskinError(f"{src}: field {name!r} has duplicate names")
+    return names
+
+
+def _group_ids(g: np.ndarray, n: int, src: str) -> np.ndarray:
+    if g.shape != (n,):
+        raise EctskinError(
+            f"{src}: field 'group' must have shape ({n},) (one group id per frame), got {g.shape}"
+        )
+    if g.dtype.kind in "iu":
+        return g.astype(np.int64)
+    if g.dtype.kind == "f":
+        bad = ~np.isfinite(g) | (g != np.round(g))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise EctskinError(f"{src}: field 'group' row {i} is {g[i]}, expected an integer id")
+        return g.astype(np.int64)
+    if g.dtype.kind in "US":
+        return g.astype(str)
+    raise EctskinError(f"{src}: field 'group' must hold integers or strings, found dtype {g.dtype}")

@@ -1,0 +1,494 @@
+"""The append-mode writer: frames go to disk while they arrive, and a killed process leaves a
+readable file.
+
+The file is built (all groups and resizable datasets) under a temporary name, moved to its path
+without clobbering an existing file and reopened in HDF5 SWMR-write mode, in which the library
+keeps the on-disk file consistent at every moment. SWMR only supports appending to datasets that
+exist when it is switched on, which is why the schema keeps all trials in one set of datasets.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import threading
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, Self
+
+import h5py
+import numpy as np
+
+from ectskin._check import EctskinError, check_array, check_type
+from ectskin._files import temp_path
+from ectskin.io.hdf5.schema import (
+    EVENT_FIELDS,
+    EVENTS_KEY,
+    TRIAL_FIELDS,
+    create_frames,
+    create_tables,
+    to_json,
+    write_events,
+    write_root,
+)
+from ectskin.io.hdf5.write import fsync_path
+from ectskin.layout import SensorLayout
+
+logger = logging.getLogger(__name__)
+
+
+def _frames_arg(
+    name: str,
+    value: Any,
+    tail: tuple[int, ...],
+    n: int | None,
+    src: str,
+    *,
+    finite: bool = False,
+    broadcast: bool = False,
+) -> np.ndarray:
+    """``value`` as a float64 array (n, *tail); an array of shape ``tail`` is one frame.
+
+    With ``broadcast`` a scalar is repeated for all ``n`` frames.
+    """
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise EctskinError(f"{src}: {name} must be numeric; {exc}") from None
+    if broadcast and arr.ndim == 0 and n is not None:
+        arr = np.full(n, arr)
+    elif arr.shape == tail:
+        arr = arr[None]
+    return check_array(name, arr, (n, *tail), finite=finite, source=src)
+
+
+def _positive_rate(frame_rate_hz: Any) -> float:
+    try:
+        rate = float(frame_rate_hz)
+    except (TypeError, ValueError):
+        rate = math.nan
+    if not (math.isfinite(rate) and rate > 0):
+        raise EctskinError(f"frame_rate_hz must be > 0, got {frame_rate_hz!r}")
+    return rate
+
+
+def _flush_interval(flush_interval_s: Any) -> float:
+    try:
+        value = float(flush_interval_s)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not value >= 0:
+        raise EctskinError(f"flush_interval_s must be >= 0 s, got {flush_interval_s!r}")
+    return value
+
+
+class RecordingWriter:
+    """Append frames to an HDF5 recording while they arrive; survives SIGKILL.
+
+    Usage::
+
+        with RecordingWriter("run.h5", layout, 30.0, meta={"source": "sim"}) as w:
+            w.start_trial("trial_0000", inflation=(0, 10, 20), region=3)
+            w.append(capacitance, timestamps, labels)      # (n, n_pairs) / (n,) or one frame
+            w.add_event(12.5, "finger lifted")
+        # close() marks the file complete
+
+    Appended frames are buffered in memory and written by :meth:`flush`: frames, trial rows and
+    events first, then ``/committed`` (the commit record: counts of frames, trials, events).
+    :meth:`flush` runs automatically inside :meth:`append`, :meth:`start_trial` and
+    :meth:`add_event` once ``flush_interval_s`` has passed on ``clock`` since the last one, so a
+    killed process loses at most the frames of the last ``flush_interval_s`` (plus one append); a
+    caller whose frames may stop arriving should call :meth:`flush` itself. Such a file opens with
+    ``read_recording(path, allow_partial=True)`` (also while the writer still runs).
+
+    Within a trial, timestamps (s) must increase; labels default to 0; markers (mm) and force (N)
+    are optional, but a trial gives them with every append or never. Thread-safe.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        layout: SensorLayout,
+        frame_rate_hz: float,
+        *,
+        meta: dict[str, Any] | None = None,
+        overwrite: bool = False,
+        flush_interval_s: float = 1.0,
+        chunk_frames: int = 64,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        check_type("layout", layout, SensorLayout)
+        self.path = Path(os.fspath(path))
+        rate = _positive_rate(frame_rate_hz)
+        self.flush_interval_s = _flush_interval(flush_interval_s)
+        if isinstance(chunk_frames, bool) or not isinstance(chunk_frames, int) or chunk_frames < 1:
+            raise EctskinError(f"chunk_frames must be an integer >= 1, got {chunk_frames!r}")
+        meta = dict(meta or {})
+        if EVENTS_KEY in meta:
+            raise EctskinError(
+                f"RecordingWriter meta: key {EVENTS_KEY!r} is reserved; use add_event() instead"
+            )
+        meta_json = to_json("RecordingWriter meta", meta)
+        self.layout = layout
+        self.frame_rate_hz = rate
+        if self.path.is_dir():
+            raise EctskinError(f"{self.path}: is a directory; expected the path of an .h5 file")
+        if not self.path.parent.is_dir():
+            raise EctskinError(f"{self.path}: directory {self.path.parent} does not exist")
+        if self.path.exists() and not overwrite:
+            raise EctskinError(f"{self.path}: file exists; pass overwrite=True to replace it")
+
+        self._clock = clock
+        self._lock = threading.RLock()
+        self._closed = True  # until the file is open
+        self._names: list[str] = []  # every trial started (written or buffered)
+        self._trial_rows: list[dict[str, Any]] = []  # trials not yet written
+        self._n_trials_written = 0
+        self._cur: dict[str, Any] | None = None  # the current trial's row (written or not)
+        self._cur_index = -1
+        self._cur_last_t = -math.inf
+        self._buf: dict[str, list[Any]] = {}  # per dataset: arrays, or (offset, array)
+        self._n_buf = 0
+        self._n_frames_written = 0
+        self._events: list[tuple[float, int, str]] = []
+        self._n_events_written = 0
+        self._has_markers_ds = layout.n_markers > 0
+        self._create(meta_json, overwrite, chunk_frames)
+        self._closed = False
+        self._last_flush = self._clock()
+        logger.info("recording to %s (SWMR, flush every %.3g s)", self.path, self.flush_interval_s)
+
+    # ------------------------------------------------------------------ setup
+    def _create(self, meta_json: str, overwrite: bool, chunk_frames: int) -> None:
+        tmp = temp_path(self.path)
+        try:
+            with h5py.File(tmp, "w", libver=("v110", "v110")) as f:
+                write_root(f, self.layout, self.frame_rate_hz, meta_json, "RecordingWriter")
+                create_frames(
+                    f, self.layout, 0, chunk_frames, self._has_markers_ds, True, compress=False
+                )
+                create_tables(f, 0, 0)
+            fsync_path(tmp)
+            self._publish(tmp, overwrite)
+        except OSError as exc:
+            raise EctskinError(f"{self.path}: cannot create the recording ({exc})") from None
+        finally:
+            tmp.unlink(missing_ok=True)
+        # Reopen directly in SWMR-write mode: the file is never open for non-SWMR writing at path.
+        fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+        fapl.set_libver_bounds(h5py.h5f.LIBVER_V110, h5py.h5f.LIBVER_V110)
+        try:
+            fid = h5py.h5f.open(
+                os.fsencode(self.path), h5py.h5f.ACC_RDWR | h5py.h5f.ACC_SWMR_WRITE, fapl=fapl
+            )
+        except OSError as exc:
+            raise EctskinError(f"{self.path}: cannot open for SWMR writing ({exc})") from None
+        self._f = h5py.File(fid)
+        self._fds = {k: self._f["frames"][k] for k in self._f["frames"]}
+        self._tds = {k: self._f["trials"][k] for k in TRIAL_FIELDS}
+        self._eds = {k: self._f["events"][k] for k in EVENT_FIELDS}
+
+    def _publish(self, tmp: Path, overwrite: bool) -> None:
+        """Move the built file to ``path``; without ``overwrite`` never clobber one that exists."""
+        exists = EctskinError(f"{self.path}: file exists; pass overwrite=True to replace it")
+        if overwrite:
+            os.replace(tmp, self.path)
+            return
+        try:  # no-clobber move: link fails if path exists
+            os.link(tmp, self.path)
+        except FileExistsError:
+            raise exists from None
+        except OSError:  # file system without hard links
+            if self.path.exists():
+                raise exists from None
+            os.replace(tmp, self.path)
+
+    # ------------------------------------------------------------------ state
+    @property
+    def n_frames(self) -> int:
+        """Frames appended so far (written or buffered)."""
+        return self._n_frames_written + self._n_buf
+
+    @property
+    def n_trials(self) -> int:
+        return len(self._names)
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise EctskinError(f"{self.path}: the RecordingWriter is closed")
+
+    def _maybe_flush(self) -> None:
+        if self._clock() - self._last_flush >= self.flush_interval_s:
+            self.flush()
+
+    # ------------------------------------------------------------------ trials
+    def start_trial(
+        self,
+        name: str,
+        *,
+        inflation: Sequence[float] = (),
+        region: int = 0,
+        meta: dict[str, Any] | None = None,
+    ) -> None:
+        """Start a new trial; the frames appended from now on belong to it.
+
+        ``inflation``: chamber volumes p in ml; ``region``: touched region (0 = none).
+        """
+        with self._lock:
+            self._check_open()
+            infl = self._check_trial(name, inflation, region)
+            row = {
+                "name": name,
+                "start": self.n_frames,
+                "region": int(region),
+                "inflation_ml": infl,
+                "has_markers": None,  # decided by the first append
+                "has_force": None,
+                "meta_json": to_json(f"trial {name!r}: meta", meta),
+            }
+            self._names.append(name)
+            self._trial_rows.append(row)
+            self._cur = row
+            self._cur_index = len(self._names) - 1
+            self._cur_last_t = -math.inf
+            self._maybe_flush()
+
+    def _check_trial(self, name: Any, inflation: Any, region: Any) -> np.ndarray:
+        """Check a new trial's name, inflation (returned as float64) and region."""
+        check_type("trial name", name, str)
+        if not name:
+            raise EctskinError(f"{self.path}: trial name must not be empty")
+        if name in self._names:
+            raise EctskinError(f"{self.path}: trial {name!r} already exists in this recording")
+        try:
+            infl = np.asarray([float(v) for v in inflation], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise EctskinError(
+                f"trial {name!r}: inflation must be a sequence of numbers (ml), got {inflation!r}"
+            ) from None
+        if isinstance(region, bool) or not isinstance(region, (int, np.integer)):
+            raise EctskinError(f"trial {name!r}: region must be an integer, got {region!r}")
+        if not 0 <= int(region) <= self.layout.n_regions:
+            raise EctskinError(
+                f"trial {name!r}: region {region} is not 0..{self.layout.n_regions} of layout "
+                f"{self.layout.name!r}"
+            )
+        return infl
+
+    # ------------------------------------------------------------------ frames
+    def append(
+        self,
+        capacitance: Any,
+        timestamps: Any,
+        labels: Any = None,
+        markers: Any = None,
+        force: Any = None,
+    ) -> None:
+        """Append frames to the current trial.
+
+        capacitance: (n, n_pairs) or one frame (n_pairs,), pF (NaN = masked channel).
+        timestamps: (n,) or a scalar, s, finite and increasing within the trial.
+        labels: (n,) or a scalar class 0..n_regions, default 0.
+        markers: (n, n_markers, 3) or (n_markers, 3), mm, NaN = occluded.
+        force: (n,) or a scalar, N.
+
+        The first append of a trial decides whether the trial carries markers and force; an
+        append of 0 frames only declares that (for a trial that may stay empty).
+        """
+        with self._lock:
+            self._check_open()
+            if self._cur is None:
+                raise EctskinError(f"{self.path}: call start_trial() before append()")
+            src = f"{self.path}: append to trial {self._cur['name']!r}"
+            cap, ts, lab, mk, fo = self._check_frames(
+                src, capacitance, timestamps, labels, markers, force
+            )
+            self._check_flags(src, mk is not None, fo is not None)
+            if cap.shape[0] == 0:
+                return
+            self._cur_last_t = float(ts[-1])
+            self._buf.setdefault("capacitance", []).append(cap)
+            self._buf.setdefault("timestamps", []).append(ts)
+            self._buf.setdefault("labels", []).append(lab)
+            if mk is not None:
+                self._buf.setdefault("markers", []).append((self._n_buf, mk))
+            if fo is not None:
+                self._buf.setdefault("force", []).append((self._n_buf, fo))
+            self._n_buf += cap.shape[0]
+            self._maybe_flush()
+
+    def _check_frames(self, src: str, capacitance, timestamps, labels, markers, force):
+        """The arguments of :meth:`append` as checked arrays (cap, ts, labels, markers, force)."""
+        L = self.layout
+        cap = _frames_arg("capacitance", capacitance, (L.n_pairs,), None, src)
+        n = cap.shape[0]
+        ts = _frames_arg("timestamps", timestamps, (), n, src, finite=True)
+        if labels is None:
+            lab = np.zeros(n, dtype=np.int16)
+        else:
+            lab = _frames_arg("labels", labels, (), n, src, finite=True, broadcast=True)
+            bad = (lab != np.round(lab)) | (lab < 0) | (lab > L.n_regions)
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise EctskinError(
+                    f"{src}: labels[{k}] is {lab[k]}, expected an integer 0..{L.n_regions}"
+                )
+            lab = lab.astype(np.int16)
+        mk = None if markers is None else _frames_arg("markers", markers, (L.n_markers, 3), n, src)
+        fo = None if force is None else _frames_arg("force", force, (), n, src, broadcast=True)
+        prev = np.concatenate([[self._cur_last_t], ts])
+        if n and np.any(np.diff(prev) <= 0):
+            k = int(np.argmax(np.diff(prev) <= 0))
+            raise EctskinError(
+                f"{src}: timestamps must increase within a trial; timestamps[{k}] = {ts[k]} "
+                f"comes after {prev[k]}"
+            )
+        return cap, ts, lab, mk, fo
+
+    def _check_flags(self, src: str, has_markers: bool, has_force: bool) -> None:
+        """Markers and force given with every append of a trial or never; the first decides."""
+        flags = {"has_markers": has_markers, "has_force": has_force}
+        for key, given in flags.items():
+            what = key[4:]
+            if self._cur[key] is not None and self._cur[key] != given:
+                raise EctskinError(
+                    f"{src}: {what} {'given' if given else 'missing'} here, but the trial's "
+                    f"earlier frames {'had' if self._cur[key] else 'had no'} {what}; give "
+                    "them with every append of a trial or never"
+                )
+        if has_markers and not self._has_markers_ds:
+            raise EctskinError(f"{src}: layout {self.layout.name!r} has no markers")
+        if self._cur["has_markers"] is None:  # the trial's first append decides
+            self._cur.update(flags)
+            if not any(r is self._cur for r in self._trial_rows):
+                self._trial_rows.append(self._cur)  # already written: rewrite its flags
+
+    def add_event(self, t_s: float, text: str) -> None:
+        """Log an event (e.g. "inflation set to (0, 10, 20)") at time ``t_s`` (s) in the current trial."""
+        with self._lock:
+            self._check_open()
+            try:
+                t = float(t_s)
+            except (TypeError, ValueError):
+                t = math.nan
+            if not math.isfinite(t):
+                raise EctskinError(
+                    f"{self.path}: event time must be a finite number of seconds, got {t_s!r}"
+                )
+            check_type("event text", text, str)
+            self._events.append((t, self._cur_index, text))
+            self._maybe_flush()
+
+    # ------------------------------------------------------------------ flushing
+    def flush(self) -> None:
+        """Write the buffered trials, events and frames, then the commit record, to disk."""
+        with self._lock:
+            self._check_open()
+            self._flush()
+
+    def _flush(self) -> None:
+        # Idempotent: rows are written by index and the counters only move once written, so a
+        # failed flush (disk full) can be retried.
+        try:
+            self._write_buffers()
+        except OSError as exc:
+            raise EctskinError(f"{self.path}: cannot write the recording ({exc})") from None
+
+    def _write_buffers(self) -> None:
+        t0 = time.perf_counter()
+        self._write_trial_rows()  # new trials, and flag updates of the current one
+        write_events(self._eds, self._events, self._n_events_written)
+        self._n_events_written += len(self._events)
+        self._events = []
+        self._write_frames()
+        self._f.flush()
+        # the commit record, only once everything it counts is on disk
+        self._f["committed"][:] = [
+            self._n_frames_written,
+            self._n_trials_written,
+            self._n_events_written,
+        ]
+        self._f.flush()
+        self._last_flush = self._clock()
+        logger.debug(
+            "%s: flushed %d frames in %.1f ms",
+            self.path,
+            self._n_frames_written,
+            1e3 * (time.perf_counter() - t0),
+        )
+
+    def _write_trial_rows(self) -> None:
+        for row in self._trial_rows:
+            k = self._names.index(row["name"])
+            if k >= self._n_trials_written:
+                for ds in self._tds.values():
+                    ds.resize((k + 1,))
+                self._n_trials_written = k + 1
+            for key in TRIAL_FIELDS:
+                value = row[key]
+                if key in ("has_markers", "has_force"):
+                    value = bool(value)
+                self._tds[key][k] = value
+        self._trial_rows = []
+
+    def _write_frames(self) -> None:
+        if not self._n_buf:
+            return
+        s, e = self._n_frames_written, self._n_frames_written + self._n_buf
+        for ds in self._fds.values():
+            ds.resize((e, *ds.shape[1:]))
+        for key in ("capacitance", "timestamps", "labels"):
+            self._fds[key][s:e] = np.concatenate(self._buf[key])
+        for key in ("markers", "force"):
+            for off, arr in self._buf.get(key, []):
+                self._fds[key][s + off : s + off + arr.shape[0]] = arr
+        self._n_frames_written = e
+        self._buf = {}
+        self._n_buf = 0
+
+    def close(self, *, complete: bool = True) -> None:
+        """Flush, mark the file complete and close it. Idempotent.
+
+        ``complete=False`` closes without marking it (as for an interrupted session): the file
+        then reads only with ``allow_partial=True``.
+        """
+        with self._lock:
+            if self._closed:
+                return
+            try:
+                self._flush()
+                if complete:
+                    self._f.attrs["complete"] = np.bool_(True)
+                    self._f.flush()
+            finally:
+                self._closed = True
+                self._f.close()
+            fsync_path(self.path)
+            logger.info(
+                "closed %s (%s): %d trials, %d frames, %d events",
+                self.path,
+                "complete" if complete else "left incomplete",
+                self._n_trials_written,
+                self._n_frames_written,
+                self._n_events_written,
+            )
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            logger.warning(
+                "%s: closed after %s; left incomplete (read it with allow_partial=True)",
+                self.path,
+                exc_type.__name__,
+            )
+            self.close(complete=False)

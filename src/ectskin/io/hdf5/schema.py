@@ -1,0 +1,231 @@
+"""The recording schema: names, versions, dataset layout and the JSON of the metadata.
+
+Both writers (:mod:`~ectskin.io.hdf5.write` and :mod:`~ectskin.io.hdf5.append`) build a file with
+:func:`write_root`, :func:`create_frames` and :func:`create_tables`, so there is one schema and
+the reader (:mod:`~ectskin.io.hdf5.reader`) has one code path. The schema itself is documented in
+``docs/recording-format.md``.
+
+JSON policy of the metadata (``meta_json``): unlike the result files of :mod:`ectskin._files`
+(strict JSON, non-finite floats written as ``null``), a recording keeps NaN and ±inf in
+``Recording.meta`` and ``Trial.meta`` as JSON's ``NaN``/``Infinity`` extension, which Python's
+``json`` reads back as the same floats: the format promises that metadata round-trips exactly
+(``docs/recording-format.md``, "Metadata as JSON"). NumPy scalars and arrays are stored as
+numbers and lists; anything else that is not a JSON value is refused.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from datetime import UTC, datetime
+from typing import Any
+
+import h5py
+import numpy as np
+
+from ectskin import __version__
+from ectskin._check import EctskinError, check_type
+from ectskin.layout import SensorLayout
+
+FORMAT = "ectskin.recording"
+FORMAT_VERSION = 1
+
+#: Key of ``Recording.meta`` that holds the events table (list of ``{"t_s", "trial", "text"}``).
+EVENTS_KEY = "events"
+
+STR = h5py.string_dtype("utf-8")
+VLEN_F8 = h5py.vlen_dtype(np.float64)
+TRIAL_FIELDS = ("name", "start", "region", "inflation_ml", "has_markers", "has_force", "meta_json")
+EVENT_FIELDS = ("t_s", "trial", "text")
+#: Optional ``/frames`` datasets (present when some trial has them).
+OPTIONAL_FRAMES = ("markers", "force")
+COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+TABLE_CHUNK = 64  # rows per chunk of the trial and event tables
+
+
+# ------------------------------------------------------------------------------------ JSON
+def _json_default(value: Any) -> Any:
+    # NumPy scalars and arrays are stored as the equivalent JSON numbers and lists.
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
+
+
+def _first_bad_key(value: Any, path: str = "", seen: frozenset[int] = frozenset()) -> str:
+    """The key path (``['a'][2]``) of the first value json cannot store, or ``""``."""
+    if isinstance(value, dict):
+        items = [(f"[{k!r}]", v) for k, v in value.items()]
+    elif isinstance(value, list | tuple):
+        items = [(f"[{k}]", v) for k, v in enumerate(value)]
+    elif isinstance(value, str | int | float | np.generic | np.ndarray | None):
+        return ""
+    else:
+        return path
+    if id(value) in seen:  # a circular reference
+        return path
+    for key, item in items:
+        found = _first_bad_key(item, path + key, seen | {id(value)})
+        if found:
+            return found
+    return ""
+
+
+def to_json(name: str, value: Any) -> str:
+    """JSON text of ``value`` (a dict of JSON-able values, None = {}) or a clear error naming
+    ``name`` and the key path of the offending value."""
+    if value is None:
+        value = {}
+    check_type(name, value, dict)
+    try:
+        return json.dumps(value, default=_json_default, sort_keys=False)
+    except (TypeError, ValueError) as exc:
+        where = _first_bad_key(value)
+        at = f" (at {where})" if where else ""
+        raise EctskinError(
+            f"{name} must hold JSON-able values (str, numbers, lists, dicts){at}: {exc}"
+        ) from None
+
+
+def utc_now() -> str:
+    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+# ------------------------------------------------------------------------- file structure
+def write_root(
+    f: h5py.File, layout: SensorLayout, frame_rate_hz: float, meta_json: str, writer: str
+) -> None:
+    """Root attributes (``complete`` False until the writer's last step), /layout, /committed."""
+    f.attrs["format"] = FORMAT
+    f.attrs["format_version"] = np.int64(FORMAT_VERSION)
+    f.attrs["complete"] = np.bool_(False)
+    f.attrs["frame_rate_hz"] = np.float64(frame_rate_hz)
+    f.attrs["created_utc"] = utc_now()
+    f.attrs["ectskin_version"] = __version__
+    f.attrs["writer"] = writer
+    f.attrs["meta_json"] = meta_json
+    g = f.create_group("layout")
+    g.attrs["json"] = layout.to_json()
+    g.attrs["name"] = layout.name
+    c = f.create_dataset("committed", data=np.zeros(3, dtype=np.int64))
+    c.attrs["fields"] = ["n_frames", "n_trials", "n_events"]
+
+
+def frame_specs(
+    layout: SensorLayout, with_markers: bool, with_force: bool
+) -> dict[str, tuple[tuple[int, ...], Any, Any, str]]:
+    """``/frames`` datasets: name → (shape of one frame, dtype, fill value, unit)."""
+    spec = {
+        "capacitance": ((layout.n_pairs,), np.float64, np.nan, "pF"),
+        "timestamps": ((), np.float64, np.nan, "s"),
+        "labels": ((), np.int16, -1, "class (0 = no touch, 1..n_regions)"),
+    }
+    if with_markers:
+        spec["markers"] = ((layout.n_markers, 3), np.float64, np.nan, "mm")
+    if with_force:
+        spec["force"] = ((), np.float64, np.nan, "N")
+    return spec
+
+
+def create_frames(
+    f: h5py.File,
+    layout: SensorLayout,
+    n_frames: int,
+    chunk_frames: int,
+    with_markers: bool,
+    with_force: bool,
+    compress: bool,
+) -> dict[str, h5py.Dataset]:
+    """Create the resizable ``/frames`` datasets with ``n_frames`` rows (filled by the caller).
+
+    ``compress``: gzip + shuffle. The live writer does not compress: a compressed chunk that is
+    flushed half full is rewritten elsewhere when it grows and its old space is not reused, so the
+    file would grow with every flush.
+    """
+    g = f.create_group("frames")
+    rows = max(1, int(chunk_frames))
+    out = {}
+    for name, (tail, dtype, fill, unit) in frame_specs(layout, with_markers, with_force).items():
+        ds = g.create_dataset(
+            name,
+            shape=(n_frames, *tail),
+            maxshape=(None, *tail),
+            chunks=(rows, *tail),
+            dtype=dtype,
+            fillvalue=fill,
+            **(COMPRESSION if compress else {}),
+        )
+        ds.attrs["unit"] = unit
+        out[name] = ds
+    out["capacitance"].attrs["pair_names"] = list(layout.pair_names)
+    if with_markers:
+        out["markers"].attrs["marker_names"] = [m.name for m in layout.markers]
+    return out
+
+
+def _create_table(f: h5py.File, group: str, spec: dict[str, Any], n_rows: int) -> dict:
+    g = f.create_group(group)
+    return {
+        k: g.create_dataset(k, shape=(n_rows,), maxshape=(None,), chunks=(TABLE_CHUNK,), dtype=dt)
+        for k, dt in spec.items()
+    }
+
+
+def create_tables(f: h5py.File, n_trials: int, n_events: int) -> tuple[dict, dict]:
+    """Create the ``/trials`` and ``/events`` tables; returns their datasets by field."""
+    tds = _create_table(
+        f,
+        "trials",
+        {
+            "name": STR,
+            "start": np.int64,
+            "region": np.int32,
+            "inflation_ml": VLEN_F8,
+            "has_markers": np.bool_,
+            "has_force": np.bool_,
+            "meta_json": STR,
+        },
+        n_trials,
+    )
+    tds["start"].attrs["unit"] = "frame index into /frames"
+    tds["inflation_ml"].attrs["unit"] = "ml"
+    eds = _create_table(f, "events", {"t_s": np.float64, "trial": np.int32, "text": STR}, n_events)
+    eds["t_s"].attrs["unit"] = "s"
+    eds["trial"].attrs["unit"] = "row in /trials, -1 = before the first trial"
+    return tds, eds
+
+
+# -------------------------------------------------------------------------------- events
+def check_events(events: Any, trial_names: list[str]) -> list[tuple[float, int, str]]:
+    """Validate ``Recording.meta["events"]`` into (t_s, trial index, text) rows."""
+    src = f"recording meta[{EVENTS_KEY!r}]"
+    check_type(src, events, list)
+    index = {n: k for k, n in enumerate(trial_names)}
+    rows = []
+    for k, ev in enumerate(events):
+        if not isinstance(ev, dict) or set(ev) != set(EVENT_FIELDS):
+            raise EctskinError(
+                f"{src}[{k}] must be a dict with keys 't_s', 'trial', 'text', got {ev!r:.80}"
+            )
+        t = ev["t_s"]
+        if isinstance(t, bool) or not isinstance(t, (int, float, np.number)) or not np.isfinite(t):
+            raise EctskinError(f"{src}[{k}].t_s must be a finite number of seconds, got {t!r}")
+        trial = ev["trial"]
+        if trial is not None and trial not in index:
+            raise EctskinError(f"{src}[{k}].trial names no trial of the recording: {trial!r}")
+        check_type(f"{src}[{k}].text", ev["text"], str)
+        rows.append((float(t), -1 if trial is None else index[trial], ev["text"]))
+    return rows
+
+
+def write_events(eds: dict, rows: Sequence[tuple[float, int, str]], start: int = 0) -> None:
+    """Write event rows at ``start`` of the ``/events`` table (growing it)."""
+    if not rows:
+        return
+    end = start + len(rows)
+    for k in EVENT_FIELDS:
+        eds[k].resize((end,))
+    eds["t_s"][start:end] = np.array([r[0] for r in rows], dtype=np.float64)
+    eds["trial"][start:end] = np.array([r[1] for r in rows], dtype=np.int32)
+    eds["text"][start:end] = np.array([r[2] for r in rows], dtype=object)

@@ -1,0 +1,165 @@
+"""Write a whole :class:`~ectskin.io.recording.Recording` to an HDF5 file, atomically.
+
+The file is built under the hidden temporary name of :func:`ectskin._files.temp_path`, marked
+``complete``, fsynced and renamed onto the target with ``os.replace``; the frames are stored
+gzip-compressed in chunks of about 256 KiB of capacitance.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from ectskin._check import EctskinError, check_type
+from ectskin._files import temp_path
+from ectskin.io.hdf5.schema import (
+    EVENTS_KEY,
+    check_events,
+    create_frames,
+    create_tables,
+    to_json,
+    write_events,
+    write_root,
+)
+from ectskin.io.recording import Recording, Trial
+from ectskin.layout import SensorLayout
+
+logger = logging.getLogger(__name__)
+
+_BATCH_CHUNK_BYTES = 256 * 1024  # target size of one capacitance chunk
+
+
+def fsync_path(path: Path, directory: bool = False) -> None:
+    """fsync a file (or, with ``directory``, a folder: best effort) by path."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:  # e.g. directories on Windows
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        if not directory:
+            raise
+    finally:
+        os.close(fd)
+
+
+def _trial_meta_json(t: Trial) -> str:
+    return to_json(f"trial {t.name!r}: meta", t.meta)
+
+
+def _check_target(path: Path, overwrite: bool) -> None:
+    if path.is_dir():
+        raise EctskinError(f"{path}: is a directory; expected the path of an .h5 file to write")
+    if path.exists() and not overwrite:
+        raise EctskinError(f"{path}: file exists; pass overwrite=True to replace it")
+    if not path.parent.is_dir():
+        raise EctskinError(f"{path}: directory {path.parent} does not exist")
+
+
+def write_recording(rec: Recording, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """Write ``rec`` to the HDF5 file ``path`` atomically and return the path.
+
+    The file is written to ``.<name>.tmp-<pid>`` in the same directory, marked ``complete``,
+    flushed to disk (fsync) and renamed onto ``path`` with ``os.replace``: a crash at any moment
+    leaves either no file (or the old one) at ``path``, never a partial one, and the temporary file
+    is removed on error. An existing ``path`` is refused unless ``overwrite=True``.
+
+    ``rec.meta`` and every ``Trial.meta`` must hold JSON-able values (NumPy scalars and arrays are
+    stored as numbers and lists). ``rec.meta["events"]``, if present, is a list of
+    ``{"t_s": float, "trial": str | None, "text": str}`` and is stored in the ``/events`` table.
+    """
+    check_type("rec", rec, Recording)
+    path = Path(os.fspath(path))
+    _check_target(path, overwrite)
+    # Re-run the Recording checks (trials may have been edited since it was built).
+    rec = Recording(rec.layout, list(rec.trials), rec.frame_rate_hz, rec.meta)
+    meta = dict(rec.meta)
+    events = (
+        check_events(meta.pop(EVENTS_KEY), [t.name for t in rec.trials])
+        if EVENTS_KEY in meta
+        else []
+    )
+    meta_json = to_json("recording meta", meta)
+    for t in rec.trials:  # fail on bad metadata before touching the disk
+        _trial_meta_json(t)
+
+    tmp = temp_path(path)
+    try:
+        _write_file(tmp, rec, meta_json, events)
+        fsync_path(tmp)
+        os.replace(tmp, path)
+    except BaseException as exc:
+        tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError):  # disk full, permissions, ...
+            raise EctskinError(f"{path}: cannot write the recording ({exc})") from None
+        raise
+    fsync_path(path.parent, directory=True)
+    logger.info("wrote %s: %d trials, %d frames", path, rec.n_trials, rec.n_frames)
+    return path
+
+
+def _write_file(tmp: Path, rec: Recording, meta_json: str, events: list) -> None:
+    layout = rec.layout
+    counts = np.array([t.n_frames for t in rec.trials], dtype=np.int64)
+    starts = (
+        np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64) if len(counts) else counts
+    )
+    n_frames = int(counts.sum())
+    chunk = min(max(1, n_frames), max(1, _BATCH_CHUNK_BYTES // (8 * layout.n_pairs)))
+    try:
+        f = h5py.File(tmp, "w", libver=("earliest", "v110"))
+    except OSError as exc:
+        raise EctskinError(f"{tmp.parent}: cannot create a file there ({exc})") from None
+    with f:
+        write_root(f, layout, rec.frame_rate_hz, meta_json, "write_recording")
+        fds = create_frames(
+            f,
+            layout,
+            n_frames,
+            chunk,
+            with_markers=layout.n_markers > 0 and any(t.markers is not None for t in rec.trials),
+            with_force=any(t.force is not None for t in rec.trials),
+            compress=True,
+        )
+        tds, eds = create_tables(f, rec.n_trials, 0)
+        _write_trial_table(tds, rec.trials, starts)
+        _write_frames(fds, layout, rec.trials, starts)
+        write_events(eds, events)
+        f["committed"][:] = [n_frames, rec.n_trials, len(events)]
+        f.attrs["complete"] = np.bool_(True)
+
+
+def _write_trial_table(tds: dict, trials: Sequence[Trial], starts: np.ndarray) -> None:
+    if not trials:
+        return
+    tds["name"][:] = np.array([t.name for t in trials], dtype=object)
+    tds["start"][:] = starts
+    tds["region"][:] = np.array([t.region for t in trials], dtype=np.int32)
+    for k, t in enumerate(trials):  # row by row: h5py would read equal lengths as a 2-D array
+        tds["inflation_ml"][k] = np.asarray(t.inflation, dtype=np.float64)
+    tds["has_markers"][:] = np.array([t.markers is not None for t in trials])
+    tds["has_force"][:] = np.array([t.force is not None for t in trials])
+    tds["meta_json"][:] = np.array([_trial_meta_json(t) for t in trials], dtype=object)
+
+
+def _write_frames(
+    fds: dict, layout: SensorLayout, trials: Sequence[Trial], starts: np.ndarray
+) -> None:
+    """Copy every trial's arrays into the ``/frames`` datasets, one trial at a time."""
+    for t, s in zip(trials, starts):
+        e = s + t.n_frames
+        if e == s:
+            continue
+        fds["capacitance"][s:e] = t.capacitance
+        fds["timestamps"][s:e] = t.timestamps
+        fds["labels"][s:e] = t.labels
+        if t.markers is not None:
+            fds["markers"][s:e] = t.markers
+        if t.force is not None:
+            fds["force"][s:e] = t.force
