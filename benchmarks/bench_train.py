@@ -33,17 +33,13 @@ import torch
 from ectskin.layout import default_layout
 from ectskin.learn.checkpoint import save_checkpoint
 from ectskin.learn.datasets import TouchData
+from ectskin.learn.distributed import Dist
+from ectskin.learn.engine import Tensors, epoch_indices, evaluate, train_one_epoch
 from ectskin.learn.models import C2DT, C2DTConfig, TouchMLP
 from ectskin.learn.predict import TouchPredictor, TrackPredictor
-from ectskin.learn.train import (
-    _Dist,
-    _Tensors,
-    _TrackTask,
-    epoch_indices,
-    evaluate,
-    train,
-    train_one_epoch,
-)
+from ectskin.learn.tasks import TrackCriterion
+from ectskin.learn.threads import TRAIN_DEFAULT_THREADS, torch_threads
+from ectskin.learn.train import train
 
 
 def touch_data(n: int, seed: int) -> TouchData:
@@ -98,10 +94,10 @@ def bench_c2dt_training(steps: int, batch: int = 255) -> dict:
     x = torch.from_numpy((0.05 * rng.standard_normal((n, 10, 28))).astype(np.float32))
     init = torch.from_numpy(rng.normal(0, 30, (n, 5, 3)).astype(np.float32))
     y = init + torch.from_numpy(rng.normal(0, 2, (n, 5, 3)).astype(np.float32))
-    data = _Tensors(x, y, init)
+    data = Tensors((x, init, y))
     opt = torch.optim.Adam(model.parameters(), lr=1e-3, fused=True)
-    task = _TrackTask(model)
-    d = _Dist()
+    task = TrackCriterion(model)
+    d = Dist()
     warm = epoch_indices(n, 0, 0)[: 3 * batch]
     train_one_epoch(model, task, opt, data, warm, batch, epoch=0, d=d)
     idx = epoch_indices(n, 1, 0)
@@ -137,9 +133,7 @@ def _latency(fn, calls: int) -> dict:
 
 def bench_latency(calls: int) -> dict:
     layout = default_layout()
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with torch_threads(1):
         with tempfile.TemporaryDirectory() as tmp:
             save_checkpoint(Path(tmp) / "touch.pt", TouchMLP())
             save_checkpoint(
@@ -157,8 +151,6 @@ def bench_latency(calls: int) -> dict:
             "touch_mlp": _latency(lambda: touch.predict(frame), calls),
             "c2dt": _latency(lambda: track.predict(window, init), calls),
         }
-    finally:
-        torch.set_num_threads(threads)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -167,15 +159,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--threads",
         type=int,
-        default=1,
-        help="torch threads for training (default 1, as ectskin.learn.train)",
+        default=TRAIN_DEFAULT_THREADS,
+        help=f"torch threads for training (default {TRAIN_DEFAULT_THREADS}, as ectskin.learn.train)",
     )
     p.add_argument("--touch-epochs", type=int, default=100)
     p.add_argument("--touch-frames", type=int, default=112_500)
     p.add_argument("--c2dt-steps", type=int, default=40, help="batches of 255 to time")
     p.add_argument("--calls", type=int, default=2000, help="inference calls per model")
     args = p.parse_args(argv)
-    torch.set_num_threads(args.threads)
+    with torch_threads(args.threads):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     res = {
         "machine": {
             "cpu_count": os.cpu_count(),

@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 import logging
 
+from ectskin.learn.profiles import describe_recipe
+
 HELP = "evaluate a trained run on its test split (metrics.json, baselines, figures)"
 log = logging.getLogger(__name__)
 
@@ -27,8 +29,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def summary_lines(metrics: dict) -> list[str]:
     """Human-readable lines of an ``evaluate_run`` result."""
-    from ectskin.learn.evaluate import describe_recipe
-
     lines = []
     t = metrics.get("touch")
     if t:
@@ -65,6 +65,8 @@ def summary_lines(metrics: dict) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    # imported on use, for start-up speed: it loads torch and matplotlib, and every ``ectskin``
+    # call imports all subcommand modules to build its parser
     from ectskin.learn.evaluate import evaluate_run
 
     metrics = evaluate_run(

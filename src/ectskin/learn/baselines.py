@@ -23,28 +23,28 @@ Tracking (on :class:`~ectskin.learn.datasets.TrackData`):
 
 Speed on ~100 000 training samples: the classical models are fit on a random subsample of at
 most ``max_train`` samples (default 10 000 for random forest and k-NN, 50 000 for logistic
-regression; ridge uses all of them, it is one linear solve). Measured on 112 500 synthetic
-19-class frames × 28 pairs on a shared 2-core CPU: logistic regression ~2 s, random forest ~8 s,
-k-NN (28 800 test frames) ~2 s. Samples of consecutive frames are
+regression; ridge uses all of them, it is one linear solve). Samples of consecutive frames are
 strongly correlated, so a subsample loses little; the number used is reported in each result.
 
 Every result holds per-sample predictions so that the evaluation computes the paper's metrics on
 exactly the same samples (accuracy and misclassified counts for touch, Eq. 3 average distance for
-tracking via :func:`ectskin.learn.evaluate.average_distance`).
+tracking via :func:`ectskin.learn.metrics.average_distance`).
 """
 
 from __future__ import annotations
 
 import logging
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ectskin._check import EctskinError
+from ectskin._check import EctskinError, check_option
 from ectskin.learn.datasets import TouchData, TrackData
+from ectskin.learn.metrics import average_distance
 
 log = logging.getLogger(__name__)
 
@@ -124,17 +124,6 @@ class TrackBaselineResult:
 
 
 # --------------------------------------------------------------------------- helpers
-def _average_distance(pred: np.ndarray, true: np.ndarray) -> tuple[float, float]:
-    """Eq. 3 (mean ± std over samples and markers of the Euclidean distance, mm).
-
-    The implementation is :func:`ectskin.learn.evaluate.average_distance` (helper E's, imported
-    here lazily so that ``evaluate`` may import this module).
-    """
-    from ectskin.learn.evaluate import average_distance
-
-    return average_distance(pred, true)
-
-
 def _subsample(n: int, max_n: int | None, rng: np.random.Generator) -> np.ndarray:
     if max_n is None or n <= max_n:
         return np.arange(n)
@@ -200,7 +189,9 @@ def sklearn_touch_baseline(
 ) -> TouchBaselineResult:
     """Fit a classical classifier (``"logreg"``, ``"random_forest"`` or ``"knn"``) on (a random
     subsample of at most ``max_train``) training frames and predict the test frames."""
+    # scikit-learn is imported here, not at the top: it costs a second at start-up
     from sklearn.ensemble import RandomForestClassifier
+    from sklearn.exceptions import ConvergenceWarning
     from sklearn.linear_model import LogisticRegression
     from sklearn.neighbors import KNeighborsClassifier
     from sklearn.pipeline import make_pipeline
@@ -208,11 +199,7 @@ def sklearn_touch_baseline(
 
     _check_touch(train, test)
     defaults = {"logreg": 50_000, "random_forest": 10_000, "knn": 10_000}
-    if name not in defaults:
-        raise EctskinError(
-            f"Invalid value for 'name': allowed values are 'logreg', 'random_forest', 'knn'; "
-            f"got {name!r}"
-        )
+    check_option("name", name, tuple(defaults))
     if max_train is None:
         max_train = defaults[name]
     rng = np.random.default_rng(seed)
@@ -233,10 +220,6 @@ def sklearn_touch_baseline(
         # scikit-learn refuses one-class problems; the answer is that class
         pred = np.full(test.n_samples, int(y_train[0]), dtype=np.int64)
     else:
-        import warnings
-
-        from sklearn.exceptions import ConvergenceWarning
-
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             model.fit(x_train, y_train)
@@ -291,7 +274,7 @@ def _track_result(
     name: str, pred: np.ndarray, test: TrackData, n_used: int, t0: float, params: dict
 ) -> TrackBaselineResult:
     pred = np.asarray(pred, dtype=np.float32)
-    mean, std = _average_distance(pred, test.y)
+    mean, std = average_distance(pred, test.y)
     res = TrackBaselineResult(
         name=name,
         pred=pred,

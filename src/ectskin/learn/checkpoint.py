@@ -10,25 +10,26 @@ A checkpoint is a ``torch.save`` of one dict of plain types and tensors::
      "extra": {...},                        # pair names, epoch, validation loss, ...
      "resume": {...}}                       # only in last.pt: optimizer, scheduler, epoch
 
-Files are written atomically (temporary file in the same folder, then ``os.replace``) and read
-with ``torch.load(..., weights_only=True)``: a model file is untrusted input, nothing in it is
-executed. Every problem with a file is an :class:`EctskinError` that names it.
+Files are written atomically (:func:`ectskin._files.atomic_write`) and read with
+``torch.load(..., weights_only=True)``: a model file is untrusted input, nothing in it is
+executed. ``normalizer`` and ``extra`` hold plain values under the JSON policy of
+:func:`ectskin._files.to_jsonable` (a non-finite number is stored as None). Every problem with a
+file is an :class:`EctskinError` that names it.
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import warnings
-from dataclasses import asdict, fields, is_dataclass
+from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 from torch import nn
 
 from ectskin._check import EctskinError
+from ectskin._files import atomic_write, to_jsonable
 from ectskin.learn.models import MODELS
 
 logger = logging.getLogger(__name__)
@@ -37,42 +38,9 @@ FORMAT = "ectskin.checkpoint"
 VERSION = 1
 
 
-def to_plain(value: Any) -> Any:
-    """NumPy arrays/scalars, tuples and dataclasses → lists, floats, ints, dicts (recursively)."""
-    if is_dataclass(value) and not isinstance(value, type):
-        return to_plain(asdict(value))
-    if hasattr(value, "to_dict") and callable(value.to_dict):
-        return to_plain(value.to_dict())
-    if isinstance(value, dict):
-        return {str(k): to_plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [to_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, torch.Tensor) and value.ndim == 0:
-        return value.item()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    return value
-
-
 def atomic_torch_save(obj: Any, path: str | Path) -> Path:
     """``torch.save`` to ``path`` atomically: readers see the old file or the new, never half."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        with open(tmp, "wb") as fh:
-            torch.save(obj, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    return path
+    return atomic_write(path, lambda fh: torch.save(obj, fh))
 
 
 def save_checkpoint(
@@ -109,8 +77,8 @@ def save_checkpoint(
         "kind": kind,
         "config": asdict(config),
         "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
-        "normalizer": to_plain(normalizer) if normalizer is not None else {},
-        "extra": to_plain(extra or {}),
+        "normalizer": to_jsonable(normalizer) if normalizer is not None else {},
+        "extra": to_jsonable(extra or {}),
     }
     if resume is not None:
         payload["resume"] = resume

@@ -1,4 +1,4 @@
-"""Learning data from recordings: calibrated touch frames, tracking windows, splits, normalisation.
+"""Learning data from recordings: calibrated touch frames and tracking windows.
 
 * :func:`touch_dataset` → :class:`TouchData`: one sample per frame, the frame's calibrated
   readouts (paper Eq. 2 against the rest state, see :mod:`ectskin.io.calibration`) and its
@@ -8,22 +8,19 @@
   coordinates of the trajectory's first frame (``init``) and of the window's last frame (``y``).
   With ``prior=True`` (the paper, §4.2) each trajectory is calibrated against its own first frame;
   ``prior=False`` is the ablation: absolute calibration against the touch reference, ``init`` = 0.
-* :func:`split_groups`: trial-exclusive train / val / test splits (paper: 125/32/32 touch trials,
-  108/18/20 tracking trials), scaled to recordings of other sizes, optionally stratified.
-* :class:`Normalizer`: per-channel mean / std fitted on the training split only, stored as plain
-  lists inside checkpoints.
 
-Channels a recording does not measure (``rec.meta["unmeasured_pairs"]``, pair indices, set by the
-generic importer when a file's channel count is not n(n−1)/2, see ``docs/import-format.md``) are
-left out of every data set: ``pair_names`` and ``pairs`` list the measured channels only
-(``pair_names`` are the file's channel names when the import stored them in
-``rec.meta["channel_names"]``).
+Splits: :mod:`ectskin.learn.splits`; normalisation: :mod:`ectskin.learn.normalizer` (re-exported).
+
+Channels a recording does not measure (``rec.meta["unmeasured_pairs"]``, set by the generic
+importer, see ``docs/import-format.md``) are left out of every data set: ``pair_names`` and
+``pairs`` list the measured channels only (the file's own channel names when the import stored
+them in ``rec.meta["channel_names"]``).
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -31,16 +28,20 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from ectskin._check import EctskinError
-from ectskin.io.recording import Recording, Trial
 from ectskin.io.calibration import calibrate, is_no_contact, touch_reference
+from ectskin.io.recording import Recording, Trial
+from ectskin.learn.normalizer import Normalizer
+from ectskin.learn.splits import (
+    SPLITS,
+    TOUCH_SPLIT,
+    TRACK_SPLIT,
+    split_from_names,
+    split_groups,
+    split_names,
+)
 
 log = logging.getLogger(__name__)
 
-#: Paper §3: touch data 189 trials split 125 / 32 / 32 (train / val / test).
-TOUCH_SPLIT = (125, 32, 32)
-#: Paper §3: tracking data 146 trials split 108 / 18 / 20.
-TRACK_SPLIT = (108, 18, 20)
-SPLITS = ("train", "val", "test")
 NONFINITE_OPTIONS = ("raise", "drop")
 
 __all__ = [
@@ -58,6 +59,7 @@ __all__ = [
     "split_names",
     "touch_dataset",
     "track_dataset",
+    "tracking_trials",
 ]
 
 
@@ -459,7 +461,7 @@ def track_dataset(
         raise EctskinError(f"track_dataset: every tracking trial is shorter than window={k}")
 
     counts = []
-    for t, c, valid in per_trial:
+    for _, c, valid in per_trial:
         m = c.shape[0] if pad else c.shape[0] - k + 1
         counts.append(m if valid is None else int(valid.sum()))
     n_total = int(sum(counts))
@@ -496,287 +498,3 @@ def track_dataset(
         pair_names=pair_names,
         group_region=np.array([t.region for t, _, _ in per_trial], dtype=np.int64),
     )
-
-
-# --------------------------------------------------------------------------- splits
-def _scaled_counts(counts: Sequence[float], n: int) -> np.ndarray:
-    """Scale (train, val, test) counts to ``n`` groups by largest remainder; none left empty."""
-    c = np.asarray(counts, dtype=np.float64)
-    total = float(c.sum())
-    if total == float(n) and np.all(c == np.round(c)):
-        out = c.astype(np.int64)
-    else:
-        exact = c * n / total
-        out = np.floor(exact).astype(np.int64)
-        rest = n - int(out.sum())
-        # largest remainders first; ties broken by split order (train, val, test)
-        order = np.lexsort((np.arange(3), -(exact - out)))
-        out[order[:rest]] += 1
-    # an empty split only where the caller asked for zero groups in it
-    while np.any((out == 0) & (c > 0)) and out.max() > 1:
-        out[int(np.argmax(out))] -= 1
-        out[int(np.argmax((out == 0) & (c > 0)))] += 1
-    return out
-
-
-def split_groups(
-    n_groups_or_names: int | Sequence[str],
-    counts: Sequence[float] = TOUCH_SPLIT,
-    *,
-    seed: int = 0,
-    stratify: Sequence[int] | np.ndarray | None = None,
-) -> dict[str, np.ndarray]:
-    """Trial-exclusive train / val / test split of group ids 0..n_groups−1.
-
-    Parameters
-    ----------
-    n_groups_or_names : int or sequence of str
-        Number of groups, or their names (``data.group_names``).
-    counts : (3,) numbers
-        Groups per split (paper: :data:`TOUCH_SPLIT` 125/32/32, :data:`TRACK_SPLIT` 108/18/20).
-        When they do not add up to the number of groups they are scaled proportionally (largest
-        remainder rounding), so fractions like (0.7, 0.15, 0.15) work too. A split that would get
-        no group takes one from the largest split.
-    seed : int
-        The split is a deterministic function of (n_groups, counts, seed, stratify).
-    stratify : (n_groups,) ints, optional
-        A label per group (e.g. ``data.group_region``). Every label gets at least one group in
-        train first (where train is large enough), then the remaining groups are spread over the
-        splits in proportion, label by label (systematic sampling).
-
-    Returns
-    -------
-    {"train": ids, "val": ids, "test": ids}: sorted, disjoint int64 arrays covering all groups.
-
-    Raises
-    ------
-    EctskinError
-        Bad counts, fewer groups than non-empty splits, or a wrong-length ``stratify``.
-    """
-    if isinstance(n_groups_or_names, (int, np.integer)) and not isinstance(n_groups_or_names, bool):
-        n = int(n_groups_or_names)
-    else:
-        try:
-            n = len(n_groups_or_names)  # type: ignore[arg-type]
-        except TypeError:
-            raise EctskinError(
-                f"split_groups: expected a number of groups or a list of names, got "
-                f"{type(n_groups_or_names).__name__}"
-            ) from None
-    try:
-        c = np.asarray(counts, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise EctskinError(
-            f"split counts must be 3 numbers (train, val, test), got {counts!r}"
-        ) from None
-    if c.shape != (3,) or not np.all(np.isfinite(c)) or np.any(c < 0) or c.sum() <= 0:
-        raise EctskinError(
-            f"split counts must be 3 non-negative numbers (train, val, test) with a positive "
-            f"sum, got {counts!r}"
-        )
-    need = int(np.count_nonzero(c))
-    if n < need:
-        raise EctskinError(
-            f"cannot split {n} group(s) (trials) into {need} non-empty splits "
-            f"{dict(zip(SPLITS, c.tolist()))}: every split needs at least one trial"
-        )
-    sizes = _scaled_counts(c, n)
-    if np.any((sizes == 0) & (c > 0)):
-        raise EctskinError(
-            f"split of {n} groups by {counts!r} leaves an empty split: {sizes.tolist()}"
-        )
-    if c.sum() != n:
-        log.info(
-            "split: %d groups, counts %s scaled to %s", n, [float(v) for v in c], sizes.tolist()
-        )
-    rng = np.random.default_rng(seed)
-    if stratify is None:
-        order = rng.permutation(n)
-    else:
-        order = _stratified_order(np.asarray(stratify), n, int(sizes[0]), rng)
-    bounds = np.cumsum(sizes)
-    parts = np.split(order, bounds[:-1])
-    return {name: np.sort(p).astype(np.int64) for name, p in zip(SPLITS, parts)}
-
-
-def _stratified_order(labels: np.ndarray, n: int, n_train: int, rng) -> np.ndarray:
-    """An ordering of 0..n−1 such that the first ``n_train`` hold one group of every label (as far
-    as they can) and every label is spread evenly along the rest (systematic sampling)."""
-    if labels.shape != (n,):
-        raise EctskinError(
-            f"stratify must hold one label per group ({n}), got shape {labels.shape}"
-        )
-    strata = np.unique(labels)
-    members = {s: rng.permutation(np.flatnonzero(labels == s)) for s in strata}
-    firsts = np.array([members[s][0] for s in rng.permutation(strata)], dtype=np.int64)
-    if firsts.size > n_train:
-        log.warning(
-            "split: %d labels but only %d training groups: %d label(s) get no training group",
-            firsts.size,
-            n_train,
-            firsts.size - n_train,
-        )
-    rest, keys = [], []
-    for s in strata:
-        m = members[s][1:]
-        if m.size:
-            # fractional rank inside the label with a random phase: labels interleave evenly
-            keys.append((np.arange(m.size) + rng.random()) / m.size)
-            rest.append(m)
-    if rest:
-        rest_a = np.concatenate(rest)
-        key = np.concatenate(keys)
-        rest_a = rest_a[np.lexsort((rng.random(rest_a.size), key))]
-    else:
-        rest_a = np.zeros(0, dtype=np.int64)
-    return np.concatenate([firsts, rest_a]).astype(np.int64)
-
-
-def split_names(
-    split: Mapping[str, np.ndarray], group_names: Sequence[str]
-) -> dict[str, list[str]]:
-    """Group ids → group names per split (what ``split.json`` stores)."""
-    return {k: [group_names[int(i)] for i in v] for k, v in split.items()}
-
-
-def split_from_names(
-    names: Mapping[str, Sequence[str]], group_names: Sequence[str], *, source: str = "split"
-) -> dict[str, np.ndarray]:
-    """Re-create a split from the names stored in ``split.json`` (inverse of :func:`split_names`).
-
-    Raises EctskinError for a missing split, a name that is not a group of the data, or a name in
-    two splits.
-    """
-    index = {name: i for i, name in enumerate(group_names)}
-    out: dict[str, np.ndarray] = {}
-    seen: dict[str, str] = {}
-    for k in SPLITS:
-        if k not in names:
-            raise EctskinError(f"{source}: missing split {k!r} (expected train, val, test)")
-        ids = []
-        for name in names[k]:
-            if name not in index:
-                raise EctskinError(
-                    f"{source}: {k} trial {name!r} is not in the data ({len(group_names)} trials, "
-                    f"e.g. {list(group_names)[:3]})"
-                )
-            if name in seen:
-                raise EctskinError(f"{source}: trial {name!r} is in both {seen[name]} and {k}")
-            seen[name] = k
-            ids.append(index[name])
-        out[k] = np.sort(np.asarray(ids, dtype=np.int64))
-    return out
-
-
-# --------------------------------------------------------------------------- normalisation
-class Normalizer:
-    """Per-channel standardisation z = (x − mean) / std, fitted on training data only.
-
-    Statistics are taken over every axis but the trailing ``channel_ndim`` ones: for touch frames
-    (n, n_pairs) and windows (n, k, n_pairs) they are per pair; for displacements (n, M, 3) with
-    ``channel_ndim=2`` per marker and axis. A channel whose std is below ``min_std`` (constant
-    over the training data) keeps std = 1, so it is centred but not blown up.
-
-    Saved as plain lists (:meth:`to_dict` / :meth:`from_dict`) inside checkpoints.
-    """
-
-    def __init__(self, mean: Any, std: Any, *, min_std: float = 1e-8) -> None:
-        mean_a = np.asarray(mean, dtype=np.float64)
-        std_a = np.asarray(std, dtype=np.float64)
-        if mean_a.shape != std_a.shape or mean_a.ndim == 0:
-            raise EctskinError(
-                f"Normalizer: mean and std must have the same (channel) shape, got "
-                f"{mean_a.shape} and {std_a.shape}"
-            )
-        if not (np.all(np.isfinite(mean_a)) and np.all(np.isfinite(std_a)) and np.all(std_a > 0)):
-            raise EctskinError("Normalizer: mean must be finite and std finite and > 0")
-        self.mean = mean_a
-        self.std = std_a
-        self.min_std = float(min_std)
-
-    @classmethod
-    def fit(cls, x: np.ndarray, *, channel_ndim: int = 1, min_std: float = 1e-8) -> Normalizer:
-        """Fit on (training) samples ``x`` of shape (..., *channel_shape)."""
-        a = np.asarray(x)
-        if a.dtype.kind not in "biuf":
-            raise EctskinError(f"Normalizer.fit: samples must be numeric, got dtype {a.dtype}")
-        if a.ndim <= channel_ndim:
-            raise EctskinError(
-                f"Normalizer.fit: need samples of shape (n, ..., channels), got {a.shape}"
-            )
-        if a.size == 0:
-            raise EctskinError("Normalizer.fit: no training samples")
-        # two passes over chunks of samples with float64 accumulators: no float64 copy of a
-        # ~100 000-window training set
-        flat = a.reshape(-1, *a.shape[a.ndim - channel_ndim :])
-        count = flat.shape[0]
-        total = np.zeros(flat.shape[1:])
-        for start in range(0, count, 65536):
-            chunk = flat[start : start + 65536]
-            if not np.all(np.isfinite(chunk)):
-                k = start + int(np.argwhere(~np.isfinite(chunk))[0][0])
-                idx = np.unravel_index(k * int(np.prod(flat.shape[1:])), a.shape)
-                raise EctskinError(
-                    f"Normalizer.fit: non-finite value in the sample at index "
-                    f"{tuple(int(i) for i in idx[: a.ndim - channel_ndim])}"
-                )
-            total += chunk.sum(axis=0, dtype=np.float64)
-        mean = total / count
-        sq = np.zeros_like(mean)
-        for start in range(0, count, 65536):
-            dev = flat[start : start + 65536] - mean
-            sq += np.einsum("n...,n...->...", dev, dev)
-        std = np.sqrt(sq / count)
-        const = std < min_std
-        if const.any():
-            log.info("Normalizer: %d constant channel(s) keep std = 1", int(const.sum()))
-            std = np.where(const, 1.0, std)
-        return cls(mean, std, min_std=min_std)
-
-    @property
-    def shape(self) -> tuple[int, ...]:
-        return self.mean.shape
-
-    def _check(self, x: np.ndarray, what: str) -> np.ndarray:
-        a = np.asarray(x)
-        if a.shape[a.ndim - self.mean.ndim :] != self.mean.shape:
-            raise EctskinError(
-                f"Normalizer.{what}: data has trailing shape {a.shape[a.ndim - self.mean.ndim :]}, "
-                f"the normaliser was fitted on channels of shape {self.mean.shape}"
-            )
-        return a
-
-    def transform(self, x: np.ndarray) -> np.ndarray:
-        """(..., *channel_shape) → standardised float32."""
-        a = self._check(x, "transform")
-        return ((a - self.mean) / self.std).astype(np.float32)
-
-    def inverse_transform(self, z: np.ndarray) -> np.ndarray:
-        """Undo :meth:`transform` (float32)."""
-        a = self._check(z, "inverse_transform")
-        return (a * self.std + self.mean).astype(np.float32)
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain lists, safe for JSON and ``torch.load(weights_only=True)``."""
-        return {
-            "kind": "standard",
-            "mean": self.mean.tolist(),
-            "std": self.std.tolist(),
-            "min_std": self.min_std,
-        }
-
-    @classmethod
-    def from_dict(cls, d: Any, *, source: str = "normalizer") -> Normalizer:
-        if not isinstance(d, Mapping) or "mean" not in d or "std" not in d:
-            raise EctskinError(
-                f"{source}: expected a dict with 'mean' and 'std' lists, got {d!r:.80}"
-            )
-        if d.get("kind", "standard") != "standard":
-            raise EctskinError(f"{source}: unknown normaliser kind {d.get('kind')!r}")
-        try:
-            return cls(d["mean"], d["std"], min_std=float(d.get("min_std", 1e-8)))
-        except (TypeError, ValueError) as exc:
-            raise EctskinError(f"{source}: {exc}") from None
-
-    def __repr__(self) -> str:
-        return f"Normalizer(shape={self.shape})"

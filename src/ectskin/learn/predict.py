@@ -3,12 +3,16 @@
 :class:`TouchPredictor` and :class:`TrackPredictor` rebuild their model from a run directory's
 ``model.pt`` alone (see :mod:`ectskin.learn.checkpoint`). The training-set normalisation lives in
 the model's buffers, so both take *calibrated* readouts (paper Eq. 2) exactly as the data sets
-hold them. Calls run in eval mode under ``torch.inference_mode`` on the CPU by default; a single
-frame or window costs well under a millisecond (see ``benchmarks/bench_train.py``).
+hold them. Calls run in eval mode under ``torch.inference_mode`` on the CPU by default (latency
+figures: ``benchmarks/bench_train.py`` and ``BENCHMARKS.md``).
+
+:func:`forward_batches` is the one batched inference path: the predictors and the evaluation of
+a run (:mod:`ectskin.learn.tasks`) both run their model through it.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +21,49 @@ import torch
 
 from ectskin._check import EctskinError
 from ectskin.learn.checkpoint import load_checkpoint
+
+
+def forward_batches(
+    model: torch.nn.Module,
+    inputs: Sequence[np.ndarray | torch.Tensor | None],
+    *,
+    batch_size: int | None = None,
+    output: Callable[[torch.Tensor], torch.Tensor] | None = None,
+    device: torch.device | None = None,
+) -> np.ndarray:
+    """``model(*inputs)`` in eval mode under ``torch.inference_mode``, ``batch_size`` samples at a
+    time (all at once when None), on ``device`` (default: the device of the model's buffers).
+
+    ``inputs`` are arrays (or tensors) with the samples on the first axis, e.g. touch frames
+    (n, n_pairs) or track windows (n, k, n_pairs) and initial coordinates (n, M, 3); None passes
+    None (a C2DT without prior). Arrays are taken as float32. ``output`` maps each batch's output
+    (e.g. softmax, argmax). Returns the batches' outputs concatenated, as numpy.
+    """
+    if device is None:
+        device = next(model.buffers()).device
+    n = int(inputs[0].shape[0])
+    size = n if batch_size is None else batch_size
+    if model.training:
+        model.eval()
+    parts = []
+    with torch.inference_mode():
+        for a in range(0, n, max(size, 1)) if n else (0,):
+            args = [None if v is None else _as_tensor(v[a : a + size], device) for v in inputs]
+            out = model(*args)
+            if output is not None:
+                out = output(out)
+            parts.append(out.cpu().numpy())
+    return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
+def _softmax(logits: torch.Tensor) -> torch.Tensor:
+    return torch.softmax(logits, dim=-1)
+
+
+def _as_tensor(value: np.ndarray | torch.Tensor, device: torch.device) -> torch.Tensor:
+    if isinstance(value, torch.Tensor):
+        return value.to(device)
+    return torch.from_numpy(np.ascontiguousarray(value, dtype=np.float32)).to(device)
 
 
 def _model_file(run_dir: str | Path) -> Path:
@@ -98,8 +145,7 @@ class TouchPredictor(_Predictor):
             f"TouchPredictor({self.source})",
             self.pair_names,
         )
-        with torch.inference_mode():
-            probs = torch.softmax(self.model(x.to(self.device)), dim=-1).cpu().numpy()
+        probs = forward_batches(self.model, [x], output=_softmax, device=self.device)
         return probs if batched else probs[0]
 
     def classify(self, c_calibrated: Any) -> np.ndarray | int:
@@ -150,7 +196,5 @@ class TrackPredictor(_Predictor):
                     f"{owner}: window and init disagree in batch size "
                     f"({tuple(x.shape)} vs {tuple(i.shape)})"
                 )
-            i = i.to(self.device)
-        with torch.inference_mode():
-            out = self.model(x.to(self.device), i).cpu().numpy()
+        out = forward_batches(self.model, [x, i], device=self.device)
         return out if batched else out[0]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import pickle
 import socket
 import subprocess
 import sys
@@ -23,48 +24,51 @@ import torch
 
 from ectskin._check import EctskinError
 from ectskin.learn.checkpoint import load_checkpoint, read_checkpoint
-from ectskin.learn.train import read_metrics, train
+from ectskin.learn.distributed import Dist
+from ectskin.learn.engine import Tensors, train_one_epoch
+from ectskin.learn.models import TouchMLP
+from ectskin.learn.runfiles import read_metrics
+from ectskin.learn.tasks import TouchCriterion
+from ectskin.learn.train import train
 
-sys.path.insert(0, os.path.dirname(__file__))
-from test_train import SMALL_C2DT, blobs, displacements
+pytestmark = pytest.mark.ddp
 
+#: What each rank runs: the three trainings on the data sets pickled by the fixture, recording
+#: the epoch indices each rank saw.
 SCRIPT = textwrap.dedent(
     """
-    import json, os, sys, faulthandler
+    import json, os, pickle, sys, faulthandler
     faulthandler.dump_traceback_later(150, exit=True)  # a hang fails with stacks
-    import numpy as np
     import torch
     torch.set_num_threads(1)
-    sys.path.insert(0, {tests!r})
     import ectskin.learn.train as T
-    from test_train import SMALL_C2DT, blobs, displacements
 
     out = sys.argv[1]
+    with open(out + "/data.pkl", "rb") as fh:
+        data, small_c2dt = pickle.load(fh)
     rank = int(os.environ["RANK"])
     seen = []
     original = T.epoch_indices
 
     def recording(n, epoch, seed, **kw):
         idx = original(n, epoch, seed, **kw)
-        seen.append({{"n": n, "epoch": epoch, **kw, "idx": idx.tolist()}})
+        seen.append({"n": n, "epoch": epoch, **kw, "idx": idx.tolist()})
         return idx
 
     T.epoch_indices = recording
-    result = {{}}
-    tr, va = blobs(20, 30, seed=0), blobs(6, 30, seed=1)
+    result = {}
+    tr, va = data["touch"]
     result["touch"] = T.train("touch", tr, va, out + "/touch", profile="quick", epochs=3,
-                              batch_size=64, model_options={{"dropout": 0.0}}, progress=False)
-    tr, va = displacements(4, 60, seed=0), displacements(2, 60, seed=1)
+                              batch_size=64, model_options={"dropout": 0.0}, progress=False)
+    tr, va = data["track"]
     result["track"] = T.train("track", tr, va, out + "/track", profile="quick", epochs=2,
-                              batch_size=32, model_options=SMALL_C2DT, progress=False,
-                              settings={{"samples_per_epoch": None, "val_samples": None}})
-    from test_robust import seen as seen_combos, states_data
-    tr = states_data(0, seen_combos, per=20)
-    va = states_data(1, seen_combos, per=20, no_contact=False)
+                              batch_size=32, model_options=small_c2dt, progress=False,
+                              settings={"samples_per_epoch": None, "val_samples": None})
+    tr, va = data["robust"]
     result["robust"] = T.train("touch", tr, va, out + "/robust", profile="robust", epochs=2,
                                batch_size=64, progress=False)
-    with open(f"{{out}}/rank{{rank}}.json", "w") as fh:
-        json.dump({{"result": result, "seen": seen}}, fh)
+    with open(f"{out}/rank{rank}.json", "w") as fh:
+        json.dump({"result": result, "seen": seen}, fh)
     """
 )
 
@@ -76,10 +80,17 @@ def _free_port() -> int:
 
 
 @pytest.fixture(scope="module")
-def ddp_run(tmp_path_factory):
+def ddp_run(tmp_path_factory, blobs, displacements, states_data, small_c2dt):
     tmp = tmp_path_factory.mktemp("ddp")
+    data = {
+        "touch": (blobs(20, 30, seed=0), blobs(6, 30, seed=1)),
+        "track": (displacements(4, 60, seed=0), displacements(2, 60, seed=1)),
+        "robust": (states_data(0, 0, per=20), states_data(1, 0, per=20, no_contact=False)),
+    }
+    with open(tmp / "data.pkl", "wb") as fh:
+        pickle.dump((data, small_c2dt), fh)
     script = tmp / "ddp_script.py"
-    script.write_text(SCRIPT.format(tests=os.path.dirname(os.path.abspath(__file__))))
+    script.write_text(SCRIPT)
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     env.pop("WORLD_SIZE", None)
     cmd = [
@@ -118,7 +129,7 @@ def test_ranks_saw_disjoint_shards_covering_the_epoch(ddp_run):
         assert r["result"]["touch"]["world_size"] == 2
 
 
-def test_only_rank0_wrote_and_the_model_is_good(ddp_run):
+def test_only_rank0_wrote_and_the_model_is_good(ddp_run, blobs):
     tmp, ranks = ddp_run
     assert sorted(p.name for p in (tmp / "touch").iterdir()) == [
         "config.json",
@@ -156,7 +167,7 @@ def test_robust_profile_trains_under_ddp(ddp_run):
     ]
 
 
-def test_ddp_matches_a_single_process_run(ddp_run, tmp_path):
+def test_ddp_matches_a_single_process_run(ddp_run, tmp_path, blobs, displacements, small_c2dt):
     tmp, _ = ddp_run
     tr, va = blobs(20, 30, seed=0), blobs(6, 30, seed=1)
     train(
@@ -179,7 +190,7 @@ def test_ddp_matches_a_single_process_run(ddp_run, tmp_path):
         profile="quick",
         epochs=2,
         batch_size=32,
-        model_options=SMALL_C2DT,
+        model_options=small_c2dt,
         progress=False,
         settings={"samples_per_epoch": None, "val_samples": None},
     )
@@ -202,18 +213,15 @@ def test_deferred_non_finite_check_names_the_first_bad_batch(tmp_path):
     remembered on the device and reported after the epoch, the same on every rank."""
     import torch.distributed as dist
 
-    from ectskin.learn.models import TouchMLP
-    from ectskin.learn.train import _Dist, _Tensors, _TouchTask, train_one_epoch
-
     dist.init_process_group("gloo", init_method=f"file://{tmp_path}/pg", rank=0, world_size=1)
     try:
         x = torch.randn(64, 28)
         x[40] = float("nan")  # sample 40 is in batch 3 of 4 (batch size 16, identity order)
-        data = _Tensors(x, torch.zeros(64, dtype=torch.int64))
+        data = Tensors((x, torch.zeros(64, dtype=torch.int64)))
         model = TouchMLP()
         opt = torch.optim.Adam(model.parameters())
-        d = _Dist(rank=0, world_size=2)  # "distributed": take the deferred path
+        d = Dist(rank=0, world_size=2)  # "distributed": take the deferred path
         with pytest.raises(EctskinError, match=r"non-finite loss at epoch 5, batch 3 of 4"):
-            train_one_epoch(model, _TouchTask(model), opt, data, torch.arange(64), 16, epoch=4, d=d)
+            train_one_epoch(model, TouchCriterion(), opt, data, torch.arange(64), 16, epoch=4, d=d)
     finally:
         dist.destroy_process_group()

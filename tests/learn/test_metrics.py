@@ -1,8 +1,7 @@
-"""Evaluation metrics on hand-computed cases, figures, and evaluate_run on a tiny trained run."""
+"""Test-set metrics on hand-computed cases (ectskin.learn.metrics)."""
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
@@ -10,7 +9,7 @@ import pytest
 
 from ectskin._check import EctskinError
 from ectskin.layout import default_layout
-from ectskin.learn.evaluate import (
+from ectskin.learn.metrics import (
     average_distance,
     confusion_matrix,
     format_count,
@@ -18,7 +17,6 @@ from ectskin.learn.evaluate import (
     region_adjacency,
     touch_metrics,
     track_metrics,
-    write_json_atomic,
 )
 
 
@@ -142,38 +140,3 @@ def test_track_metrics_per_marker_and_trajectory():
     assert m["worst_trajectory"]["name"] == "t1"
     assert m["worst_trajectory"]["ad_mm_mean"] == pytest.approx(2.5)
     assert m["ad_mm_max"] == pytest.approx(4.0)
-
-
-def test_write_json_atomic_converts_numpy(tmp_path):
-    p = write_json_atomic(
-        tmp_path / "m.json", {"a": np.float32(1.5), "b": np.arange(3), "c": float("nan")}
-    )
-    assert json.loads(p.read_text()) == {"a": 1.5, "b": [0, 1, 2], "c": None}
-    assert [f.name for f in tmp_path.iterdir()] == ["m.json"]  # no temp file left
-
-
-# ----------------------------------------------------------------------------- figures
-def test_figures_draw_and_return_figures(tmp_path):
-    from ectskin.viz import plot_confusion, plot_marker_trajectory, plot_tracking_examples
-
-    conf = np.diag([5, 6, 7])
-    conf[1, 2] = 2
-    fig = plot_confusion(conf)
-    texts = [t.get_text() for t in fig.axes[0].texts]
-    assert sorted(texts) == sorted(["5", "6", "7", "2"])  # non-zero cells annotated
-    assert "2 of 20" in fig.axes[0].get_title()
-    fig.savefig(tmp_path / "c.png")
-
-    true = np.zeros((6, 5, 3))
-    true[..., 2] = np.arange(5) * 24
-    pred = true + 1.0  # every marker sqrt(3) mm off
-    fig = plot_tracking_examples(pred, true, titles=[f"s{i}" for i in range(6)])
-    assert len(fig.axes) == 6
-    assert all(f"AD = {math.sqrt(3):.3f} mm" in ax.get_title() for ax in fig.axes)
-    fig.savefig(tmp_path / "t.png")
-
-    t = np.arange(30) / 30
-    fig = plot_marker_trajectory(t, true[0, :1].repeat(30, 0) + 2.0, true[0, :1].repeat(30, 0))
-    assert len(fig.axes) == 3
-    with pytest.raises(EctskinError, match="shape"):
-        plot_marker_trajectory(t, np.zeros((29, 3)), np.zeros((30, 3)))

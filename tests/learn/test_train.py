@@ -1,5 +1,5 @@
-"""Training loop (ectskin.learn.train): profiles, files, best weights, resume, determinism,
-errors, sharding, and the CLI helper on a small recording."""
+"""Training (ectskin.learn.train, ectskin.learn.engine): files, best weights, resume,
+determinism, errors, sharding, and train_from_recording on a small recording file."""
 
 from __future__ import annotations
 
@@ -12,93 +12,18 @@ import pytest
 import torch
 
 from ectskin._check import EctskinError
+from ectskin.io import write_recording
 from ectskin.layout import default_layout
 from ectskin.learn.checkpoint import load_checkpoint, read_checkpoint
-from ectskin.learn.datasets import TouchData, TrackData
-from ectskin.learn.train import (
-    PROFILES,
-    epoch_indices,
-    main_from_args,
-    profile_settings,
-    read_metrics,
-    train,
-)
+from ectskin.learn.engine import epoch_indices
+from ectskin.learn.runfiles import read_metrics
+from ectskin.learn.train import TrainConfig, train, train_from_recording
 
-torch.set_num_threads(1)
 LAYOUT = default_layout()
 
 
-# ============================================================================ synthetic data
-def blobs(n_groups: int, per: int, *, seed: int, n_classes: int = 5, noise: float = 0.25):
-    """Gaussian blobs: group g is class g % n_classes around a fixed centre (28 channels)."""
-    centres = np.random.default_rng(123).normal(0, 0.2, size=(n_classes, 28))
-    rng = np.random.default_rng(seed)
-    cls = np.arange(n_groups) % n_classes
-    x = centres[np.repeat(cls, per)] + noise * 0.2 * rng.standard_normal((n_groups * per, 28))
-    return TouchData(
-        x=x.astype(np.float32),
-        y=np.repeat(cls, per).astype(np.int64),
-        group=np.repeat(np.arange(n_groups), per).astype(np.int64),
-        group_names=[f"s{seed}-t{g}" for g in range(n_groups)],
-        n_classes=n_classes,
-        pair_names=list(LAYOUT.pair_names),
-    )
-
-
-def displacements(n_groups: int, per: int, *, seed: int, k: int = 4) -> TrackData:
-    """A bending-like law: the markers (on a line along z, like the paper's) move along y by
-    30 mm x (mean of 6 front pairs' last frame) x (z / 120)², a clamped beam's shape; the other
-    22 pairs are distractors. The C2DT must find the right pairs among 28 tokens."""
-    rng = np.random.default_rng(seed)
-    n = n_groups * per
-    x = (0.1 * rng.standard_normal((n, k, 28))).astype(np.float32)
-    z = np.array([24.0, 48, 72, 96, 120])
-    base = np.stack([np.full(5, 25.0), np.zeros(5), z], axis=1)  # (5, 3)
-    init = base + rng.normal(0, 1.0, size=(n_groups, 1, 3))  # per-trajectory offset
-    init = np.repeat(init, per, axis=0).astype(np.float32)
-    bend = x[:, -1, [0, 1, 2, 7, 8, 13]].mean(1)  # (n,)
-    y = init.copy()
-    y[:, :, 1] += 30 * bend[:, None] * (z / 120) ** 2
-    return TrackData(
-        x=x,
-        init=init,
-        y=y.astype(np.float32),
-        group=np.repeat(np.arange(n_groups), per).astype(np.int64),
-        frame=np.tile(np.arange(per), n_groups).astype(np.int64),
-        group_names=[f"s{seed}-t{g}" for g in range(n_groups)],
-        electrode_desc=LAYOUT.electrode_descriptors().astype(np.float32),
-        pairs=LAYOUT.pairs.astype(np.int64),
-        prior=True,
-        pair_names=list(LAYOUT.pair_names),
-    )
-
-
-SMALL_C2DT = {"d_model": 16, "n_heads": 2, "ff": 32}
-
-
-# ============================================================================ profiles
-def test_paper_profile_is_the_papers_settings():
-    touch, track = PROFILES["paper"]["touch"], PROFILES["paper"]["track"]
-    assert (touch.epochs, touch.batch_size, track.epochs, track.batch_size) == (100, 256, 150, 255)
-    for s in (touch, track):
-        assert (s.lr, s.step_size, s.gamma) == (1e-3, 15, 1 / 1.2)
-        assert s.samples_per_epoch is None and s.val_samples is None
-    assert profile_settings("touch", "quick", epochs=3).epochs == 3
-    assert profile_settings("track", "quick", samples_per_epoch=None).samples_per_epoch is None
-    with pytest.raises(EctskinError, match="'epochs' must be a positive integer, got 0"):
-        train("touch", blobs(2, 5, seed=0), blobs(1, 5, seed=1), "unused", epochs=0)
-    with pytest.raises(
-        EctskinError, match="allowed values are 'paper', 'quick', 'robust'; got 'fast'"
-    ):
-        profile_settings("touch", "fast")
-    with pytest.raises(EctskinError, match="'batch_size' must be a positive integer"):
-        profile_settings("touch", "paper", batch_size=0)
-    with pytest.raises(EctskinError, match="unknown training setting"):
-        profile_settings("touch", "paper", momentum=0.9)
-
-
 # ============================================================================ touch
-def test_touch_training_writes_the_run_and_keeps_the_best_weights(tmp_path):
+def test_touch_training_writes_the_run_and_keeps_the_best_weights(tmp_path, blobs):
     tr, va, te = blobs(20, 50, seed=0), blobs(5, 50, seed=1), blobs(5, 50, seed=2)
     out = tmp_path / "run"
     s = train(
@@ -146,7 +71,7 @@ def test_touch_training_writes_the_run_and_keeps_the_best_weights(tmp_path):
     assert cfg["task"] == "touch" and cfg["settings"]["epochs"] == 6 and cfg["n_train"] == 1000
 
 
-def test_resume_equals_an_uninterrupted_run(tmp_path):
+def test_resume_equals_an_uninterrupted_run(tmp_path, blobs):
     tr, va = blobs(10, 40, seed=0), blobs(4, 40, seed=1)
     straight = train(
         "touch",
@@ -212,7 +137,7 @@ def test_resume_equals_an_uninterrupted_run(tmp_path):
     assert again["epochs_run"] == 0 and again["best_val_loss"] == resumed["best_val_loss"]
 
 
-def test_resume_drops_metrics_rows_written_after_last_checkpoint(tmp_path):
+def test_resume_drops_metrics_rows_written_after_last_checkpoint(tmp_path, blobs):
     tr, va = blobs(10, 20, seed=0), blobs(4, 20, seed=1)
     kw = {"profile": "quick", "progress": False}
     train("touch", tr, va, tmp_path, epochs=2, **kw)
@@ -223,7 +148,7 @@ def test_resume_drops_metrics_rows_written_after_last_checkpoint(tmp_path):
     assert [r["epoch"] for r in rows] == [1, 2, 3] and rows[2]["train_loss"] != 9
 
 
-def test_resume_refuses_other_settings_or_data(tmp_path):
+def test_resume_refuses_other_settings_or_data(tmp_path, blobs):
     tr, va = blobs(10, 20, seed=0), blobs(4, 20, seed=1)
     train("touch", tr, va, tmp_path, profile="quick", epochs=1, progress=False)
     with pytest.raises(EctskinError, match=r"last\.pt: training settings differ \(batch_size"):
@@ -260,7 +185,7 @@ def test_resume_refuses_other_settings_or_data(tmp_path):
     assert s["resumed_from"] == 0 and s["epochs_run"] == 1
 
 
-def test_training_is_deterministic_for_a_seed(tmp_path):
+def test_training_is_deterministic_for_a_seed(tmp_path, blobs):
     tr, va = blobs(10, 30, seed=0), blobs(4, 30, seed=1)
     kw = {"profile": "quick", "epochs": 2, "progress": False}
     train("touch", tr, va, tmp_path / "a", seed=7, **kw)
@@ -271,7 +196,7 @@ def test_training_is_deterministic_for_a_seed(tmp_path):
     assert not torch.equal(sd["a"]["net.0.weight"], sd["c"]["net.0.weight"])
 
 
-def test_bad_inputs_are_clear_errors(tmp_path):
+def test_bad_inputs_are_clear_errors(tmp_path, blobs):
     tr, va = blobs(6, 10, seed=0), blobs(2, 10, seed=1)
     bad = blobs(6, 10, seed=0)
     bad.x[23, 4] = np.nan
@@ -291,7 +216,7 @@ def test_bad_inputs_are_clear_errors(tmp_path):
         train("track", tr, va, tmp_path, epochs=1, progress=False)
 
 
-def test_non_finite_loss_stops_naming_epoch_and_batch(tmp_path):
+def test_non_finite_loss_stops_naming_epoch_and_batch(tmp_path, blobs):
     tr, va = blobs(10, 40, seed=0), blobs(4, 40, seed=1)
     with pytest.raises(EctskinError, match=r"non-finite loss .* at epoch 1, batch \d+ of 13"):
         train(
@@ -307,7 +232,7 @@ def test_non_finite_loss_stops_naming_epoch_and_batch(tmp_path):
 
 
 # ============================================================================ track
-def test_track_training_beats_no_motion(tmp_path):
+def test_track_training_beats_no_motion(tmp_path, displacements, small_c2dt):
     tr, va = displacements(6, 200, seed=0), displacements(2, 200, seed=1)
     s = train(
         "track",
@@ -318,7 +243,7 @@ def test_track_training_beats_no_motion(tmp_path):
         epochs=8,
         batch_size=64,
         settings={"step_size": 4, "samples_per_epoch": None, "val_samples": None},
-        model_options=SMALL_C2DT,
+        model_options=small_c2dt,
         progress=False,
     )
     assert s["metric"] == "ad_mm"
@@ -338,7 +263,7 @@ def test_track_training_beats_no_motion(tmp_path):
     assert best["val_loss"] == pytest.approx(np.mean((pred - va.y) ** 2), rel=1e-4)
 
 
-def test_track_without_prior_and_with_subsampled_epochs(tmp_path):
+def test_track_without_prior_and_with_subsampled_epochs(tmp_path, displacements, small_c2dt):
     tr, va = displacements(4, 50, seed=0), displacements(2, 50, seed=1)
     tr.prior = va.prior = False
     s = train(
@@ -350,7 +275,7 @@ def test_track_without_prior_and_with_subsampled_epochs(tmp_path):
         epochs=2,
         settings={"samples_per_epoch": 64, "val_samples": 30},
         batch_size=32,
-        model_options=SMALL_C2DT,
+        model_options=small_c2dt,
         progress=False,
     )
     assert math.isfinite(s["best_val_metric"])
@@ -380,76 +305,66 @@ def test_epoch_indices_shard_one_permutation():
     assert len(epoch_indices(n, 4, 0, samples=10)) == 10
 
 
-# ============================================================================ CLI helper
-def _tiny_recording(path):
-    """A hand-made recording: 2 inflation states x (no contact + 4 touch regions), 40 frames."""
-    from ectskin.io.hdf5 import write_recording
-    from ectskin.io.recording import Recording, Trial
-
-    rng = np.random.default_rng(0)
-    base = 1.0 + rng.uniform(0, 1, 28)
-    resp = rng.normal(0, 0.05, size=(LAYOUT.n_classes, 28))
-    trials = []
-    for s, infl in enumerate((0.0, 20.0)):
-        for region in (0, 1, 5, 10, 14):
-            n = 40
-            force = np.abs(np.sin(np.linspace(0, 3, n))) if region else np.zeros(n)
-            c = base * (1 + 0.01 * infl / 20) + base * resp[region] * (0.5 + force[:, None])
-            c = c + rng.normal(0, 1e-3, size=c.shape)
-            markers = np.broadcast_to(
-                np.array([[25.0, 0, z] for z in (24, 48, 72, 96, 120)]), (n, 5, 3)
-            ).copy()
-            markers[:, :, 1] += 3 * force[:, None]
-            trials.append(
-                Trial(
-                    name=f"p{s}-r{region}",
-                    capacitance=c,
-                    timestamps=np.arange(n) / 30.0,
-                    labels=np.full(n, region, dtype=np.int16),
-                    inflation=(infl,) * 3,
-                    region=region,
-                    markers=markers,
-                    meta={"kind": "touch" if region else "no_contact"},
-                )
-            )
-    write_recording(Recording(LAYOUT, trials, 30.0), path)
+# ============================================================================ from a file
+@pytest.fixture
+def recording_file(tmp_path, make_recording):
+    """2 inflation states x (no contact + 4 touch regions), 40 frames, markers everywhere."""
+    path = tmp_path / "data.h5"
+    write_recording(
+        make_recording(n_frames=40, regions=(1, 5, 10, 14), occluded=(), no_markers=()), path
+    )
     return path
 
 
-def test_main_from_args_trains_from_a_recording_file(tmp_path):
-    data = _tiny_recording(tmp_path / "data.h5")
-    s = main_from_args(
-        "touch",
-        data,
-        tmp_path / "touch",
-        profile="quick",
-        epochs=2,
-        counts=(6, 2, 2),
-        progress=False,
-    )
+def test_train_from_recording(tmp_path, recording_file, small_c2dt):
+    data = recording_file
+    config = TrainConfig(profile="quick", epochs=2, counts=(6, 2, 2), progress=False)
+    s = train_from_recording("touch", data, tmp_path / "touch", config)
     split = json.loads((tmp_path / "touch" / "split.json").read_text())
     assert s["n_train"] == 6 * 40 and (s["n_val"], s["n_test"]) == (80, 80)
-    assert {len(split[k]) for k in ("train", "val", "test")} == {6, 2}.union({2})
+    assert [len(split[k]) for k in ("train", "val", "test")] == [6, 2, 2]
     assert not set(split["train"]) & set(split["test"]) and split["task"] == "touch"
-    assert split["data"] == str(data.resolve())
-    s = main_from_args(
-        "track",
-        data,
-        tmp_path / "track",
+    assert split["data"] == str(data.resolve()) and split["split_seed"] == 0
+    config = TrainConfig(
         profile="quick",
         epochs=1,
         window=3,
         counts=(4, 2, 2),
         progress=False,
-        model_options=SMALL_C2DT,
+        model_options=small_c2dt,
     )
-    _, config, _ = load_checkpoint(tmp_path / "track" / "model.pt")
-    assert config.window == 3 and s["n_train"] == 4 * 40
+    s = train_from_recording("track", data, tmp_path / "track", config)
+    _, model_config, _ = load_checkpoint(tmp_path / "track" / "model.pt")
+    assert model_config.window == 3 and s["n_train"] == 4 * 40
     with pytest.raises(EctskinError, match="no such data file"):
-        main_from_args("touch", tmp_path / "nope.h5", tmp_path / "x")
+        train_from_recording("touch", tmp_path / "nope.h5", tmp_path / "x")
 
 
-def test_progress_bars_on_a_tty_and_epoch_logs_otherwise(tmp_path, monkeypatch, caplog):
+def test_train_from_recording_refuses_before_reading_the_data(tmp_path):
+    missing = tmp_path / "never-read.h5"  # every refusal comes before the data is read
+    with pytest.raises(EctskinError, match="allowed values are 'touch', 'track'"):
+        train_from_recording("shape", missing, tmp_path / "a")
+    with pytest.raises(EctskinError, match="'epochs' must be a positive integer, got 0"):
+        train_from_recording("touch", missing, tmp_path / "a", TrainConfig(epochs=0))
+    with pytest.raises(EctskinError, match="apply to 'track' only"):
+        train_from_recording("touch", missing, tmp_path / "a", TrainConfig(window=3))
+    with pytest.raises(EctskinError, match="window must be an integer >= 1"):
+        train_from_recording("track", missing, tmp_path / "a", TrainConfig(window=0))
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    with pytest.raises(EctskinError, match="not a run directory"):
+        train_from_recording("touch", missing, other)
+    half = tmp_path / "half"
+    half.mkdir()
+    (half / "model.pt").write_bytes(b"")
+    with pytest.raises(EctskinError, match="model.pt without last.pt"):
+        train_from_recording("touch", missing, half)
+    with pytest.raises(EctskinError, match="threads must be an integer >= 1"):
+        train_from_recording("touch", missing, tmp_path / "a", TrainConfig(threads=0))
+
+
+def test_progress_bars_on_a_tty_and_epoch_logs_otherwise(tmp_path, monkeypatch, caplog, blobs):
     import io
     import logging
     import sys
@@ -464,13 +379,13 @@ def test_progress_bars_on_a_tty_and_epoch_logs_otherwise(tmp_path, monkeypatch, 
     train("touch", tr, va, tmp_path / "a", profile="quick", epochs=2)
     assert "train touch" in tty.getvalue() and "2/2" in tty.getvalue()
     monkeypatch.setattr(sys, "stderr", io.StringIO())  # not a terminal: one log line per epoch
-    with caplog.at_level(logging.INFO, logger="ectskin.learn.train"):
+    with caplog.at_level(logging.INFO, logger="ectskin.learn.engine"):
         train("touch", tr, va, tmp_path / "b", profile="quick", epochs=2)
     assert [r.getMessage()[:9] for r in caplog.records if "epoch" in r.getMessage()][:2] == [
         "epoch 1/2",
         "epoch 2/2",
     ]
     caplog.clear()
-    with caplog.at_level(logging.INFO, logger="ectskin.learn.train"):
+    with caplog.at_level(logging.INFO, logger="ectskin.learn.engine"):
         train("touch", tr, va, tmp_path / "c", profile="quick", epochs=2, progress=False)
     assert not [r for r in caplog.records if r.getMessage().startswith("epoch")]

@@ -1,0 +1,187 @@
+"""Named training profiles: the optimisation settings and the touch recipe of each task.
+
+:data:`PROFILES` maps profile → task → :class:`TrainSettings`; :func:`profile_settings` picks one
+and applies overrides, checking every field at the door.
+
+* ``paper``: the paper's settings (§4): Adam, lr 1e-3 divided by 1.2 every 15 epochs (StepLR,
+  gamma 1/1.2); touch 100 epochs of batch 256, track 150 epochs of batch 255; the weights with
+  the lowest validation loss are kept.
+* ``quick``: for a laptop CPU. Touch 30 epochs of batch 256, the learning rate divided by 1.2
+  every 5 epochs. Track 20 epochs, each on a fresh random subset of 8 192 training windows
+  (windows of one trajectory are strongly correlated, so a subset per epoch loses little),
+  batch 256, divided by 1.2 every 2 epochs, validated on a fixed subset of 4 096 windows. Both
+  keep the paper's optimizer and best-validation rule.
+* ``robust`` (touch only; ours, not the paper's): the paper's TouchMLP, unchanged, trained with
+  a recipe meant to generalise to unseen (inflation state, touch placement) combinations. Per
+  training frame it adds an *inflation shift*, the difference between the mean no-contact
+  frames of two training inflation states drawn at random ("the same touch seen at another
+  inflation", see :mod:`ectskin.learn.augment`), then mixes the batch up (mixup, Beta(0.4, 0.4),
+  a λ per sample), uses cross-entropy with label smoothing 0.1, Adam 1e-3 divided by 1.2 every 5
+  epochs, batch 256, 20 epochs, and keeps the weights with the best validation *accuracy*, ties
+  broken by the lower validation loss.
+
+Measured training times are in ``BENCHMARKS.md``; a run's accuracy is in its ``metrics.json``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+
+from ectskin._check import EctskinError, check_option
+
+#: Rules that pick the kept weights: lowest validation loss, or best validation metric.
+SELECT = ("val_loss", "val_metric")
+
+
+@dataclass(frozen=True)
+class TrainSettings:
+    """Optimisation settings of one profile and task (Adam + StepLR, paper §4), and the touch
+    recipe: augmentation, label smoothing and the rule that picks the kept weights (defaults:
+    the paper's; the ``robust`` profile sets them)."""
+
+    epochs: int
+    batch_size: int  # global batch (split over DDP ranks)
+    lr: float = 1e-3
+    step_size: int = 15  # StepLR: epochs between learning-rate decays
+    gamma: float = 1 / 1.2  # "decayed by a factor of 1.2 every 15 epochs"
+    samples_per_epoch: int | None = None  # None: every training sample once per epoch
+    val_samples: int | None = None  # None: the whole validation set each epoch
+    eval_batch_size: int = 2048
+    # --- touch recipe (defaults: the paper's, no augmentation) --------------------------------
+    inflation_shift: bool = False  # add mean(no-contact state a) - mean(state b) per frame
+    mixup_alpha: float = 0.0  # > 0: mixup with Beta(alpha, alpha), one lambda per sample
+    label_smoothing: float = 0.0  # of the training cross-entropy (validation loss: plain CE)
+    select: str = "val_loss"  # keep the weights of the lowest val_loss or the best val_metric
+
+    @property
+    def augments(self) -> bool:
+        return self.inflation_shift or self.mixup_alpha > 0
+
+
+#: profile → task → settings (see the module docstring).
+PROFILES: dict[str, dict[str, TrainSettings]] = {
+    "paper": {
+        "touch": TrainSettings(epochs=100, batch_size=256),
+        "track": TrainSettings(epochs=150, batch_size=255),
+    },
+    "quick": {
+        "touch": TrainSettings(epochs=30, batch_size=256, step_size=5),
+        "track": TrainSettings(
+            epochs=20, batch_size=256, step_size=2, samples_per_epoch=8192, val_samples=4096
+        ),
+    },
+    "robust": {
+        "touch": TrainSettings(
+            epochs=20,
+            batch_size=256,
+            step_size=5,
+            inflation_shift=True,
+            mixup_alpha=0.4,
+            label_smoothing=0.1,
+            select="val_metric",
+        ),
+    },
+}
+#: The tasks that have training settings, in the order of :data:`PROFILES`.
+PROFILE_TASKS = tuple(dict.fromkeys(task for per_task in PROFILES.values() for task in per_task))
+#: Tasks that learn class labels: the recipe's augmentation and label smoothing apply to them.
+RECIPE_TASKS = ("touch",)
+#: The fields of the touch recipe, stored as ``recipe`` in config.json and metrics.json.
+RECIPE_FIELDS = ("inflation_shift", "mixup_alpha", "label_smoothing", "select")
+
+
+def profiles_for(task: str) -> tuple[str, ...]:
+    """The names of the profiles that have settings for ``task``."""
+    return tuple(name for name, per_task in PROFILES.items() if task in per_task)
+
+
+def profile_settings(task: str, profile: str = "paper", **overrides: Any) -> TrainSettings:
+    """The :class:`TrainSettings` of ``profile`` for ``task`` with ``overrides`` applied
+    (e.g. ``samples_per_epoch=None`` to use every training sample in the quick profile)."""
+    check_option("task", task, PROFILE_TASKS)
+    check_option("profile", profile, tuple(PROFILES))
+    if task not in PROFILES[profile]:
+        available = ", ".join(repr(p) for p in profiles_for(task))
+        raise EctskinError(
+            f"profile {profile!r} has no settings for task {task!r} (it exists for "
+            f"{', '.join(repr(t) for t in PROFILES[profile])} only); profiles for {task!r}: "
+            f"{available}"
+        )
+    names = {f.name for f in fields(TrainSettings)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise EctskinError(f"unknown training setting(s): {', '.join(unknown)}")
+    settings = replace(PROFILES[profile][task], **overrides)
+    _check_settings(settings)
+    if task not in RECIPE_TASKS and (settings.augments or settings.label_smoothing > 0):
+        raise EctskinError(
+            "training settings 'inflation_shift', 'mixup_alpha' and 'label_smoothing' apply to "
+            f"task {' or '.join(repr(t) for t in RECIPE_TASKS)} only, got "
+            f"{settings.inflation_shift!r}, {settings.mixup_alpha!r}, "
+            f"{settings.label_smoothing!r} for {task!r}"
+        )
+    return settings
+
+
+def _check_settings(settings: TrainSettings) -> None:
+    """Every field of ``settings`` in its range, or an EctskinError naming the field."""
+    for name in ("epochs", "batch_size", "step_size", "eval_batch_size"):
+        v = getattr(settings, name)
+        if not isinstance(v, int | np.integer) or isinstance(v, bool) or v < 1:
+            raise EctskinError(f"training setting {name!r} must be a positive integer, got {v!r}")
+    for name in ("samples_per_epoch", "val_samples"):
+        v = getattr(settings, name)
+        if v is not None and (not isinstance(v, int | np.integer) or v < 1):
+            raise EctskinError(f"training setting {name!r} must be None or >= 1, got {v!r}")
+    if not (settings.lr > 0 and math.isfinite(settings.lr)):
+        raise EctskinError(f"training setting 'lr' must be > 0, got {settings.lr!r}")
+    if not 0 < settings.gamma <= 1:
+        raise EctskinError(f"training setting 'gamma' must be in (0, 1], got {settings.gamma!r}")
+    if not isinstance(settings.inflation_shift, bool | np.bool_):
+        raise EctskinError(
+            f"training setting 'inflation_shift' must be True or False, got "
+            f"{settings.inflation_shift!r}"
+        )
+    if not (settings.mixup_alpha >= 0 and math.isfinite(settings.mixup_alpha)):
+        raise EctskinError(
+            f"training setting 'mixup_alpha' must be >= 0 (0: no mixup), got "
+            f"{settings.mixup_alpha!r}"
+        )
+    if not 0 <= settings.label_smoothing < 1:
+        raise EctskinError(
+            f"training setting 'label_smoothing' must be in [0, 1), got "
+            f"{settings.label_smoothing!r}"
+        )
+    check_option("select", settings.select, SELECT)
+
+
+def describe_recipe(recipe: Mapping[str, Any] | None, metric: str = "accuracy") -> str:
+    """A phrase for a run's training recipe (``recipe`` of its config.json), e.g. "inflation
+    shift over 25 no-contact training states, mixup (Beta 0.4, 0.4), label smoothing 0.1, weights
+    of the best validation accuracy"; "the paper's recipe" for none of these."""
+    if not recipe:
+        return "the paper's recipe"
+    parts = []
+    if recipe.get("inflation_shift"):
+        n = int(recipe.get("inflation_shift_states") or 0)
+        parts.append(
+            f"inflation shift over {n} no-contact training states"
+            if n >= 2
+            else "inflation shift skipped (fewer than 2 no-contact training trials)"
+        )
+    alpha = float(recipe.get("mixup_alpha") or 0)
+    if alpha > 0:
+        parts.append(f"mixup (Beta {alpha:g}, {alpha:g})")
+    smoothing = float(recipe.get("label_smoothing") or 0)
+    if smoothing > 0:
+        parts.append(f"label smoothing {smoothing:g}")
+    if recipe.get("select") == "val_metric":
+        parts.append(f"weights of the best validation {metric}")
+    elif parts:
+        parts.append("weights of the lowest validation loss")
+    return ", ".join(parts) or "the paper's recipe"
