@@ -1,8 +1,8 @@
 """``ectskin demo [--out DIR]``: ``reproduce`` with the quick profile into ``./demo-output``.
 
-About 10 minutes on a 2-core laptop: simulate the paper's 189-trial experiment in the twin, train
-TouchMLP and C2DT (and the two ablations) with the quick settings, evaluate against the baselines
-and write report.html.
+Simulates the paper's 189-trial experiment in the twin, trains TouchMLP and C2DT (and the two
+ablations) with the quick settings, evaluates them against the baselines and writes report.html.
+Meant for a laptop CPU; the report lists the time each step took.
 """
 
 from __future__ import annotations
@@ -11,9 +11,7 @@ import argparse
 
 from ectskin.commands.reproduce import add_common_arguments, run_reproduce
 
-HELP = (
-    "run the whole reproduction with quick settings into ./demo-output (about 10 min on a laptop)"
-)
+HELP = "run the whole reproduction with quick settings into ./demo-output (minutes on a laptop)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

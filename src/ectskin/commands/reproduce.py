@@ -1,5 +1,5 @@
 """``ectskin reproduce OUT_DIR``: the paper end to end (simulate, characterise, train, evaluate,
-report). Thin wrapper over :func:`ectskin.report.reproduce.reproduce`.
+report). Thin wrapper over :func:`ectskin.pipeline.reproduce`.
 
 Finished steps in OUT_DIR are reused (and reported as such), interrupted trainings resume;
 results made with other settings are never overwritten without ``--force``.
@@ -8,14 +8,13 @@ results made with other settings are never overwritten without ``--force``.
 from __future__ import annotations
 
 import argparse
-import logging
 
 from ectskin._check import EctskinError
+from ectskin.report import results_table
 
 HELP = (
     "reproduce the paper: simulate, characterise, train both models + ablations, evaluate, report"
 )
-log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -49,8 +48,9 @@ def add_common_arguments(p: argparse.ArgumentParser, *, default_profile: str) ->
     p.add_argument(
         "--threads",
         default="auto",
-        help="torch CPU threads: a number, 'auto' (default: 1 on machines with <= 4 cores, where "
-        "more gain nothing for these small models) or 'torch' (one per core)",
+        help="torch CPU threads of training and evaluation: a number, 'auto' (default: 1 on "
+        "machines with <= 4 cores, where more gain nothing for these small models) or 'torch' "
+        "(one per core)",
     )
     p.add_argument(
         "--force",
@@ -60,24 +60,25 @@ def add_common_arguments(p: argparse.ArgumentParser, *, default_profile: str) ->
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
-def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
-    from ectskin.report.reproduce import reproduce
+def threads_option(text: str) -> int | str | None:
+    """``--threads`` as the pipeline takes it: a number, "auto", or None for "torch"."""
+    if text in ("auto", "torch"):
+        return {"auto": "auto", "torch": None}[text]
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise EctskinError(f"--threads must be a number >= 1, 'auto' or 'torch', got {text!r}")
+    return n
 
-    if args.workers is not None and args.workers < 1:
-        raise EctskinError(f"--workers must be >= 1, got {args.workers}")
-    if args.epochs is not None and args.epochs < 1:
-        raise EctskinError(f"--epochs must be >= 1, got {args.epochs}")
-    threads = {"auto": "auto", "torch": None}.get(args.threads, args.threads)
-    if isinstance(threads, str) and threads != "auto":
-        try:
-            threads = int(threads)
-        except ValueError:
-            threads = 0
-        if threads < 1:
-            raise EctskinError(
-                f"--threads must be a number >= 1, 'auto' or 'torch', got {args.threads!r}"
-            )
-    m = reproduce(
+
+def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
+    # imported here, not at the top: the pipeline imports torch, which `ectskin --help` and the
+    # other commands should not wait for
+    from ectskin.pipeline import ReproduceConfig, reproduce
+
+    config = ReproduceConfig(
         out_dir,
         profile=args.profile,
         seed=args.seed,
@@ -88,11 +89,10 @@ def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
         robust=not args.no_robust,
         baselines=not args.no_baselines,
         device=args.device,
-        threads=threads,
+        threads=threads_option(args.threads),
         progress=not args.no_progress,
     )
-    from ectskin.report.report import results_table
-
+    m = reproduce(config)
     for metric, paper, this, base in results_table(m):
         print(f"{metric}: {this} (paper {paper}; baselines: {base})")
     if m.get("reused"):

@@ -117,3 +117,28 @@ def test_report_errors(tmp_path):
         write_report(tmp_path / "missing", METRICS)
     with pytest.raises(EctskinError, match="nope.png"):
         write_report(tmp_path, METRICS, {"x": "nope.png"})
+
+
+def test_report_shows_the_robust_recipe(tmp_path):
+    words = "mixup (Beta 0.4, 0.4), weights of the best validation accuracy"
+    robust = {"accuracy": 0.97, "recipe_description": words}
+    m = {**METRICS, "touch": {**METRICS["touch"], "robust": robust}}
+    md = write_report(tmp_path, m)[0].read_text()
+    assert f"trained with the `robust` profile instead of the paper's recipe: {words}. It" in md
+    del robust["recipe_description"]  # a metrics.json without the words still renders
+    md = write_report(tmp_path, m)[0].read_text()
+    assert "instead of the paper's recipe. It is evaluated on the same test trials" in md
+
+
+def test_the_report_imports_no_data_or_learning_code():
+    """report/ renders a dict: importing it loads neither torch nor the layers that make data."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, ectskin.report; "
+        "print(sorted(m for m in sys.modules if m == 'torch' or m.split('.')[:2] in "
+        "[['ectskin', p] for p in ('io', 'twin', 'learn', 'pipeline', 'electrostatics')]))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

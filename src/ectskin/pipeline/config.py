@@ -1,0 +1,175 @@
+"""What a reproduction runs: the trainings of the paper's runs and :class:`ReproduceConfig`.
+
+The runs (``OUT_DIR/runs/<name>``), each a training of :mod:`ectskin.learn.train` on the same
+data and split seed:
+
+==================  =======  ======  =====  ==========================================
+run                 task     window  prior  role
+==================  =======  ======  =====  ==========================================
+``touch``           touch    10      yes    the paper's TouchMLP
+``touch_robust``    touch    10      yes    the same network, ``robust`` profile (ours)
+``track``           track    10      yes    the paper's C2DT
+``track_no_prior``  track    10      no     ablation: absolute calibration, no initial coordinates
+``track_window_1``  track    1       yes    ablation: 1 frame instead of 10
+==================  =======  ======  =====  ==========================================
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+from ectskin._check import EctskinError, check_option, check_type
+from ectskin.io import Recording
+from ectskin.learn.threads import resolve_threads
+from ectskin.twin import Protocol
+
+#: Training profiles of a reproduction (:data:`ectskin.learn.train.PROFILES` apply per run).
+PROFILES = ("quick", "paper")
+
+#: run name → (task, window, prior).
+RUNS: dict[str, tuple[str, int, bool]] = {
+    "touch": ("touch", 10, True),
+    "touch_robust": ("touch", 10, True),
+    "track": ("track", 10, True),
+    "track_no_prior": ("track", 10, False),
+    "track_window_1": ("track", 1, True),
+}
+#: ablation key in metrics.json → run name
+ABLATIONS = {"no_prior": "track_no_prior", "window_1": "track_window_1"}
+#: runs trained with a fixed profile of ectskin.learn.train instead of the config's ``profile``
+RUN_PROFILES = {"touch_robust": "robust"}
+#: epochs of the ablation trainings under the quick profile (the main runs use the profile's)
+QUICK_ABLATION_EPOCHS = 12
+
+
+def _check_positive_int(name: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise EctskinError(f"{name} must be an integer >= 1, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class ReproduceConfig:
+    """Settings of :func:`ectskin.pipeline.reproduce`; checked when made.
+
+    Parameters
+    ----------
+    out_dir : path
+        Output folder (created). Finished steps found there are reused
+        (:mod:`ectskin.pipeline.runner`).
+    profile : "quick" | "paper"
+        Training settings of the paper's runs and the ablations (:data:`PROFILES`).
+    seed : int
+        Seeds the simulation protocol (when ``protocol`` is None), the splits and the training.
+    workers : int, optional
+        Simulation processes (default: all cores).
+    force : bool
+        Redo steps whose earlier results in ``out_dir`` were made with other settings.
+    protocol : ectskin.twin.Protocol, optional
+        The experiment to simulate (default: the paper's, ``Protocol(seed=seed)``).
+    recording : Recording, optional
+        Use this recording instead of simulating one (written to ``out_dir/data.h5``); excludes
+        ``protocol``, and the twin's characterisation is skipped.
+    epochs : int or {run name: int}, optional
+        Override the profile's epochs (run names: :data:`RUNS`; a "touch" entry also applies to
+        "touch_robust", a "track" entry to the ablations).
+    ablations, baselines, characterize : bool
+        Include the two tracking ablations, the baselines, the twin's characterisation.
+    robust : bool
+        Also train and evaluate the TouchMLP with the ``robust`` profile.
+    device : str, optional
+        Training device (default: CUDA when available).
+    progress : bool
+        Progress bars.
+    threads : int, "auto" or None
+        Torch CPU threads of training and evaluation (:mod:`ectskin.learn.threads`; None:
+        torch's current setting).
+    """
+
+    out_dir: Path
+    profile: str = "quick"
+    seed: int = 0
+    workers: int | None = None
+    force: bool = False
+    protocol: Protocol | None = None
+    recording: Recording | None = field(default=None, repr=False, compare=False)
+    epochs: int | Mapping[str, int] | None = None
+    ablations: bool = True
+    baselines: bool = True
+    characterize: bool = True
+    robust: bool = True
+    device: str | None = None
+    progress: bool = True
+    threads: int | str | None = "auto"
+
+    def __post_init__(self) -> None:
+        check_type("out_dir", self.out_dir, (str, os.PathLike))
+        object.__setattr__(self, "out_dir", Path(self.out_dir))
+        check_option("profile", self.profile, PROFILES)
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
+            raise EctskinError(f"seed must be an integer, got {self.seed!r}")
+        if self.workers is not None:
+            _check_positive_int("workers", self.workers)
+        if self.protocol is not None:
+            check_type("protocol", self.protocol, Protocol)
+        if self.recording is not None:
+            check_type("recording", self.recording, Recording)
+            if self.protocol is not None:
+                raise EctskinError("give a protocol to simulate or a recording to use, not both")
+        if isinstance(self.epochs, Mapping):
+            unknown = sorted(set(self.epochs) - set(RUNS))
+            if unknown:
+                raise EctskinError(
+                    f"epochs: unknown run name(s) {unknown}; allowed: {', '.join(RUNS)}"
+                )
+            for k, v in self.epochs.items():
+                _check_positive_int(f"epochs[{k!r}]", v)
+            object.__setattr__(self, "epochs", MappingProxyType(dict(self.epochs)))
+        elif self.epochs is not None:
+            _check_positive_int("epochs", self.epochs)
+        resolve_threads(self.threads)  # an invalid value fails here, before any work
+
+    @property
+    def run_names(self) -> tuple[str, ...]:
+        """The runs this config trains, in training order."""
+        return (
+            ("touch",)
+            + (("touch_robust",) if self.robust else ())
+            + ("track",)
+            + (tuple(ABLATIONS.values()) if self.ablations else ())
+        )
+
+    def simulation_protocol(self) -> Protocol | None:
+        """The protocol to simulate: ``protocol``, else the paper's with ``seed``; None when a
+        recording is given."""
+        if self.recording is not None:
+            return None
+        return self.protocol if self.protocol is not None else Protocol(seed=self.seed)
+
+    def run_profile(self, name: str) -> str:
+        """The ``ectskin.learn.train`` profile run ``name`` trains with."""
+        return RUN_PROFILES.get(name, self.profile)
+
+    def epochs_for(self, name: str) -> int | None:
+        """Epochs of run ``name``: from ``epochs`` (an int for all, or per run as documented
+        above), else the profile's (None; ablations under ``quick``: :data:`QUICK_ABLATION_EPOCHS`).
+        """
+        epochs = self.epochs
+        if isinstance(epochs, Mapping):
+            if name in epochs:
+                return int(epochs[name])
+            if name in ABLATIONS.values() and "track" in epochs:
+                return int(epochs["track"])
+            if name == "touch_robust" and "touch" in epochs:
+                return int(epochs["touch"])
+            epochs = None
+        if epochs is not None:
+            return int(epochs)
+        if self.profile == "quick" and name in ABLATIONS.values():
+            return QUICK_ABLATION_EPOCHS
+        return None

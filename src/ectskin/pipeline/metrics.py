@@ -1,0 +1,164 @@
+"""The reproduction's ``metrics.json``: the per-run metrics combined, and the report's figures.
+
+:func:`combine_metrics` builds the dict that :mod:`ectskin.report` renders (its keys are listed
+there): the paper runs' metrics under ``touch`` and ``track``; the robust TouchMLP under
+``touch.robust``, with ``recipe_description``, its training recipe in words; the ablations under
+``track.ablations``; then the data, the protocol, the step timings, the reused steps and the
+machine.
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Mapping
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from ectskin._check import EctskinError
+from ectskin.io import list_trials
+from ectskin.learn.profiles import describe_recipe
+from ectskin.pipeline.config import ABLATIONS
+from ectskin.pipeline.runner import StepRunner
+from ectskin.report import machine_info
+from ectskin.twin import Protocol
+
+METRICS_FORMAT = "ectskin.metrics"
+
+#: keys of the robust run's touch metrics copied into metrics.json under ``touch.robust``
+ROBUST_KEYS = (
+    "accuracy",
+    "n_test_frames",
+    "n_misclassified",
+    "misclassified",
+    "n_misclassified_adjacent",
+    "all_adjacent",
+    "confusions",
+    "per_class_accuracy",
+    "per_trial",
+    "worst_trial",
+    "training",
+    "split",
+)
+#: keys of an ablation run's track metrics copied under ``track.ablations.<key>``
+ABLATION_KEYS = (
+    "ad_mm_mean",
+    "ad_mm_std",
+    "ad_mm_median",
+    "n_test_samples",
+    "window",
+    "prior",
+    "per_marker",
+    "worst_trajectory",
+    "training",
+    "examples",
+)
+
+#: figures copied into OUT_DIR/figures and shown in the report: (run, file, caption, copy's name)
+REPORT_FIGURES = (
+    (
+        "touch",
+        "fig7_confusion.png",
+        "Fig. 7: touch confusion map of the test set (TouchMLP)",
+        "fig7_confusion.png",
+    ),
+    (
+        "touch_robust",
+        "fig7_confusion.png",
+        "Fig. 7, robust recipe (ours): touch confusion map of the same test set (TouchMLP)",
+        "fig7_confusion_robust.png",
+    ),
+    (
+        "track",
+        "fig9_tracking.png",
+        "Fig. 9: tracking examples, estimated (red) vs true (blue) markers (C2DT)",
+        "fig9_tracking.png",
+    ),
+    (
+        "track",
+        "fig10_trajectory.png",
+        "Fig. 10: one marker's trajectory over a test trial (C2DT)",
+        "fig10_trajectory.png",
+    ),
+    (
+        "touch",
+        "learning_curves.png",
+        "TouchMLP training and validation loss",
+        "touch_learning_curves.png",
+    ),
+    (
+        "touch_robust",
+        "learning_curves.png",
+        "TouchMLP, robust recipe: training (augmented) and validation loss",
+        "touch_robust_learning_curves.png",
+    ),
+    (
+        "track",
+        "learning_curves.png",
+        "C2DT training and validation loss",
+        "track_learning_curves.png",
+    ),
+)
+
+
+def combine_metrics(
+    results: Mapping[str, dict[str, Any]],
+    runner: StepRunner,
+    *,
+    profile: str,
+    seed: int,
+    protocol: Protocol | None,
+    data_settings: Mapping[str, Any],
+    data_path: Path,
+) -> dict[str, Any]:
+    """The OUT_DIR/metrics.json dict from ``results`` ({run: its metrics.json})."""
+    m: dict[str, Any] = {
+        "format": METRICS_FORMAT,
+        "version": 1,
+        "profile": profile,
+        "seed": seed,
+        "created_utc": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
+    }
+    if "touch" in results:
+        m["touch"] = dict(results["touch"].get("touch", {}))
+        if "touch_robust" in results:
+            r = results["touch_robust"].get("touch", {})
+            robust = {k: r[k] for k in ROBUST_KEYS if k in r}
+            # the report's words for the recipe (the report itself reads no training code)
+            robust["recipe_description"] = describe_recipe((r.get("training") or {}).get("recipe"))
+            m["touch"]["robust"] = robust
+    if "track" in results:
+        m["track"] = dict(results["track"].get("track", {}))
+        abl = {}
+        for key, name in ABLATIONS.items():
+            if name in results:
+                r = results[name].get("track", {})
+                abl[key] = {k: r.get(k) for k in ABLATION_KEYS if k in r}
+        if abl:
+            m["track"]["ablations"] = abl
+    try:
+        n_trials = len(list_trials(data_path))
+    except EctskinError:
+        n_trials = None
+    m["data"] = {"file": data_path.name, "source": data_settings.get("source"), "trials": n_trials}
+    if protocol is not None:
+        m["protocol"] = protocol.to_dict()
+    m["timings_s"] = dict(runner.timings)
+    m["reused"] = list(runner.reused)
+    m["machine"] = machine_info()
+    return m
+
+
+def copy_figures(out: Path, runs: tuple[str, ...]) -> dict[str, str]:
+    """Copy the report's figures of ``runs`` into OUT_DIR/figures; {caption: path relative to
+    OUT_DIR}."""
+    fig_dir = out / "figures"
+    fig_dir.mkdir(exist_ok=True)
+    figures: dict[str, str] = {}
+    for run, name, caption, copy_name in REPORT_FIGURES:
+        src = out / "runs" / run / name
+        if run in runs and src.is_file():
+            dst = fig_dir / copy_name
+            shutil.copyfile(src, dst)
+            figures[caption] = dst.relative_to(out).as_posix()
+    return figures

@@ -1,0 +1,90 @@
+"""Reproduce the paper end to end: simulate → characterise → train → evaluate → report.
+
+:func:`reproduce` is what ``ectskin reproduce OUT_DIR`` and ``ectskin demo`` run. It writes::
+
+    data.h5                       the simulated experiment (paper §3 protocol)
+    characterize/                 Fig. 3, Fig. 4 and characterize.json of the twin
+    runs/<run>/                   one training per run of :data:`ectskin.pipeline.config.RUNS`
+                                  (model.pt, metrics.csv, split.json, metrics.json, figures)
+    figures/                      copies of the figures shown in the report
+    metrics.json, report.md, report.html
+    reproduce.json                what each step was run with, whether it finished, its time
+
+Nothing is overwritten silently: finished steps are reused, interrupted ones resumed, and results
+made with other settings are refused unless ``force`` (:mod:`ectskin.pipeline.runner`).
+
+Profiles: ``quick`` trains with the ``quick`` settings of :mod:`ectskin.learn.train` (the
+ablations for :data:`~ectskin.pipeline.config.QUICK_ABLATION_EPOCHS` epochs), ``paper`` with the
+paper's (meant for a GPU). Both simulate the paper's protocol (189 trials of 30 s) unless a
+protocol is given, and both also train the TouchMLP with the ``robust`` profile on the same split
+(``touch.robust`` in metrics.json).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+from ectskin._check import EctskinError, check_type
+from ectskin._files import read_json, write_json_atomic
+from ectskin.learn.threads import torch_threads
+from ectskin.pipeline.config import ReproduceConfig
+from ectskin.pipeline.metrics import combine_metrics, copy_figures
+from ectskin.pipeline.runner import StepRunner
+from ectskin.pipeline.steps import characterise, evaluate_runs, simulate_or_load, train_runs
+from ectskin.report import write_report
+
+log = logging.getLogger(__name__)
+
+
+def reproduce(config: ReproduceConfig) -> dict[str, Any]:
+    """Run the whole reproduction into ``config.out_dir``; return the metrics written to
+    ``metrics.json`` (exactly as saved).
+
+    Training and evaluation run with the torch CPU threads that ``config.threads`` resolves to
+    (:func:`ectskin.learn.threads.torch_threads`); the previous setting is restored afterwards.
+    """
+    check_type("config", config, ReproduceConfig)
+    out = config.out_dir
+    if out.exists() and not out.is_dir():
+        raise EctskinError(f"output folder {out} exists and is not a folder")
+    with torch_threads(config.threads) as n_threads:
+        return _run(config, n_threads)
+
+
+def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
+    out = config.out_dir
+    out.mkdir(parents=True, exist_ok=True)
+    t_start = time.perf_counter()
+    runner = StepRunner(out, config.force)
+
+    data_path, data_settings = simulate_or_load(runner, config)
+    if config.characterize and config.recording is None:
+        characterise(runner, config)
+    train_runs(runner, config, data_path, data_settings, threads)
+    results = evaluate_runs(runner, config, data_path, data_settings)
+
+    metrics = combine_metrics(
+        results,
+        runner,
+        profile=config.profile,
+        seed=config.seed,
+        protocol=config.simulation_protocol(),
+        data_settings=data_settings,
+        data_path=data_path,
+    )
+    figures = copy_figures(out, config.run_names)
+    metrics["figures"] = dict(figures)
+    metrics["timings_s"]["total"] = time.perf_counter() - t_start
+    write_json_atomic(out / "metrics.json", metrics)
+    metrics = read_json(out / "metrics.json", "metrics")  # return exactly what was saved
+    write_report(out, metrics, figures)
+    if runner.reused:
+        log.info("reused finished steps: %s", ", ".join(runner.reused))
+    log.info(
+        "reproduction written to %s (report.md, report.html, metrics.json) in %.1f s",
+        out,
+        metrics["timings_s"]["total"],
+    )
+    return metrics

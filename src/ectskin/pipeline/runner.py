@@ -1,0 +1,176 @@
+"""Cached steps: run a step once, reuse it while its settings hold, refuse to overwrite otherwise.
+
+Each step of the pipeline has a name, its *settings* (a JSON-able dict: everything its results
+depend on) and its *outputs* (files or folders in the output folder). ``OUT_DIR/reproduce.json``
+records per step the settings it ran with, whether it finished and how long it took::
+
+    {"format": "ectskin.reproduce", "version": 1, "ectskin": "0.1.0",
+     "steps": {"simulate": {"settings": {...}, "done": true, "seconds": 27.3}, ...}}
+
+:meth:`StepRunner.step` then decides:
+
+* outputs present, step finished with the same settings → reused (listed in ``reused``);
+* outputs present, step started with the same settings but not finished → run again in place
+  (an interrupted training resumes from its ``last.pt``);
+* outputs present but made with other settings, or of unknown origin → :class:`EctskinError`
+  naming the differing settings, unless ``force``, which removes them and runs the step again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import shutil
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+from ectskin import __version__
+from ectskin._check import EctskinError
+from ectskin._files import read_json, to_jsonable, write_json_atomic
+
+log = logging.getLogger(__name__)
+
+STATE_FILE = "reproduce.json"
+STATE_FORMAT = "ectskin.reproduce"
+
+T = TypeVar("T")
+
+
+def plain(obj: Any) -> Any:
+    """``obj`` as plain JSON values (tuples → lists ...), so settings compare equal to saved ones."""
+    return json.loads(json.dumps(to_jsonable(obj), sort_keys=True))
+
+
+def digest(obj: Any) -> str:
+    """A short hash of ``obj``'s JSON text (16 hex digits), e.g. of a data step's settings."""
+    text = json.dumps(plain(obj), sort_keys=True)
+    return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
+
+
+def _flatten(d: Any, prefix: str = "") -> dict[str, Any]:
+    if not isinstance(d, Mapping):
+        return {prefix or "value": d}
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        key = f"{prefix}.{k}" if prefix else str(k)
+        out.update(_flatten(v, key) if isinstance(v, Mapping) else {key: v})
+    return out
+
+
+def settings_diff(old: Any, new: Any) -> str:
+    """ "protocol.seed: 0 -> 1; epochs: None -> 5" for two nested settings dicts."""
+    a, b = _flatten(plain(old)), _flatten(plain(new))
+    parts = [
+        f"{k}: {a.get(k)!r} -> {b.get(k)!r}"
+        for k in sorted(set(a) | set(b))
+        if a.get(k) != b.get(k)
+    ]
+    text = "; ".join(parts) or "unknown difference"
+    return text if len(text) <= 400 else text[:397] + "..."
+
+
+class StepState:
+    """``OUT_DIR/reproduce.json``: per step its settings, done flag and seconds."""
+
+    def __init__(self, out: Path) -> None:
+        self.path = out / STATE_FILE
+        self.steps: dict[str, dict[str, Any]] = {}
+        if self.path.exists():
+            d = read_json(self.path, "reproduce state")
+            if not isinstance(d, dict) or d.get("format") != STATE_FORMAT:
+                raise EctskinError(
+                    f"{self.path}: not an ectskin reproduce state (format {STATE_FORMAT!r})"
+                )
+            self.steps = dict(d.get("steps") or {})
+
+    def save(self) -> None:
+        write_json_atomic(
+            self.path,
+            {"format": STATE_FORMAT, "version": 1, "ectskin": __version__, "steps": self.steps},
+        )
+
+    def settings(self, step: str) -> dict[str, Any] | None:
+        """The settings ``step`` last started with (None: no record)."""
+        return (self.steps.get(step) or {}).get("settings")
+
+    def done(self, step: str, settings: Mapping[str, Any]) -> bool:
+        s = self.steps.get(step) or {}
+        return bool(s.get("done")) and s.get("settings") == plain(settings)
+
+    def start(self, step: str, settings: Mapping[str, Any]) -> None:
+        self.steps[step] = {"settings": plain(settings), "done": False}
+        self.save()
+
+    def finish(self, step: str, seconds: float, **info: Any) -> None:
+        self.steps[step].update(done=True, seconds=float(seconds), **info)
+        self.save()
+
+
+class StepRunner:
+    """Runs the steps in order into ``out``, reusing finished ones and refusing conflicting
+    leftovers (removed first with ``force``). ``timings`` {step: seconds} and ``reused`` [step]
+    collect what happened."""
+
+    def __init__(self, out: Path, force: bool) -> None:
+        self.out = out
+        self.force = force
+        self.state = StepState(out)
+        self.timings: dict[str, float] = {}
+        self.reused: list[str] = []
+
+    def _names(self, paths: list[Path]) -> str:
+        return ", ".join(str(p.relative_to(self.out)) for p in paths)
+
+    def step(
+        self, name: str, settings: Mapping[str, Any], outputs: list[Path], fn: Callable[[], T]
+    ) -> T | None:
+        """Run ``fn()`` for step ``name`` unless it finished with ``settings`` before.
+
+        ``outputs``: the files/folders the step writes. Present but made with other settings (or
+        of unknown origin) → error, or removed first with ``force``. Returns ``fn``'s result;
+        a reused step returns None.
+        """
+        settings = plain(settings)
+        existing = [p for p in outputs if p.exists()]
+        if existing and self.state.done(name, settings):
+            self.timings[name] = float(self.state.steps[name].get("seconds", 0.0))
+            self.reused.append(name)
+            log.info("%s: reusing the finished step (%s)", name, self._names(existing))
+            return None
+        old = self.state.settings(name)
+        resumable = old == settings  # interrupted with the same settings: resume in place
+        if existing and not resumable:
+            what = self._names(existing)
+            if not self.force:
+                why = (
+                    f"they were made with other settings ({settings_diff(old, settings)})"
+                    if old is not None
+                    else f"their origin is unknown (no record in {STATE_FILE})"
+                )
+                raise EctskinError(
+                    f"{self.out}: step {name!r} would overwrite {what}: {why}. Use --force "
+                    f"(force=True) to redo it, or another output folder"
+                )
+            log.warning("%s: --force: removing %s", name, what)
+            for p in existing:
+                shutil.rmtree(p) if p.is_dir() else p.unlink()
+        elif existing:
+            log.info("%s: resuming an interrupted step", name)
+        self.state.start(name, settings)
+        t0 = time.perf_counter()
+        result = fn()
+        dt = time.perf_counter() - t0
+        self.timings[name] = dt
+        self.state.finish(name, dt)
+        log.info("%s: done in %.1f s", name, dt)
+        return result
+
+    def adopt(self, name: str, settings: Mapping[str, Any]) -> None:
+        """Record step ``name`` as finished with ``settings`` without running it (its outputs,
+        found in the folder, were checked by the caller to match); the next :meth:`step`
+        reuses them."""
+        self.state.start(name, settings)
+        self.state.finish(name, 0.0, adopted=True)

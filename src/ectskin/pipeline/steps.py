@@ -1,0 +1,186 @@
+"""The steps of a reproduction: data, characterisation, training, evaluation.
+
+Each function runs one kind of step through a :class:`~ectskin.pipeline.runner.StepRunner`, with
+the settings that decide whether an earlier result in the output folder can be reused::
+
+    simulate        OUT_DIR/data.h5              twin (protocol) or the given recording
+    characterize    OUT_DIR/characterize/        Fig. 3, Fig. 4, characterize.json of the twin
+    train_<run>     OUT_DIR/runs/<run>/          model.pt, last.pt, metrics.csv, split.json ...
+    evaluate_<run>  OUT_DIR/runs/<run>/metrics.json (+ figures; baselines for touch and track)
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ectskin._check import EctskinError
+from ectskin._files import read_json
+from ectskin.io import Recording, read_recording, write_recording
+from ectskin.learn.evaluate import evaluate_run
+from ectskin.learn.train import TrainConfig, train_from_recording
+from ectskin.pipeline.config import RUNS, ReproduceConfig
+from ectskin.pipeline.runner import StepRunner, digest, plain, settings_diff
+from ectskin.twin import Protocol, simulate_experiment
+from ectskin.twin.characterize import characterize as characterize_twin
+
+log = logging.getLogger(__name__)
+
+DATA_FILE = "data.h5"
+#: the two runs evaluated against the baselines (the ablations are compared to ``track``)
+MAIN_RUNS = ("touch", "track")
+
+
+def recording_digest(recording: Recording) -> str:
+    """A short hash of a recording's trial names and capacitance, to recognise it again."""
+    h = hashlib.blake2b(digest_size=8)
+    for t in recording.trials:
+        h.update(t.name.encode())
+        h.update(np.ascontiguousarray(t.capacitance).tobytes())
+    return h.hexdigest()
+
+
+def _check_adoptable(path: Path, protocol_settings: dict[str, Any]) -> None:
+    """Raise unless ``path`` (a data.h5 with no record in the state file) holds a recording of
+    the protocol ``protocol_settings``."""
+    try:
+        found = plain(read_recording(path).meta.get("protocol"))
+    except EctskinError as exc:
+        raise EctskinError(
+            f"{path} exists but is not a readable recording of this protocol ({exc}); "
+            f"use --force to simulate again, or another output folder"
+        ) from None
+    want = plain(protocol_settings)
+    if found != want:
+        detail = settings_diff(found, want) if isinstance(found, dict) else "no protocol stored"
+        raise EctskinError(
+            f"{path} holds a recording of another protocol ({detail}); use --force to "
+            f"simulate again, or another output folder"
+        )
+
+
+def simulate_or_load(runner: StepRunner, config: ReproduceConfig) -> tuple[Path, dict[str, Any]]:
+    """Step "simulate": ``OUT_DIR/data.h5`` from the twin, or from ``config.recording``.
+
+    A data.h5 found without a record in the state file is adopted when it holds the same
+    protocol (and refused otherwise, unless ``force``). Returns (path, the step's settings).
+    """
+    path = runner.out / DATA_FILE
+    recording = config.recording
+    if recording is not None:
+        settings = {
+            "source": "given recording",
+            "digest": recording_digest(recording),
+            "n_trials": recording.n_trials,
+        }
+
+        def make() -> None:
+            write_recording(recording, path, overwrite=True)
+
+    else:
+        protocol: Protocol = config.simulation_protocol()
+        settings = {"source": "ectskin.twin", "protocol": protocol.to_dict()}
+        if path.exists() and runner.state.settings("simulate") is None and not runner.force:
+            _check_adoptable(path, settings["protocol"])
+            log.info("simulate: %s holds the same protocol; reusing it", path)
+            runner.adopt("simulate", settings)
+
+        def make() -> None:
+            rec = simulate_experiment(protocol, workers=config.workers, progress=config.progress)
+            write_recording(rec, path, overwrite=True)
+
+    runner.step("simulate", settings, [path], make)
+    return path, settings
+
+
+def characterise(runner: StepRunner, config: ReproduceConfig) -> None:
+    """Step "characterize": the twin's §2.2 characterisation into ``OUT_DIR/characterize``."""
+    char_dir = runner.out / "characterize"
+    runner.step(
+        "characterize",
+        {"seed": config.seed},
+        [char_dir],
+        lambda: characterize_twin(char_dir, seed=config.seed),
+    )
+
+
+def run_settings(
+    config: ReproduceConfig, name: str, data_settings: dict[str, Any]
+) -> dict[str, Any]:
+    """The settings a training of run ``name`` depends on (and its evaluation, with
+    ``baselines``)."""
+    task, window, prior = RUNS[name]
+    return {
+        "data": digest(data_settings),
+        "task": task,
+        "window": window,
+        "prior": prior,
+        "profile": config.run_profile(name),
+        "seed": config.seed,
+        "epochs": config.epochs_for(name),
+    }
+
+
+def train_runs(
+    runner: StepRunner,
+    config: ReproduceConfig,
+    data_path: Path,
+    data_settings: dict[str, Any],
+    threads: int | None,
+) -> dict[str, dict[str, Any]]:
+    """Steps "train_<run>" for every run of ``config``, with ``threads`` torch CPU threads.
+    Returns {run: training summary} of the runs trained now (reused ones are left out)."""
+    summaries: dict[str, dict[str, Any]] = {}
+    for name in config.run_names:
+        task, window, prior = RUNS[name]
+        settings = run_settings(config, name, data_settings)
+        run_dir = runner.out / "runs" / name
+        run_profile = settings["profile"]
+        train_config = TrainConfig(
+            profile=run_profile,
+            seed=config.seed,
+            epochs=settings["epochs"],
+            window=window,
+            prior=prior,
+            resume=True,
+            device=config.device,
+            progress=config.progress,
+            threads=threads,
+        )
+        log.info("train %s: %s, window %d, prior %s, profile %s", name, *RUNS[name], run_profile)
+        fit = partial(train_from_recording, task, data_path, run_dir, train_config)
+        summary = runner.step(f"train_{name}", settings, [run_dir], fit)
+        if summary is not None:
+            summaries[name] = summary
+    return summaries
+
+
+def evaluate_runs(
+    runner: StepRunner,
+    config: ReproduceConfig,
+    data_path: Path,
+    data_settings: dict[str, Any],
+) -> dict[str, dict[str, Any]]:
+    """Steps "evaluate_<run>": each run's ``metrics.json`` on its test split (baselines on the
+    same split for the two main runs). Returns {run: its metrics.json}."""
+    results: dict[str, dict[str, Any]] = {}
+    for name in config.run_names:
+        run_dir = runner.out / "runs" / name
+        with_baselines = config.baselines and name in MAIN_RUNS
+        settings = {**run_settings(config, name, data_settings), "baselines": with_baselines}
+        evaluate = partial(
+            evaluate_run,
+            run_dir,
+            data_path,
+            baselines=with_baselines,
+            figures=True,
+            seed=config.seed,
+        )
+        runner.step(f"evaluate_{name}", settings, [run_dir / "metrics.json"], evaluate)
+        results[name] = read_json(run_dir / "metrics.json", "run metrics")
+    return results

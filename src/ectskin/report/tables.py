@@ -1,0 +1,214 @@
+"""The report's tables and sentences from a metrics dict: this run beside the paper's numbers
+(§4) and beside the trivial baselines, the margin over them, the tracking ablations."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from ectskin.report.wording import (
+    DASH,
+    baseline_name,
+    count,
+    duration,
+    lookup,
+    mm,
+    pct,
+)
+
+#: The paper's numbers (§4), quoted in the report beside this run's.
+PAPER = {
+    "touch_accuracy_pct": 99.88,
+    "touch_misclassified": "34 of 28 800",
+    "touch_adjacent": "all",
+    "track_ad_mm": (2.905, 2.207),
+    "track_worst_example_mm": 3.754,
+    "touch_training": "10 min on 1 GPU (Quadro P5000)",
+    "track_training": "2.5 h on 3 GPUs (Quadro P5000)",
+    "touch_split": "125 / 32 / 32 trials",
+    "track_split": "108 / 18 / 20 trials",
+}
+
+#: the report's name for the TouchMLP trained with the ``robust`` profile
+ROBUST_LABEL = "TouchMLP, robust recipe (ours)"
+
+
+def results_table(metrics: Mapping[str, Any]) -> list[tuple[str, str, str, str]]:
+    """The rows "metric · paper · this run · baselines" of the report, as plain strings."""
+    rows: list[tuple[str, str, str, str]] = []
+    t = lookup(metrics, "touch", {})
+    if t:
+        tb = lookup(t, "baselines", {}) or {}
+        rows.append(
+            (
+                "Touch: test accuracy",
+                f"{PAPER['touch_accuracy_pct']:.2f} %",
+                pct(lookup(t, "accuracy")),
+                "; ".join(f"{baseline_name(k)} {pct(lookup(v, 'accuracy'))}" for k, v in tb.items())
+                or DASH,
+            )
+        )
+        rows.append(
+            (
+                "Touch: misclassified test frames",
+                PAPER["touch_misclassified"],
+                count(lookup(t, "n_misclassified"), lookup(t, "n_test_frames")),
+                "; ".join(
+                    f"{baseline_name(k)} "
+                    f"{count(lookup(v, 'n_misclassified'), lookup(v, 'n_test_frames', lookup(t, 'n_test_frames')))}"
+                    for k, v in tb.items()
+                )
+                or DASH,
+            )
+        )
+        n_wrong, n_adj = lookup(t, "n_misclassified"), lookup(t, "n_misclassified_adjacent")
+        if n_wrong is not None and n_adj is not None:
+            adj = "none misclassified" if n_wrong == 0 else f"{n_adj} of {n_wrong}"
+            rows.append(("Touch: confusions between adjacent regions", "all 34", adj, DASH))
+        r = lookup(t, "robust", {})
+        if r:
+            n_wrong, n_adj = lookup(r, "n_misclassified"), lookup(r, "n_misclassified_adjacent")
+            wrong = f"{count(n_wrong, lookup(r, 'n_test_frames'))} misclassified"
+            if n_wrong and n_adj is not None:
+                wrong += f", {'all' if n_adj == n_wrong else n_adj} between adjacent regions"
+            rows.append(
+                (
+                    f"Touch: test accuracy, {ROBUST_LABEL}",
+                    f"{PAPER['touch_accuracy_pct']:.2f} % (34 of 28 800 misclassified, all adjacent)",
+                    f"{pct(lookup(r, 'accuracy'))} ({wrong})",
+                    DASH,
+                )
+            )
+    k = lookup(metrics, "track", {})
+    if k:
+        kb = lookup(k, "baselines", {}) or {}
+        rows.append(
+            (
+                "Tracking: average distance AD (Eq. 3)",
+                mm(*PAPER["track_ad_mm"]),
+                mm(lookup(k, "ad_mm_mean"), lookup(k, "ad_mm_std")),
+                "; ".join(
+                    f"{baseline_name(b)} {mm(lookup(v, 'ad_mm_mean'), lookup(v, 'ad_mm_std'))}"
+                    for b, v in kb.items()
+                )
+                or DASH,
+            )
+        )
+        rows.append(
+            (
+                "Tracking: worst of 6 shown examples",
+                mm(PAPER["track_worst_example_mm"]),
+                mm(lookup(k, "examples.worst_ad_mm")),
+                DASH,
+            )
+        )
+        worst = lookup(k, "worst_trajectory")
+        if worst:
+            rows.append(
+                (
+                    "Tracking: worst test trajectory (mean AD)",
+                    DASH,
+                    f"{mm(lookup(worst, 'ad_mm_mean'))} ({lookup(worst, 'name', '?')})",
+                    DASH,
+                )
+            )
+    for task, key in (("Touch", "touch"), ("Tracking", "track")):
+        sp = lookup(metrics, f"{key}.split")
+        if sp:
+            n_test = lookup(
+                metrics, f"{key}.n_test_frames", lookup(metrics, f"{key}.n_test_samples")
+            )
+            rows.append(
+                (
+                    f"{task}: trials train / val / test",
+                    PAPER[f"{key}_split"],
+                    " / ".join(str(lookup(sp, k, "?")) for k in ("train", "val", "test"))
+                    + (f" trials ({n_test:,} test frames)".replace(",", " ") if n_test else ""),
+                    DASH,
+                )
+            )
+    for task, key, paper in (
+        ("Touch", "touch", PAPER["touch_training"]),
+        ("Touch (robust recipe)", "touch.robust", DASH),
+        ("Tracking", "track", PAPER["track_training"]),
+    ):
+        tr = lookup(metrics, f"{key}.training")
+        if tr:
+            dev = lookup(tr, "device")
+            rows.append(
+                (
+                    f"{task}: training time",
+                    paper,
+                    f"{duration(lookup(tr, 'seconds'))}"
+                    + (f" on {dev}" if dev else "")
+                    + (f", {lookup(tr, 'epochs')} epochs" if lookup(tr, "epochs") else ""),
+                    DASH,
+                )
+            )
+    return rows
+
+
+def margin_text(metrics: Mapping[str, Any]) -> list[str]:
+    """Sentences on the margin of each model over its trivial baseline (honest either way)."""
+    out = []
+    ad = lookup(metrics, "track.ad_mm_mean")
+    nm = lookup(metrics, "track.baselines.no_motion.ad_mm_mean")
+    if ad is not None and nm is not None and nm > 0:
+        gain = nm - ad
+        if gain > 0:
+            out.append(
+                f"C2DT's AD is {gain:.3f} mm below the 'markers do not move' baseline "
+                f"({ad:.3f} vs {nm:.3f} mm, {100 * gain / nm:.1f} % lower)."
+            )
+        else:
+            out.append(
+                f"C2DT does NOT beat the 'markers do not move' baseline: AD {ad:.3f} mm vs "
+                f"{nm:.3f} mm for predicting the initial coordinates."
+            )
+    acc = lookup(metrics, "touch.accuracy")
+    tb = lookup(metrics, "touch.baselines", {}) or {}
+    base = {k: lookup(v, "accuracy") for k, v in tb.items() if lookup(v, "accuracy") is not None}
+    if acc is not None and base:
+        best = max(base, key=base.get)
+        maj = base.get("majority")
+        text = (
+            f"TouchMLP reaches {pct(acc)} against {pct(base[best])} for the best baseline "
+            f"({baseline_name(best)})"
+        )
+        if maj is not None and best != "majority":
+            text += f" and {pct(maj)} for always predicting the majority class"
+        out.append(text + ".")
+    racc = lookup(metrics, "touch.robust.accuracy")
+    if racc is not None and acc is not None:
+        gain = racc - acc
+        out.append(
+            f"Trained with the robust recipe, the same TouchMLP reaches {pct(racc)} on the same "
+            f"test trials ({100 * gain:+.2f} points versus the paper's recipe)."
+        )
+    return out
+
+
+def ablation_rows(metrics: Mapping[str, Any]) -> list[tuple[str, str, str, str]]:
+    """Rows "variant · training epochs · AD · change vs the full model" for the tracking
+    ablations."""
+    k = lookup(metrics, "track", {})
+    abl = lookup(k, "ablations", {}) or {}
+    if not abl:
+        return []
+    full = lookup(k, "ad_mm_mean")
+
+    def epochs(v: Any) -> str:
+        e = lookup(v, "training.epochs")
+        return DASH if e is None else str(e)
+
+    rows = [("C2DT (prior, 10 frames)", epochs(k), mm(full, lookup(k, "ad_mm_std")), DASH)]
+    labels = {
+        "no_prior": "without prior knowledge (absolute calibration, no initial coordinates)",
+        "window_1": "1 frame instead of 10",
+    }
+    for name, v in abl.items():
+        a = lookup(v, "ad_mm_mean")
+        change = DASH if a is None or full is None else f"{a - full:+.3f} mm"
+        label = labels.get(name, name.replace("_", " "))
+        rows.append((label, epochs(v), mm(a, lookup(v, "ad_mm_std")), change))
+    return rows
