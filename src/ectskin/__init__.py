@@ -2,11 +2,11 @@
 
 The package follows the data flow of the system (see ``docs/architecture.md``)::
 
-    layout ─► twin (mechanics ─► electrostatics ─► readout) ─► io (HDF5 recordings)
-          ─► learn (calibration, datasets, models, training, evaluation) ─► report
-          ─► live (sources, recorder, engine) ─► dashboard
+    layout ─► viz ─► electrostatics ─► io (recordings, HDF5, Eq. 2, imports)
+          ─► twin (mechanics, sensor, readout, protocol) ─► learn (tasks, training, evaluation)
+          ─► report ─► pipeline ─► live (sources, engine, recorder) ─► dashboard ─► commands
 
-Each sub-package imports only from the ones to its left.
+Each sub-package imports only from the ones to its left (``tests/test_architecture.py``).
 """
 
 from ectskin._check import EctskinError

@@ -142,3 +142,10 @@ def test_the_report_imports_no_data_or_learning_code():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_report_says_which_command_made_it(tmp_path):
+    metrics = {**METRICS, "command": "ectskin demo --seed 3 --out 'my out'"}
+    md_path, html_path = write_report(tmp_path, metrics, {})
+    assert "Made by `ectskin demo --seed 3 --out 'my out'`." in md_path.read_text()
+    assert "<code>ectskin demo --seed 3 --out &#x27;my out&#x27;</code>" in html_path.read_text()

@@ -8,6 +8,8 @@ results made with other settings are never overwritten without ``--force``.
 from __future__ import annotations
 
 import argparse
+import shlex
+import sys
 
 from ectskin._check import EctskinError
 from ectskin.report import results_table
@@ -91,6 +93,7 @@ def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
         device=args.device,
         threads=threads_option(args.threads),
         progress=not args.no_progress,
+        command=" ".join(["ectskin", *map(shlex.quote, sys.argv[1:])]) if sys.argv[1:] else None,
     )
     m = reproduce(config)
     for metric, paper, this, base in results_table(m):

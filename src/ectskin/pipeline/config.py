@@ -89,6 +89,9 @@ class ReproduceConfig:
     threads : int, "auto" or None
         Torch CPU threads of training and evaluation (:mod:`ectskin.learn.threads`; None:
         torch's current setting).
+    command : str, optional
+        The command line that made the run, written into metrics.json and the report so that
+        every figure there says how to get it again (the CLI passes its own).
     """
 
     out_dir: Path
@@ -106,6 +109,7 @@ class ReproduceConfig:
     device: str | None = None
     progress: bool = True
     threads: int | str | None = "auto"
+    command: str | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         check_type("out_dir", self.out_dir, (str, os.PathLike))

@@ -74,6 +74,8 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
         data_settings=data_settings,
         data_path=data_path,
     )
+    if config.command:
+        metrics["command"] = config.command
     figures = copy_figures(out, config.run_names)
     metrics["figures"] = dict(figures)
     metrics["timings_s"]["total"] = time.perf_counter() - t_start

@@ -178,6 +178,9 @@ def render_markdown(
     created = lookup(metrics, "created_utc")
     if created:
         lines += [f"_Created {created} by ectskin {__version__}._", ""]
+    command = lookup(metrics, "command")
+    if command:
+        lines += [f"Made by `{command}`.", ""]
     for kind, payload in _sections(metrics, figures):
         if kind == "h2":
             lines += [f"## {payload}", ""]
@@ -219,6 +222,9 @@ def render_html(
     created = lookup(metrics, "created_utc")
     if created:
         parts.append(f"<p><em>Created {html.escape(created)} by ectskin {__version__}.</em></p>")
+    command = lookup(metrics, "command")
+    if command:
+        parts.append(f"<p>Made by <code>{html.escape(command)}</code>.</p>")
     for kind, payload in _sections(metrics, figures):
         if kind == "h2":
             parts.append(f"<h2>{html.escape(payload)}</h2>")

@@ -40,7 +40,7 @@ class Discretisation:
     across and meshed wider by :func:`~ectskin.electrostatics.meshing.edge_correction_factor` so
     they carry the true strip's charge; their free ends are refined to ``end_panel_fraction`` of
     the width. Doubling every density from these defaults changes the readout by < 1 %
-    (``tests/test_twin.py``).
+    (``tests/twin/test_twin.py``).
     """
 
     wire_panel_length_mm: float = 2.0
