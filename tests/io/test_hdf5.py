@@ -17,6 +17,7 @@ import pytest
 
 from ectskin import EctskinError
 from ectskin.io.hdf5 import (
+    FORMAT_VERSION,
     RecordingWriter,
     list_trials,
     read_layout,
@@ -24,31 +25,48 @@ from ectskin.io.hdf5 import (
     write_recording,
 )
 from ectskin.io.hdf5 import write as hdf5_write
-from ectskin.io.recording import Recording, Trial
+from ectskin.io.recording import GROUND_TRUTH_FIELDS, Recording, Trial
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "recording-format.md"
+
+
+NAN_PAYLOAD = np.frombuffer(b"\x01\x00\x00\x00\x00\x00\xf8\x7f", "<f8")[0]
+
+
+def finger_truth(n: int, rng) -> dict[str, np.ndarray]:
+    """Finger ground truth of ``n`` frames: no finger (NaN, one with a payload), hovering, contact."""
+    contact = np.zeros(n, dtype=bool)
+    contact[n // 2 :] = True
+    uv = rng.uniform(-20, 80, size=(n, 2))
+    height = np.where(contact, 0.0, rng.uniform(0.5, 30.0, size=n))
+    if n:
+        uv[:3] = np.nan
+        height[:3] = np.nan
+        height[1] = NAN_PAYLOAD  # no finger, stored bit for bit
+    return {"contact": contact, "finger_uv_mm": uv, "finger_height_mm": height}
 
 
 def special_recording(layout, seed: int = 0) -> Recording:
     """Four trials: markers with occlusions, an empty trial, one without markers, one with force.
 
     The capacitance holds values that only a bit-exact store keeps: NaN with a payload, -0.0,
-    +-inf, a subnormal and the largest float.
+    +-inf, a subnormal and the largest float. The finger ground truth: all of it on the first
+    two trials (NaN where there is no finger), none on the third, only ``contact`` on the last.
     """
     rng = np.random.default_rng(seed)
-    specs = [  # (n_frames, markers, force, inflation, region)
-        (40, True, False, (0.0, 10.0, 20.0), 0),
-        (0, True, False, (10.0, 10.0, 10.0), 4),
-        (25, False, True, (), 11),
-        (13, True, True, (20.0, 0.0, 20.0, 5.5), 18),
+    specs = [  # (n_frames, markers, force, inflation, region, ground truth, finger surface)
+        (40, True, False, (0.0, 10.0, 20.0), 0, GROUND_TRUTH_FIELDS, "front"),
+        (0, True, False, (10.0, 10.0, 10.0), 4, GROUND_TRUTH_FIELDS, "back"),
+        (25, False, True, (), 11, (), None),
+        (13, True, True, (20.0, 0.0, 20.0, 5.5), 18, ("contact",), None),
     ]
     trials = []
-    for k, (n, with_markers, with_force, inflation, region) in enumerate(specs):
+    for k, (n, with_markers, with_force, inflation, region, truth, surface) in enumerate(specs):
         cap = rng.normal(1.0, 0.2, size=(n, layout.n_pairs))
         if n:
             special = np.array(
                 [
-                    np.frombuffer(b"\x01\x00\x00\x00\x00\x00\xf8\x7f", "<f8")[0],
+                    NAN_PAYLOAD,
                     -0.0,
                     np.inf,
                     -np.inf,
@@ -71,6 +89,8 @@ def special_recording(layout, seed: int = 0) -> Recording:
                 region=region,
                 markers=markers,
                 force=rng.uniform(0, 2, size=n) if with_force else None,
+                **{f: v for f, v in finger_truth(n, rng).items() if f in truth},
+                finger_surface=surface,
                 meta={"index": k, "note": "Berührung ✓", "nested": {"list": [1, 2.5, None, True]}},
             )
         )
@@ -92,7 +112,15 @@ def assert_same_recording(a: Recording, b: Recording) -> None:
     assert [t.name for t in a.trials] == [t.name for t in b.trials]
     for ta, tb in zip(a.trials, b.trials):
         assert (ta.inflation, ta.region, ta.meta) == (tb.inflation, tb.region, tb.meta), ta.name
-        for field in ("capacitance", "timestamps", "labels", "markers", "force"):
+        assert ta.finger_surface == tb.finger_surface, ta.name
+        for field in (
+            "capacitance",
+            "timestamps",
+            "labels",
+            "markers",
+            "force",
+            *GROUND_TRUTH_FIELDS,
+        ):
             xa, xb = getattr(ta, field), getattr(tb, field)
             assert (xa is None) == (xb is None), (ta.name, field)
             if xa is not None:
@@ -111,8 +139,13 @@ def test_round_trip_is_bit_exact(tmp_path, layout):
     assert back.layout.source == f"{path}:/layout"
     # the NaN payload survived: not just "some NaN"
     assert back.trials[0].capacitance[0, :1].tobytes() == b"\x01\x00\x00\x00\x00\x00\xf8\x7f"
+    assert back.trials[0].finger_height_mm[1:2].tobytes() == NAN_PAYLOAD.tobytes()
+    assert back.trials[0].has_ground_truth and back.trials[1].has_ground_truth
+    assert back.trials[0].contact.dtype == np.bool_
+    assert back.format_version == FORMAT_VERSION == 2 and back.source == str(path)
     with h5py.File(path, "r") as f:  # a closed file opens in any HDF5 tool
         assert f.attrs["complete"] and f.attrs["format"] == "ectskin.recording"
+        assert f.attrs["format_version"] == 2
         assert f["frames/capacitance"].compression == "gzip"
         assert list(f["frames/capacitance"].attrs["pair_names"])[:2] == list(layout.pair_names[:2])
 
@@ -139,6 +172,11 @@ def test_docs_snippet_reads_the_file_without_ectskin(tmp_path, layout):
         if t.markers is not None:
             assert np.array_equal(got["markers"], t.markers, equal_nan=True)
         assert (got["force"] is None) == (t.force is None)
+        for field in GROUND_TRUTH_FIELDS:
+            assert (got[field] is None) == (getattr(t, field) is None), (t.name, field)
+            if got[field] is not None:
+                assert got[field].tobytes() == getattr(t, field).tobytes(), (t.name, field)
+        assert got["finger_surface"] == t.finger_surface
         assert tuple(got["inflation_ml"]) == t.inflation
         assert got["region"] == t.region and got["meta"] == t.meta
 
@@ -165,6 +203,10 @@ def test_list_trials_and_read_layout_load_no_frames(tmp_path, layout, monkeypatc
     assert [r["inflation"] for r in rows] == [t.inflation for t in rec.trials]
     assert [r["has_markers"] for r in rows] == [True, True, False, True]
     assert [r["has_force"] for r in rows] == [False, False, True, True]
+    assert [r["has_contact"] for r in rows] == [True, True, False, True]
+    assert [r["has_finger_uv_mm"] for r in rows] == [True, True, False, False]
+    assert [r["has_finger_height_mm"] for r in rows] == [True, True, False, False]
+    assert [r["finger_surface"] for r in rows] == ["front", "back", None, None]
 
 
 def test_read_selected_trials_in_requested_order(tmp_path, layout):
@@ -266,8 +308,36 @@ MALFORMED = {
         r"not an ectskin recording: root attribute 'format' is 'someone.else'",
     ),
     "newer version": (
-        lambda p: _edit(p, lambda f: f.attrs.__setitem__("format_version", 2)),
-        r"format_version 2 is newer than this ectskin reads \(1\)",
+        lambda p: _edit(p, lambda f: f.attrs.__setitem__("format_version", FORMAT_VERSION + 1)),
+        rf"format_version {FORMAT_VERSION + 1} is newer than this ectskin reads \({FORMAT_VERSION}\)",
+    ),
+    "missing ground-truth column": (
+        lambda p: _edit(p, lambda f: f.__delitem__("trials/has_contact")),
+        r"missing dataset /trials/has_contact \(required by ectskin.recording version 2\)",
+    ),
+    "missing ground-truth dataset": (
+        lambda p: _edit(p, lambda f: f.__delitem__("frames/finger_uv_mm")),
+        r"missing dataset /frames/finger_uv_mm: trial 'trial_0000' has has_finger_uv_mm=True",
+    ),
+    "float contact": (
+        lambda p: _edit(p, lambda f: _replace(f, "frames/contact", f["frames/contact"][()] * 0.5)),
+        r"/frames/contact has dtype float64, expected a boolean",
+    ),
+    "contact not 0/1": (
+        lambda p: _edit(
+            p, lambda f: _replace(f, "frames/contact", f["frames/contact"][()].astype(np.int8) * 2)
+        ),
+        r"/frames/contact\[0:40\] does not fit bool losslessly",
+    ),
+    "unknown finger surface": (
+        lambda p: _edit(p, lambda f: f["trials/finger_surface"].__setitem__(0, "top")),
+        r"/trials/finger_surface\[0\] \(trial 'trial_0000'\) is 'top', expected '' \(none\) or "
+        r"one of front, back, right, left",
+    ),
+    "uv and height disagree": (
+        lambda p: _edit(p, lambda f: f["frames/finger_height_mm"].__setitem__(0, 3.0)),
+        r"/frames rows 0:40: trial 'trial_0000': frame 0 has finger_uv_mm \[nan, nan\] but "
+        r"finger_height_mm 3.0",
     ),
     "incomplete": (
         lambda p: _edit(p, lambda f: f.attrs.__setitem__("complete", False)),
@@ -314,7 +384,8 @@ def test_malformed_file_gives_one_clear_error(tmp_path, layout, case):
     text = str(info.value)
     assert text.startswith(f"{path}: "), text
     assert re.search(message, text), text
-    if case not in ("incomplete", "label out of range", "timestamps go back"):
+    frame_content = ("label out of range", "timestamps go back", "uv and height disagree")
+    if case not in ("incomplete", "contact not 0/1", *frame_content):
         with pytest.raises(EctskinError, match=re.escape(str(path))):
             list_trials(path, allow_partial=True)
 
@@ -361,7 +432,13 @@ def test_writer_round_trip_equals_write_recording(tmp_path, layout):
     ) as w:
         w.add_event(0.1, "session start")  # before the first trial
         for k, t in enumerate(rec.trials):
-            w.start_trial(t.name, inflation=t.inflation, region=t.region, meta=t.meta)
+            w.start_trial(
+                t.name,
+                inflation=t.inflation,
+                region=t.region,
+                finger_surface=t.finger_surface,
+                meta=t.meta,
+            )
             if k == 0:
                 w.add_event(0.5, "inflation set to (0, 10, 20)")
             split = t.n_frames // 3
@@ -372,8 +449,13 @@ def test_writer_round_trip_equals_write_recording(tmp_path, layout):
                     int(t.labels[i]),
                     markers=None if t.markers is None else t.markers[i],
                     force=None if t.force is None else t.force[i],
+                    **{
+                        f: getattr(t, f)[i]
+                        for f in GROUND_TRUTH_FIELDS
+                        if getattr(t, f) is not None
+                    },
                 )
-            # then one batch (empty for the empty trial: it declares its markers/force)
+            # then one batch (empty for the empty trial: it declares what it carries)
             rows = slice(split, None)
             w.append(
                 t.capacitance[rows],
@@ -381,6 +463,9 @@ def test_writer_round_trip_equals_write_recording(tmp_path, layout):
                 t.labels[rows],
                 markers=None if t.markers is None else t.markers[rows],
                 force=None if t.force is None else t.force[rows],
+                **{
+                    f: getattr(t, f)[rows] for f in GROUND_TRUTH_FIELDS if getattr(t, f) is not None
+                },
             )
         assert w.n_frames == rec.n_frames and w.n_trials == rec.n_trials
     assert w.closed

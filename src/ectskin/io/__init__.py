@@ -6,7 +6,8 @@ dispatches on the file's suffix (HDF5 ``.h5``/``.hdf5`` → :mod:`ectskin.io.hdf
 
 Modules, by job:
 
-* :mod:`~ectskin.io.recording`: :class:`Recording` and :class:`Trial`, checked at construction;
+* :mod:`~ectskin.io.recording`: :class:`Recording` and :class:`Trial`, checked at construction,
+  and :func:`require_ground_truth` for code that needs the finger's per-frame ground truth;
 * :mod:`~ectskin.io.hdf5`: the recording file format (schema, reader, batch and append writers);
 * :mod:`~ectskin.io.generic`: recordings from other sources in a documented NPZ/CSV layout;
 * :mod:`~ectskin.io.capmeter`, :mod:`~ectskin.io.motive`: instrument exports (capacitance meter,
@@ -25,7 +26,7 @@ from ectskin._check import EctskinError
 from ectskin.io import hdf5
 from ectskin.io.generic import load_generic
 from ectskin.io.hdf5 import RecordingWriter, list_trials, read_layout, write_recording
-from ectskin.io.recording import Recording, Trial
+from ectskin.io.recording import GROUND_TRUTH_FIELDS, Recording, Trial, require_ground_truth
 
 #: Suffixes :func:`read_recording` takes, by reader.
 GENERIC_SUFFIXES = (".npz", ".csv")
@@ -45,11 +46,13 @@ def read_recording(path: str | os.PathLike, **kwargs) -> Recording:
 
 
 __all__ = [
+    "GROUND_TRUTH_FIELDS",
     "Recording",
     "RecordingWriter",
     "Trial",
     "list_trials",
     "read_layout",
     "read_recording",
+    "require_ground_truth",
     "write_recording",
 ]

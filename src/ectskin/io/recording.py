@@ -4,18 +4,29 @@ A trial is one contiguous group of frames (30 s in the paper's protocol). Arrays
 metadata are checked against each other when a trial is built, so downstream code can trust
 shapes and units:
 
-================  =============================  ======================================
-field             shape                          meaning
-================  =============================  ======================================
-``capacitance``   (n_frames, n_pairs) float64    raw readout per pair, pF (NaN = masked)
-``timestamps``    (n_frames,) float64            seconds from the start of the trial
-``labels``        (n_frames,) int16              touch class per frame, 0 = no touch
-``markers``       (n_frames, n_markers, 3) f64   marker positions, mm, NaN where occluded
-``force``         (n_frames,) float64            touch force, N (NaN where unknown)
-================  =============================  ======================================
+======================  =============================  ======================================
+field                   shape                          meaning
+======================  =============================  ======================================
+``capacitance``         (n_frames, n_pairs) float64    raw readout per pair, pF (NaN = masked)
+``timestamps``          (n_frames,) float64            seconds from the start of the trial
+``labels``              (n_frames,) int16              touch class per frame, 0 = no touch
+``markers``             (n_frames, n_markers, 3) f64   marker positions, mm, NaN where occluded
+``force``               (n_frames,) float64            touch force, N (NaN where unknown)
+``contact``             (n_frames,) bool               the finger is on the skin
+``finger_uv_mm``        (n_frames, 2) float64          skin point under the fingertip, mm
+``finger_height_mm``    (n_frames,) float64            fingertip height above the skin, mm
+======================  =============================  ======================================
 
-``markers`` and ``force`` may be ``None`` (not recorded). ``inflation`` is the chamber volume
+``markers``, ``force`` and the finger ground truth (``contact``, ``finger_uv_mm``,
+``finger_height_mm``) may each be ``None`` (not recorded). ``inflation`` is the chamber volume
 vector p in ml, ``region`` the trial's touched region (0 for none).
+
+The finger ground truth describes where the finger is in every frame, in contact or hovering:
+``finger_uv_mm`` is the point of the skin under the fingertip in the surface coordinates (u, v)
+of ``finger_surface`` (the face the finger is on or over: (x, z) on ``front``/``back``, see
+:mod:`ectskin.layout.layout`), ``finger_height_mm`` the fingertip's height above the skin. Both
+are NaN in frames without a finger (the same frames for both); in contact frames the height is
+0 and the point is known. :func:`require_ground_truth` refuses a recording without them.
 """
 
 from __future__ import annotations
@@ -25,8 +36,83 @@ from typing import Any
 
 import numpy as np
 
-from ectskin._check import EctskinError, check_array
+from ectskin._check import EctskinError, check_array, check_option
 from ectskin.layout import SensorLayout
+from ectskin.layout.layout import SURFACES
+
+#: The per-frame finger ground truth of a :class:`Trial` (each optional, all three needed).
+GROUND_TRUTH_FIELDS = ("contact", "finger_uv_mm", "finger_height_mm")
+
+
+def _bool_frames(name: str, value: Any, n: int, src: str) -> np.ndarray:
+    """(n,) bool from bools or the numbers 0/1; anything else is refused, naming the frame."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:
+        raise EctskinError(f"{src}: {name} must be bool; {exc}") from None
+    if arr.dtype != np.bool_:
+        if arr.dtype.kind not in "iuf":
+            raise EctskinError(f"{src}: {name} must be bool, found dtype {arr.dtype}")
+        bad = ~np.isin(arr, (0, 1))
+        if bad.any():
+            k = tuple(int(i) for i in np.argwhere(bad)[0])
+            raise EctskinError(f"{src}: {name} must be bool (or 0/1), found {arr[k]} at index {k}")
+    return check_array(name, arr, (n,), dtype=np.bool_, source=src)
+
+
+def check_ground_truth(
+    src: str, n: int, contact: Any, finger_uv_mm: Any, finger_height_mm: Any
+) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """Checked finger ground truth of ``n`` frames (each argument may be None = not recorded).
+
+    ``contact`` (n,) bool; ``finger_uv_mm`` (n, 2) float64, a row all NaN or all finite;
+    ``finger_height_mm`` (n,) float64, NaN or >= 0. Where both positions are given they agree on
+    the frames without a finger (NaN); in contact frames the point is known and the height is 0.
+    Raises an :class:`EctskinError` naming ``src``, the field and the first bad frame.
+    """
+    if contact is not None:
+        contact = _bool_frames("contact", contact, n, src)
+    uv_missing = h_missing = None
+    if finger_uv_mm is not None:
+        finger_uv_mm = check_array("finger_uv_mm", finger_uv_mm, (n, 2), source=src)
+        nan = np.isnan(finger_uv_mm)
+        bad = np.isinf(finger_uv_mm).any(axis=1) | (nan[:, 0] != nan[:, 1])
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise EctskinError(
+                f"{src}: finger_uv_mm[{k}] is {finger_uv_mm[k].tolist()}, expected two finite "
+                "numbers (mm) or two NaN (no finger)"
+            )
+        uv_missing = nan[:, 0]
+    if finger_height_mm is not None:
+        finger_height_mm = check_array("finger_height_mm", finger_height_mm, (n,), source=src)
+        h_missing = np.isnan(finger_height_mm)
+        bad = ~h_missing & ~(np.isfinite(finger_height_mm) & (finger_height_mm >= 0))
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise EctskinError(
+                f"{src}: finger_height_mm[{k}] is {finger_height_mm[k]}, expected a height >= 0 "
+                "mm (0 in contact) or NaN (no finger)"
+            )
+    if uv_missing is not None and h_missing is not None and np.any(uv_missing != h_missing):
+        k = int(np.argmax(uv_missing != h_missing))
+        raise EctskinError(
+            f"{src}: frame {k} has finger_uv_mm {finger_uv_mm[k].tolist()} but finger_height_mm "
+            f"{finger_height_mm[k]}; both are NaN in the frames without a finger, else neither"
+        )
+    if contact is not None and uv_missing is not None and np.any(contact & uv_missing):
+        k = int(np.argmax(contact & uv_missing))
+        raise EctskinError(
+            f"{src}: frame {k} is in contact but finger_uv_mm is NaN (no finger); in contact "
+            "the point under the fingertip is known"
+        )
+    if contact is not None and h_missing is not None and np.any(contact & (finger_height_mm != 0)):
+        k = int(np.argmax(contact & (finger_height_mm != 0)))
+        raise EctskinError(
+            f"{src}: frame {k} is in contact but finger_height_mm is {finger_height_mm[k]}, "
+            "expected 0 (the height in contact)"
+        )
+    return contact, finger_uv_mm, finger_height_mm
 
 
 @dataclass
@@ -41,6 +127,10 @@ class Trial:
     region: int = 0
     markers: np.ndarray | None = None
     force: np.ndarray | None = None
+    contact: np.ndarray | None = None
+    finger_uv_mm: np.ndarray | None = None
+    finger_height_mm: np.ndarray | None = None
+    finger_surface: str | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -53,6 +143,11 @@ class Trial:
             self.markers = check_array("markers", self.markers, (n, None, 3), source=src)
         if self.force is not None:
             self.force = check_array("force", self.force, (n,), source=src)
+        self.contact, self.finger_uv_mm, self.finger_height_mm = check_ground_truth(
+            src, n, self.contact, self.finger_uv_mm, self.finger_height_mm
+        )
+        if self.finger_surface is not None:
+            check_option("finger_surface", self.finger_surface, SURFACES, source=src)
         self.inflation = tuple(float(v) for v in self.inflation)
         self.region = int(self.region)
         if n and np.any(np.diff(self.timestamps) <= 0):
@@ -78,15 +173,32 @@ class Trial:
     def has_occlusion(self) -> bool:
         return self.markers is not None and bool(np.isnan(self.markers).any())
 
+    @property
+    def has_ground_truth(self) -> bool:
+        """True when the trial carries contact, finger_uv_mm and finger_height_mm."""
+        return not self.missing_ground_truth
+
+    @property
+    def missing_ground_truth(self) -> tuple[str, ...]:
+        """The fields of :data:`GROUND_TRUTH_FIELDS` this trial lacks (None)."""
+        return tuple(k for k in GROUND_TRUTH_FIELDS if getattr(self, k) is None)
+
 
 @dataclass
 class Recording:
-    """A layout plus trials of frames at ``frame_rate_hz``; checks that all of them agree."""
+    """A layout plus trials of frames at ``frame_rate_hz``; checks that all of them agree.
+
+    ``source`` (the file it was read from) and ``format_version`` (of that file's format) say
+    where the recording came from, for messages; they are not part of its value (not compared,
+    not written).
+    """
 
     layout: SensorLayout
     trials: list[Trial]
     frame_rate_hz: float
     meta: dict[str, Any] = field(default_factory=dict)
+    source: str | None = field(default=None, compare=False)
+    format_version: int | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.frame_rate_hz) and self.frame_rate_hz > 0):
@@ -136,3 +248,25 @@ class Recording:
             if t.name == name:
                 return t
         raise EctskinError(f"recording has no trial {name!r}")
+
+
+def require_ground_truth(rec: Recording, *, source: str | None = None) -> Recording:
+    """Return ``rec`` if every trial carries the finger ground truth, else raise one clear error.
+
+    The error names the recording (``source``, default ``rec.source``), its format version where
+    known and the first trial lacking any of :data:`GROUND_TRUTH_FIELDS`, e.g. the trials of a
+    format-version-1 HDF5 file, which predates them.
+    """
+    for t in rec.trials:
+        missing = t.missing_ground_truth
+        if missing:
+            name = source if source is not None else rec.source
+            what = "recording" + (f" {name}" if name else "")
+            if rec.format_version is not None:
+                what += f" (schema {rec.format_version})"
+            raise EctskinError(
+                f"{what} has no per-frame finger ground truth (trial {t.name!r} lacks "
+                f"{', '.join(missing)}); record it again with ectskin simulate, or import labels "
+                "(docs/import-format.md)"
+            )
+    return rec

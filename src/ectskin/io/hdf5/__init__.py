@@ -1,6 +1,7 @@
 """HDF5 recordings: one file per experiment holding the layout and every trial.
 
-The schema (``format = "ectskin.recording"``, ``format_version = 1``) is documented in
+The schema (``format = "ectskin.recording"``, ``format_version = 2``; version 1 files, which
+predate the finger ground truth, are still read) is documented in
 ``docs/recording-format.md``. In short, all frames of all trials are stored back to back in one set
 of resizable datasets under ``/frames`` and a trial index under ``/trials`` says where each trial
 starts; ``/committed`` records how many frames, trials and events are part of the recording::
@@ -14,7 +15,11 @@ starts; ``/committed`` records how many frames, trials and events are part of th
     /frames/labels       (n_frames,) int16
     /frames/markers      (n_frames, n_markers, 3) float64, mm   [if any trial has markers]
     /frames/force        (n_frames,) float64, N                 [if any trial has force]
-    /trials/{name, start, region, inflation_ml, has_markers, has_force, meta_json}  (n_trials,)
+    /frames/contact      (n_frames,) bool                       [if any trial has it; v2]
+    /frames/finger_uv_mm (n_frames, 2) float64, mm              [if any trial has it; v2]
+    /frames/finger_height_mm  (n_frames,) float64, mm           [if any trial has it; v2]
+    /trials/{name, start, region, inflation_ml, has_markers, has_force, meta_json,
+             has_contact, has_finger_uv_mm, has_finger_height_mm, finger_surface [v2]}  (n_trials,)
     /events/{t_s, trial, text}                                                     (n_events,)
 
 Why one set of datasets rather than a group per trial: the live :class:`RecordingWriter` uses
@@ -28,7 +33,8 @@ Modules, by job:
 * :mod:`~ectskin.io.hdf5.schema`: names, versions, the dataset layout, the metadata's JSON;
 * :mod:`~ectskin.io.hdf5.write`: :func:`write_recording`, a whole recording at once, atomically
   (temp file, fsync, ``os.replace``);
-* :mod:`~ectskin.io.hdf5.append`: :class:`RecordingWriter`, frames appended as they arrive (SWMR);
+* :mod:`~ectskin.io.hdf5.append`: :class:`RecordingWriter`, frames appended as they arrive (SWMR),
+  with the checks of each appended batch in :mod:`~ectskin.io.hdf5.frame_args`;
 * :mod:`~ectskin.io.hdf5.read` (with :mod:`~ectskin.io.hdf5.reader`): :func:`read_recording`
   checks the schema and returns a ``Recording`` (bit-exact arrays); :func:`read_layout` and
   :func:`list_trials` read metadata only, for big files;

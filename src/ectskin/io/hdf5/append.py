@@ -21,11 +21,13 @@ from typing import Any, Self
 import h5py
 import numpy as np
 
-from ectskin._check import EctskinError, check_array, check_type
+from ectskin._check import EctskinError, check_option, check_type
 from ectskin._files import temp_path
+from ectskin.io.hdf5.frame_args import check_frames
 from ectskin.io.hdf5.schema import (
     EVENT_FIELDS,
     EVENTS_KEY,
+    OPTIONAL_FRAMES,
     TRIAL_FIELDS,
     create_frames,
     create_tables,
@@ -35,33 +37,9 @@ from ectskin.io.hdf5.schema import (
 )
 from ectskin.io.hdf5.write import fsync_path
 from ectskin.layout import SensorLayout
+from ectskin.layout.layout import SURFACES
 
 logger = logging.getLogger(__name__)
-
-
-def _frames_arg(
-    name: str,
-    value: Any,
-    tail: tuple[int, ...],
-    n: int | None,
-    src: str,
-    *,
-    finite: bool = False,
-    broadcast: bool = False,
-) -> np.ndarray:
-    """``value`` as a float64 array (n, *tail); an array of shape ``tail`` is one frame.
-
-    With ``broadcast`` a scalar is repeated for all ``n`` frames.
-    """
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise EctskinError(f"{src}: {name} must be numeric; {exc}") from None
-    if broadcast and arr.ndim == 0 and n is not None:
-        arr = np.full(n, arr)
-    elif arr.shape == tail:
-        arr = arr[None]
-    return check_array(name, arr, (n, *tail), finite=finite, source=src)
 
 
 def _positive_rate(frame_rate_hz: Any) -> float:
@@ -103,8 +81,10 @@ class RecordingWriter:
     caller whose frames may stop arriving should call :meth:`flush` itself. Such a file opens with
     ``read_recording(path, allow_partial=True)`` (also while the writer still runs).
 
-    Within a trial, timestamps (s) must increase; labels default to 0; markers (mm) and force (N)
-    are optional, but a trial gives them with every append or never. Thread-safe.
+    Within a trial, timestamps (s) must increase; labels default to 0; markers (mm), force (N)
+    and the finger ground truth (contact, finger_uv_mm, finger_height_mm; see
+    :class:`~ectskin.io.recording.Trial`) are optional, but a trial gives each of them with every
+    append or never. Thread-safe.
     """
 
     def __init__(
@@ -166,9 +146,9 @@ class RecordingWriter:
         try:
             with h5py.File(tmp, "w", libver=("v110", "v110")) as f:
                 write_root(f, self.layout, self.frame_rate_hz, meta_json, "RecordingWriter")
-                create_frames(
-                    f, self.layout, 0, chunk_frames, self._has_markers_ds, True, compress=False
-                )
+                # SWMR cannot add datasets later: create every optional one now
+                optional = [k for k in OPTIONAL_FRAMES if k != "markers" or self._has_markers_ds]
+                create_frames(f, self.layout, 0, chunk_frames, optional, compress=False)
                 create_tables(f, 0, 0)
             fsync_path(tmp)
             self._publish(tmp, overwrite)
@@ -234,22 +214,27 @@ class RecordingWriter:
         *,
         inflation: Sequence[float] = (),
         region: int = 0,
+        finger_surface: str | None = None,
         meta: dict[str, Any] | None = None,
     ) -> None:
         """Start a new trial; the frames appended from now on belong to it.
 
-        ``inflation``: chamber volumes p in ml; ``region``: touched region (0 = none).
+        ``inflation``: chamber volumes p in ml; ``region``: touched region (0 = none);
+        ``finger_surface``: the face the finger is on or over ("front", "back", ...; None =
+        unknown), the surface of the trial's ``finger_uv_mm``.
         """
         with self._lock:
             self._check_open()
             infl = self._check_trial(name, inflation, region)
+            if finger_surface is not None:
+                check_option("finger_surface", finger_surface, SURFACES, f"trial {name!r}")
             row = {
                 "name": name,
                 "start": self.n_frames,
                 "region": int(region),
                 "inflation_ml": infl,
-                "has_markers": None,  # decided by the first append
-                "has_force": None,
+                **{f"has_{k}": None for k in OPTIONAL_FRAMES},  # decided by the first append
+                "finger_surface": finger_surface or "",
                 "meta_json": to_json(f"trial {name!r}: meta", meta),
             }
             self._names.append(name)
@@ -289,6 +274,10 @@ class RecordingWriter:
         labels: Any = None,
         markers: Any = None,
         force: Any = None,
+        *,
+        contact: Any = None,
+        finger_uv_mm: Any = None,
+        finger_height_mm: Any = None,
     ) -> None:
         """Append frames to the current trial.
 
@@ -297,63 +286,45 @@ class RecordingWriter:
         labels: (n,) or a scalar class 0..n_regions, default 0.
         markers: (n, n_markers, 3) or (n_markers, 3), mm, NaN = occluded.
         force: (n,) or a scalar, N.
+        contact: (n,) or a scalar bool, the finger is on the skin.
+        finger_uv_mm: (n, 2) or (2,), mm, the skin point under the fingertip; NaN = no finger.
+        finger_height_mm: (n,) or a scalar, mm above the skin (0 in contact); NaN = no finger.
 
-        The first append of a trial decides whether the trial carries markers and force; an
-        append of 0 frames only declares that (for a trial that may stay empty).
+        The first append of a trial decides which of markers, force, contact, finger_uv_mm and
+        finger_height_mm the trial carries; an append of 0 frames only declares that (for a trial
+        that may stay empty).
         """
         with self._lock:
             self._check_open()
             if self._cur is None:
                 raise EctskinError(f"{self.path}: call start_trial() before append()")
             src = f"{self.path}: append to trial {self._cur['name']!r}"
-            cap, ts, lab, mk, fo = self._check_frames(
-                src, capacitance, timestamps, labels, markers, force
+            given = {
+                "markers": markers,
+                "force": force,
+                "contact": contact,
+                "finger_uv_mm": finger_uv_mm,
+                "finger_height_mm": finger_height_mm,
+            }
+            frames = check_frames(
+                self.layout, src, self._cur_last_t, capacitance, timestamps, labels, given
             )
-            self._check_flags(src, mk is not None, fo is not None)
-            if cap.shape[0] == 0:
+            self._check_flags(src, {k: frames[k] is not None for k in OPTIONAL_FRAMES})
+            n = frames["capacitance"].shape[0]
+            if n == 0:
                 return
-            self._cur_last_t = float(ts[-1])
-            self._buf.setdefault("capacitance", []).append(cap)
-            self._buf.setdefault("timestamps", []).append(ts)
-            self._buf.setdefault("labels", []).append(lab)
-            if mk is not None:
-                self._buf.setdefault("markers", []).append((self._n_buf, mk))
-            if fo is not None:
-                self._buf.setdefault("force", []).append((self._n_buf, fo))
-            self._n_buf += cap.shape[0]
+            self._cur_last_t = float(frames["timestamps"][-1])
+            for key in ("capacitance", "timestamps", "labels"):
+                self._buf.setdefault(key, []).append(frames[key])
+            for key in OPTIONAL_FRAMES:
+                if frames[key] is not None:
+                    self._buf.setdefault(key, []).append((self._n_buf, frames[key]))
+            self._n_buf += n
             self._maybe_flush()
 
-    def _check_frames(self, src: str, capacitance, timestamps, labels, markers, force):
-        """The arguments of :meth:`append` as checked arrays (cap, ts, labels, markers, force)."""
-        L = self.layout
-        cap = _frames_arg("capacitance", capacitance, (L.n_pairs,), None, src)
-        n = cap.shape[0]
-        ts = _frames_arg("timestamps", timestamps, (), n, src, finite=True)
-        if labels is None:
-            lab = np.zeros(n, dtype=np.int16)
-        else:
-            lab = _frames_arg("labels", labels, (), n, src, finite=True, broadcast=True)
-            bad = (lab != np.round(lab)) | (lab < 0) | (lab > L.n_regions)
-            if bad.any():
-                k = int(np.argmax(bad))
-                raise EctskinError(
-                    f"{src}: labels[{k}] is {lab[k]}, expected an integer 0..{L.n_regions}"
-                )
-            lab = lab.astype(np.int16)
-        mk = None if markers is None else _frames_arg("markers", markers, (L.n_markers, 3), n, src)
-        fo = None if force is None else _frames_arg("force", force, (), n, src, broadcast=True)
-        prev = np.concatenate([[self._cur_last_t], ts])
-        if n and np.any(np.diff(prev) <= 0):
-            k = int(np.argmax(np.diff(prev) <= 0))
-            raise EctskinError(
-                f"{src}: timestamps must increase within a trial; timestamps[{k}] = {ts[k]} "
-                f"comes after {prev[k]}"
-            )
-        return cap, ts, lab, mk, fo
-
-    def _check_flags(self, src: str, has_markers: bool, has_force: bool) -> None:
-        """Markers and force given with every append of a trial or never; the first decides."""
-        flags = {"has_markers": has_markers, "has_force": has_force}
+    def _check_flags(self, src: str, has: dict[str, bool]) -> None:
+        """Each optional dataset given with every append of a trial or never; the first decides."""
+        flags = {f"has_{k}": v for k, v in has.items()}
         for key, given in flags.items():
             what = key[4:]
             if self._cur[key] is not None and self._cur[key] != given:
@@ -362,7 +333,7 @@ class RecordingWriter:
                     f"earlier frames {'had' if self._cur[key] else 'had no'} {what}; give "
                     "them with every append of a trial or never"
                 )
-        if has_markers and not self._has_markers_ds:
+        if flags["has_markers"] and not self._has_markers_ds:
             raise EctskinError(f"{src}: layout {self.layout.name!r} has no markers")
         if self._cur["has_markers"] is None:  # the trial's first append decides
             self._cur.update(flags)
@@ -432,7 +403,7 @@ class RecordingWriter:
                 self._n_trials_written = k + 1
             for key in TRIAL_FIELDS:
                 value = row[key]
-                if key in ("has_markers", "has_force"):
+                if key.startswith("has_"):
                     value = bool(value)
                 self._tds[key][k] = value
         self._trial_rows = []
@@ -445,7 +416,7 @@ class RecordingWriter:
             ds.resize((e, *ds.shape[1:]))
         for key in ("capacitance", "timestamps", "labels"):
             self._fds[key][s:e] = np.concatenate(self._buf[key])
-        for key in ("markers", "force"):
+        for key in OPTIONAL_FRAMES:
             for off, arr in self._buf.get(key, []):
                 self._fds[key][s + off : s + off + arr.shape[0]] = arr
         self._n_frames_written = e

@@ -106,8 +106,11 @@ def read_recording(
 
     ``trials``: names of the trials to load (in that order); default all, in file order.
     Arrays are returned exactly as written (float64 capacitance in pF, timestamps in s, int16
-    labels, markers in mm, force in N). Events, if any, are in ``meta["events"]`` as a list of
-    ``{"t_s": float, "trial": str | None, "text": str}``.
+    labels, markers in mm, force in N, the finger ground truth). Events, if any, are in
+    ``meta["events"]`` as a list of ``{"t_s": float, "trial": str | None, "text": str}``.
+    Files of format version 1 predate the finger ground truth: their trials have ``contact``,
+    ``finger_uv_mm``, ``finger_height_mm`` and ``finger_surface`` None. The recording's
+    ``source`` is ``path`` and its ``format_version`` the file's.
     """
 
     def run(r: FileReader) -> Recording:
@@ -121,7 +124,14 @@ def read_recording(
         loaded = r.trials(layout, index, rows)
         r.field = "/"
         try:
-            return Recording(layout, loaded, head["frame_rate_hz"], meta)
+            return Recording(
+                layout,
+                loaded,
+                head["frame_rate_hz"],
+                meta,
+                source=str(r.path),
+                format_version=head["version"],
+            )
         except EctskinError as exc:
             raise r.fail(str(exc)) from None
 
@@ -154,8 +164,9 @@ def list_trials(path: str | os.PathLike, *, allow_partial: bool = False) -> list
     """One dict per trial, in file order, without loading any frame.
 
     Keys: ``name``, ``n_frames``, ``region``, ``inflation`` (tuple, ml), ``start_frame`` (row in
-    ``/frames``), ``has_markers``, ``has_force``, ``meta``. Incomplete files as in
-    :func:`read_recording`.
+    ``/frames``), ``has_markers``, ``has_force``, ``has_contact``, ``has_finger_uv_mm``,
+    ``has_finger_height_mm`` (all False in a version-1 file), ``finger_surface`` (str or None),
+    ``meta``. Incomplete files as in :func:`read_recording`.
     """
 
     def run(r: FileReader) -> list[dict[str, Any]]:

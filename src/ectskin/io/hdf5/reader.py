@@ -5,6 +5,10 @@ root attributes (:meth:`~FileReader.header`), ``/layout``, the commit record and
 event tables (:meth:`~FileReader.index`), then the frames of the selected trials
 (:meth:`~FileReader.trials`). ``field`` names the part being read, so an unexpected h5py error
 can still be reported against it (:func:`ectskin.io.hdf5.read.guarded`).
+
+Files of every version up to :data:`~ectskin.io.hdf5.schema.FORMAT_VERSION` are read: a version-1
+file has no finger ground truth, so its trials come back with ``contact``, ``finger_uv_mm``,
+``finger_height_mm`` and ``finger_surface`` None.
 """
 
 from __future__ import annotations
@@ -20,9 +24,16 @@ import h5py
 import numpy as np
 
 from ectskin._check import EctskinError
-from ectskin.io.hdf5.schema import EVENT_FIELDS, FORMAT, FORMAT_VERSION, TRIAL_FIELDS
+from ectskin.io.hdf5.schema import (
+    EVENT_FIELDS,
+    FORMAT,
+    FORMAT_VERSION,
+    OPTIONAL_FRAMES,
+    TRIAL_FIELDS_OF_VERSION,
+)
 from ectskin.io.recording import Trial
 from ectskin.layout import SensorLayout
+from ectskin.layout.layout import SURFACES
 
 logger = logging.getLogger(__name__)
 
@@ -34,6 +45,7 @@ class FileReader:
         self.f = f
         self.path = path
         self.field = "/"
+        self.version = FORMAT_VERSION  # the file's, once the header is read
 
     def fail(self, msg: str) -> EctskinError:
         return EctskinError(f"{self.path}: {msg}")
@@ -44,9 +56,7 @@ class FileReader:
         obj = self.f.get(name)
         if obj is None:
             what = "dataset" if kind is h5py.Dataset else "group"
-            raise self.fail(
-                f"missing {what} {name} (required by {FORMAT} version {FORMAT_VERSION})"
-            )
+            raise self.fail(f"missing {what} {name} (required by {FORMAT} version {self.version})")
         if not isinstance(obj, kind):
             raise self.fail(f"{name} is a {type(obj).__name__}, expected a {kind.__name__}")
         return obj
@@ -85,7 +95,7 @@ class FileReader:
     def header(self, allow_partial: bool) -> dict[str, Any]:
         """Root attributes: format, version, completeness, frame rate and ``Recording.meta``."""
         self._check_format()
-        version = self._format_version()
+        version = self.version = self._format_version()
         complete = self.attr(self.f, "complete")
         if not isinstance(complete, (bool, np.bool_, int, np.integer)) or int(complete) not in (
             0,
@@ -163,8 +173,8 @@ class FileReader:
                 "n_frames": int(stops[k] - starts[k]),
                 "region": int(cols["region"][k]),
                 "inflation": cols["inflation"][k],
-                "has_markers": bool(cols["has_markers"][k]),
-                "has_force": bool(cols["has_force"][k]),
+                **{f"has_{d}": bool(cols[f"has_{d}"][k]) for d in OPTIONAL_FRAMES},
+                "finger_surface": cols["finger_surface"][k],
                 "meta": cols["meta"][k],
             }
             for k in range(n_trials)
@@ -183,14 +193,18 @@ class FileReader:
         return n_frames, n_trials, n_events
 
     def _trial_table(self, n_trials: int, complete: bool) -> tuple[dict, int]:
-        tds = {k: self.node(f"/trials/{k}") for k in TRIAL_FIELDS}
+        """The ``/trials`` columns of the file's version (a version-1 file has fewer)."""
+        tds = {k: self.node(f"/trials/{k}") for k in TRIAL_FIELDS_OF_VERSION[self.version]}
         n_trials = self._check_rows(tds, "trials", n_trials, complete)
         self._check_kind(tds["start"], "iu", "an integer")
         self._check_kind(tds["region"], "iu", "an integer")
-        self._check_kind(tds["has_markers"], "biu", "a boolean")
-        self._check_kind(tds["has_force"], "biu", "a boolean")
+        for k in tds:
+            if k.startswith("has_"):
+                self._check_kind(tds[k], "biu", "a boolean")
         self._check_strings(tds["name"])
         self._check_strings(tds["meta_json"])
+        if "finger_surface" in tds:
+            self._check_strings(tds["finger_surface"])
         if h5py.check_vlen_dtype(tds["inflation_ml"].dtype) is None:
             raise self.fail(
                 f"/trials/inflation_ml has dtype {tds['inflation_ml'].dtype}, expected variable-"
@@ -202,8 +216,8 @@ class FileReader:
         self, layout: SensorLayout, n_frames: int, complete: bool
     ) -> tuple[dict, int]:
         fds = {}
-        for k in ("capacitance", "timestamps", "labels", "markers", "force"):
-            if k in ("markers", "force") and f"frames/{k}" not in self.f:
+        for k in ("capacitance", "timestamps", "labels", *OPTIONAL_FRAMES):
+            if k in OPTIONAL_FRAMES and f"frames/{k}" not in self.f:
                 continue
             fds[k] = self.node(f"/frames/{k}")
         tails = {
@@ -212,14 +226,18 @@ class FileReader:
             "labels": ((), "(n_frames,)", "iu"),
             "markers": ((layout.n_markers, 3), f"(n_frames, {layout.n_markers}, 3)", "f"),
             "force": ((), "(n_frames,)", "f"),
+            "contact": ((), "(n_frames,)", "biu"),
+            "finger_uv_mm": ((2,), "(n_frames, 2)", "f"),
+            "finger_height_mm": ((), "(n_frames,)", "f"),
         }
+        kind_names = {"f": "a float", "iu": "an integer", "biu": "a boolean"}
         for k, ds in fds.items():
             tail, want, kinds = tails[k]
             if ds.ndim != 1 + len(tail) or tuple(ds.shape[1:]) != tail:
                 raise self.fail(
                     f"/frames/{k} has shape {ds.shape}, expected {want} for layout {layout.name!r}"
                 )
-            self._check_kind(ds, kinds, "a float" if kinds == "f" else "an integer")
+            self._check_kind(ds, kinds, kind_names[kinds])
         return fds, self._check_rows(fds, "frames", n_frames, complete)
 
     def _trial_columns(self, tds: dict, n_trials: int) -> dict[str, Any]:
@@ -230,8 +248,15 @@ class FileReader:
             "start": np.asarray(tds["start"][:n_trials], dtype=np.int64),
             "region": np.asarray(tds["region"][:n_trials], dtype=np.int64),
             "inflation": [tuple(float(v) for v in row) for row in tds["inflation_ml"][:n_trials]],
-            "has_markers": np.asarray(tds["has_markers"][:n_trials]).astype(bool),
-            "has_force": np.asarray(tds["has_force"][:n_trials]).astype(bool),
+            **{  # a version-1 file has no ground-truth columns: all False
+                f"has_{k}": (
+                    np.asarray(tds[f"has_{k}"][:n_trials]).astype(bool)
+                    if f"has_{k}" in tds
+                    else np.zeros(len(names), dtype=bool)
+                )
+                for k in OPTIONAL_FRAMES
+            },
+            "finger_surface": self._finger_surfaces(tds, names),
             "meta": [],
         }
         for k, text in enumerate(tds["meta_json"].asstr()[:n_trials]):
@@ -252,6 +277,21 @@ class FileReader:
                 raise self.fail(f"/trials/name[{k}]: trial name {name!r} is empty or repeated")
             seen.add(name)
         return cols
+
+    def _finger_surfaces(self, tds: dict, names: list[str]) -> list[str | None]:
+        """``/trials/finger_surface`` as surface names ('' → None); None for a version-1 file."""
+        if "finger_surface" not in tds:
+            return [None] * len(names)
+        out = []
+        for k, s in enumerate(tds["finger_surface"].asstr()[: len(names)]):
+            s = str(s)
+            if s and s not in SURFACES:
+                raise self.fail(
+                    f"/trials/finger_surface[{k}] (trial {names[k]!r}) is {s!r}, expected '' "
+                    f"(none) or one of {', '.join(SURFACES)}"
+                )
+            out.append(s or None)
+        return out
 
     def _check_starts(
         self, names: list[str], starts: np.ndarray, n_frames: int, complete: bool
@@ -283,15 +323,13 @@ class FileReader:
     def _check_optional_frames(
         self, layout: SensorLayout, fds: dict, names: list[str], cols: dict
     ) -> None:
-        has_m, has_f = cols["has_markers"], cols["has_force"]
-        if has_m.any() and "markers" not in fds and layout.n_markers:
-            k = int(np.argmax(has_m))
-            raise self.fail(
-                f"missing dataset /frames/markers: trial {names[k]!r} has has_markers=True"
-            )
-        if has_f.any() and "force" not in fds:
-            k = int(np.argmax(has_f))
-            raise self.fail(f"missing dataset /frames/force: trial {names[k]!r} has has_force=True")
+        for d in OPTIONAL_FRAMES:
+            has = cols[f"has_{d}"]
+            if d == "markers" and not layout.n_markers:  # markers (n, 0, 3) are not stored
+                continue
+            if has.any() and d not in fds:
+                k = int(np.argmax(has))
+                raise self.fail(f"missing dataset /frames/{d}: trial {names[k]!r} has has_{d}=True")
 
     def _events(self, n_events: int, complete: bool, names: list[str]) -> list[dict[str, Any]]:
         eds = {k: self.node(f"/events/{k}") for k in EVENT_FIELDS}
@@ -360,7 +398,13 @@ class FileReader:
                 if layout.n_markers
                 else np.zeros((e - s, 0, 3))
             )
-        fo = self._read(fds["force"], s, e, np.float64) if row["has_force"] else None
+        optional = {  # force and the finger ground truth
+            k: self._read(fds[k], s, e, np.bool_ if k == "contact" else np.float64)
+            if row[f"has_{k}"]
+            else None
+            for k in OPTIONAL_FRAMES
+            if k != "markers"
+        }
         try:
             return Trial(
                 name=row["name"],
@@ -370,7 +414,8 @@ class FileReader:
                 inflation=row["inflation"],
                 region=row["region"],
                 markers=mk,
-                force=fo,
+                **optional,
+                finger_surface=row["finger_surface"],
                 meta=row["meta"],
             )
         except EctskinError as exc:

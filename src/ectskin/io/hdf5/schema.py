@@ -16,7 +16,7 @@ numbers and lists; anything else that is not a JSON value is refused.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from datetime import UTC, datetime
 from typing import Any
 
@@ -25,20 +25,39 @@ import numpy as np
 
 from ectskin import __version__
 from ectskin._check import EctskinError, check_type
+from ectskin.io.recording import GROUND_TRUTH_FIELDS
 from ectskin.layout import SensorLayout
 
 FORMAT = "ectskin.recording"
-FORMAT_VERSION = 1
+#: The version written. 1: the first; 2: adds the finger ground truth (``/frames/contact``,
+#: ``finger_uv_mm``, ``finger_height_mm`` and their ``/trials`` columns). Versions 1 and 2 read.
+FORMAT_VERSION = 2
 
 #: Key of ``Recording.meta`` that holds the events table (list of ``{"t_s", "trial", "text"}``).
 EVENTS_KEY = "events"
 
 STR = h5py.string_dtype("utf-8")
 VLEN_F8 = h5py.vlen_dtype(np.float64)
-TRIAL_FIELDS = ("name", "start", "region", "inflation_ml", "has_markers", "has_force", "meta_json")
+#: Optional ``/frames`` datasets (present when some trial has them), each flagged per trial by
+#: the ``/trials`` column ``has_<name>``; the finger ground truth exists from version 2 on.
+OPTIONAL_FRAMES = ("markers", "force", *GROUND_TRUTH_FIELDS)
+#: ``/trials`` columns of each format version.
+TRIAL_FIELDS_OF_VERSION = {
+    1: ("name", "start", "region", "inflation_ml", "has_markers", "has_force", "meta_json"),
+    2: (
+        "name",
+        "start",
+        "region",
+        "inflation_ml",
+        "has_markers",
+        "has_force",
+        *(f"has_{k}" for k in GROUND_TRUTH_FIELDS),
+        "finger_surface",
+        "meta_json",
+    ),
+}
+TRIAL_FIELDS = TRIAL_FIELDS_OF_VERSION[FORMAT_VERSION]
 EVENT_FIELDS = ("t_s", "trial", "text")
-#: Optional ``/frames`` datasets (present when some trial has them).
-OPTIONAL_FRAMES = ("markers", "force")
 COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 TABLE_CHUNK = 64  # rows per chunk of the trial and event tables
 
@@ -113,19 +132,24 @@ def write_root(
 
 
 def frame_specs(
-    layout: SensorLayout, with_markers: bool, with_force: bool
+    layout: SensorLayout, optional: Collection[str]
 ) -> dict[str, tuple[tuple[int, ...], Any, Any, str]]:
-    """``/frames`` datasets: name → (shape of one frame, dtype, fill value, unit)."""
+    """``/frames`` datasets, the required ones and those of ``optional`` (of
+    :data:`OPTIONAL_FRAMES`): name → (shape of one frame, dtype, fill value, unit)."""
     spec = {
         "capacitance": ((layout.n_pairs,), np.float64, np.nan, "pF"),
         "timestamps": ((), np.float64, np.nan, "s"),
         "labels": ((), np.int16, -1, "class (0 = no touch, 1..n_regions)"),
+        "markers": ((layout.n_markers, 3), np.float64, np.nan, "mm"),
+        "force": ((), np.float64, np.nan, "N"),
+        "contact": ((), np.bool_, False, "bool (True = the finger is on the skin)"),
+        "finger_uv_mm": ((2,), np.float64, np.nan, "mm (surface coordinates u, v)"),
+        "finger_height_mm": ((), np.float64, np.nan, "mm (above the skin)"),
     }
-    if with_markers:
-        spec["markers"] = ((layout.n_markers, 3), np.float64, np.nan, "mm")
-    if with_force:
-        spec["force"] = ((), np.float64, np.nan, "N")
-    return spec
+    unknown = set(optional) - set(OPTIONAL_FRAMES)
+    if unknown:
+        raise ValueError(f"not optional /frames datasets: {sorted(unknown)}")
+    return {k: v for k, v in spec.items() if k not in OPTIONAL_FRAMES or k in optional}
 
 
 def create_frames(
@@ -133,11 +157,11 @@ def create_frames(
     layout: SensorLayout,
     n_frames: int,
     chunk_frames: int,
-    with_markers: bool,
-    with_force: bool,
+    optional: Collection[str],
     compress: bool,
 ) -> dict[str, h5py.Dataset]:
-    """Create the resizable ``/frames`` datasets with ``n_frames`` rows (filled by the caller).
+    """Create the resizable ``/frames`` datasets with ``n_frames`` rows (filled by the caller):
+    the required ones and those named in ``optional`` (of :data:`OPTIONAL_FRAMES`).
 
     ``compress``: gzip + shuffle. The live writer does not compress: a compressed chunk that is
     flushed half full is rewritten elsewhere when it grows and its old space is not reused, so the
@@ -146,7 +170,7 @@ def create_frames(
     g = f.create_group("frames")
     rows = max(1, int(chunk_frames))
     out = {}
-    for name, (tail, dtype, fill, unit) in frame_specs(layout, with_markers, with_force).items():
+    for name, (tail, dtype, fill, unit) in frame_specs(layout, optional).items():
         ds = g.create_dataset(
             name,
             shape=(n_frames, *tail),
@@ -159,7 +183,7 @@ def create_frames(
         ds.attrs["unit"] = unit
         out[name] = ds
     out["capacitance"].attrs["pair_names"] = list(layout.pair_names)
-    if with_markers:
+    if "markers" in out:
         out["markers"].attrs["marker_names"] = [m.name for m in layout.markers]
     return out
 
@@ -182,13 +206,14 @@ def create_tables(f: h5py.File, n_trials: int, n_events: int) -> tuple[dict, dic
             "start": np.int64,
             "region": np.int32,
             "inflation_ml": VLEN_F8,
-            "has_markers": np.bool_,
-            "has_force": np.bool_,
+            **{f"has_{k}": np.bool_ for k in OPTIONAL_FRAMES},
+            "finger_surface": STR,
             "meta_json": STR,
         },
         n_trials,
     )
     tds["start"].attrs["unit"] = "frame index into /frames"
+    tds["finger_surface"].attrs["unit"] = "surface name, '' = none"
     tds["inflation_ml"].attrs["unit"] = "ml"
     eds = _create_table(f, "events", {"t_s": np.float64, "trial": np.int32, "text": STR}, n_events)
     eds["t_s"].attrs["unit"] = "s"

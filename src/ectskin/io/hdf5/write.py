@@ -19,6 +19,7 @@ from ectskin._check import EctskinError, check_type
 from ectskin._files import temp_path
 from ectskin.io.hdf5.schema import (
     EVENTS_KEY,
+    OPTIONAL_FRAMES,
     check_events,
     create_frames,
     create_tables,
@@ -118,15 +119,12 @@ def _write_file(tmp: Path, rec: Recording, meta_json: str, events: list) -> None
         raise EctskinError(f"{tmp.parent}: cannot create a file there ({exc})") from None
     with f:
         write_root(f, layout, rec.frame_rate_hz, meta_json, "write_recording")
-        fds = create_frames(
-            f,
-            layout,
-            n_frames,
-            chunk,
-            with_markers=layout.n_markers > 0 and any(t.markers is not None for t in rec.trials),
-            with_force=any(t.force is not None for t in rec.trials),
-            compress=True,
-        )
+        optional = [
+            k for k in OPTIONAL_FRAMES if any(getattr(t, k) is not None for t in rec.trials)
+        ]
+        if layout.n_markers == 0 and "markers" in optional:  # (n, 0, 3): nothing to store
+            optional.remove("markers")
+        fds = create_frames(f, layout, n_frames, chunk, optional, compress=True)
         tds, eds = create_tables(f, rec.n_trials, 0)
         _write_trial_table(tds, rec.trials, starts)
         _write_frames(fds, layout, rec.trials, starts)
@@ -143,8 +141,9 @@ def _write_trial_table(tds: dict, trials: Sequence[Trial], starts: np.ndarray) -
     tds["region"][:] = np.array([t.region for t in trials], dtype=np.int32)
     for k, t in enumerate(trials):  # row by row: h5py would read equal lengths as a 2-D array
         tds["inflation_ml"][k] = np.asarray(t.inflation, dtype=np.float64)
-    tds["has_markers"][:] = np.array([t.markers is not None for t in trials])
-    tds["has_force"][:] = np.array([t.force is not None for t in trials])
+    for k in OPTIONAL_FRAMES:
+        tds[f"has_{k}"][:] = np.array([getattr(t, k) is not None for t in trials])
+    tds["finger_surface"][:] = np.array([t.finger_surface or "" for t in trials], dtype=object)
     tds["meta_json"][:] = np.array([_trial_meta_json(t) for t in trials], dtype=object)
 
 
@@ -159,7 +158,7 @@ def _write_frames(
         fds["capacitance"][s:e] = t.capacitance
         fds["timestamps"][s:e] = t.timestamps
         fds["labels"][s:e] = t.labels
-        if t.markers is not None:
-            fds["markers"][s:e] = t.markers
-        if t.force is not None:
-            fds["force"][s:e] = t.force
+        for k in OPTIONAL_FRAMES:
+            value = getattr(t, k)
+            if value is not None and k in fds:  # no /frames/markers for a layout without markers
+                fds[k][s:e] = value
