@@ -51,7 +51,7 @@ def main() -> None:
         "frames": rec.n_frames,
         "wall_s": round(wall, 2),
         "frames_per_s": round(rec.n_frames / wall, 1),
-        "mom_solves": rec.n_trials - len(proto.states()) + len(proto.states()) * 0,
+        "mom_solves": int(sum(t.meta["mom_solves"] for t in rec.trials)),
         "touch_solve_ms_median": round(1000 * float(np.median(solve)), 1),
         "panels_with_finger": int(
             sensor.electrode_panels([0, 0, 0], None, [0.0])[0].n_panels
@@ -60,8 +60,6 @@ def main() -> None:
         "peak_rss_mb": round(_peak_rss_mb(), 1),
         "load_avg_1min": os.getloadavg()[0],
     }
-    n_touch = sum(t.meta["kind"] == "touch" for t in rec.trials)
-    res["mom_solves"] = n_touch * proto.force_nodes + (rec.n_trials - n_touch)
     for k, v in res.items():
         print(f"{k:24s} {v}")
     if args.out:

@@ -29,6 +29,10 @@ def test_simulate_writes_a_readable_recording(tmp_path, capsys):
         (["simulate", "{out}", "--levels", "0,45"], "impossible inflation for chamber 1: 45.0 ml"),
         (["simulate", "{out}", "--levels", "-5"], "impossible inflation"),
         (["simulate", "{out}", "--levels", "a,b"], "--levels must be comma-separated numbers"),
+        (["simulate", "{out}", "--snr-db", "nan"], "readout: gain_snr_db must be a finite number"),
+        (["simulate", "{out}", "--fps", "inf"], "frame_rate_hz"),
+        (["simulate", "{out}", "--push-max", "-1"], "push_max_n must be a finite number >= 0"),
+        (["simulate", "{out}", "--finger-radius", "0"], "finger_radius_mm"),
         (["simulate", "{out}", "--layout", "{bad}"], "not valid JSON"),
         (["characterize", "{dir}", "--region", "25"], "unknown region 25"),
         (["characterize", "{dir}", "--inflation", "20,20"], "one volume per chamber"),
@@ -52,6 +56,10 @@ def test_characterize_writes_figures_and_json(tmp_path):
     res = json.loads((tmp_path / "characterize.json").read_text())
     assert len(res["pairs"]) == 28 and len(res["touches"]) == 18
     pair = res["pairs"][0]
-    assert set(pair) == {"pair", "electrodes", "same_face", "inflation_change"}
+    assert set(pair) == {
+        "pair", "electrodes", "same_face", "standing_pf", "noise_ff", "snr_db", "inflation_change"
+    }
+    assert min(p["snr_db"] for p in res["pairs"]) > 60.0  # the paper's readout, every pair
+    assert res["readout"]["output_step_ff"] < min(p["noise_ff"] for p in res["pairs"])
     assert len(res["touches"][4]["change"]) == 28
     assert np.isfinite(res["inflation_change_max_abs"])

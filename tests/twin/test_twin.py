@@ -8,8 +8,12 @@ from ectskin import EctskinError
 from ectskin.layout import default_layout
 from ectskin.twin import Protocol, SensorModel, Touch, plan_trials, simulate_experiment
 from ectskin.twin.characterize import characterize
+from ectskin.twin.human import finger_path, hand_push
 from ectskin.twin.live import LiveTwin
-from ectskin.twin.simulate import capacitance_over_force
+from ectskin.twin.mechanics import Handling
+from ectskin.twin.protocol import region_bounds
+from ectskin.twin.readout import ReadoutConfig, noise_pf, readout
+from ectskin.twin.simulate import TouchResponse
 
 
 @pytest.fixture(scope="module")
@@ -119,12 +123,58 @@ def test_touch_moves_mainly_the_pairs_near_it(char, layout):
     assert near_wins >= 0.8 * len(char["touches"])
 
 
-def test_force_interpolation_is_below_the_readout_noise(sensor):
-    p, touch = [10, 0, 20], Touch("back", (5.0, 90.0))
-    forces = np.array([0.35, 0.9, 1.55, 1.95])
-    interp = capacitance_over_force(sensor, p, touch, np.r_[0.3, forces, 2.0], Protocol().force_nodes)[1:-1]
-    direct = sensor.capacitance(p, touch, forces)
-    assert np.max(np.abs(interp - direct)) < 0.01e-3  # 1 % of the 1 fF quantisation step
+def _trial_model(sensor, layout, region, p, seed, **protocol):
+    proto = Protocol(**protocol)
+    rng = np.random.default_rng(seed)
+    reg = layout.region(region)
+    lo, hi = region_bounds(reg, proto.touch_margin)
+    path = finger_path(300, 30.0, np.asarray([reg.centre_mm]), lo, hi, proto, rng)
+    hand = hand_push(300, 30.0, proto, rng, sensor.manipulator.config)
+    push_dir = None
+    if hand.push_force_n is not None:
+        push_dir = hand.push_force_n[np.argmax(np.linalg.norm(hand.push_force_n, axis=1))]
+        push_dir = push_dir / np.linalg.norm(push_dir)
+    model = TouchResponse(sensor, p, reg.surface, path, hand, push_dir, proto)
+    return reg, path, hand, model(path, hand)
+
+
+@pytest.mark.parametrize(
+    "region, p, seed, options",
+    [(5, [10, 0, 20], 5, {}), (14, [0, 20, 0], 6, {"hover": True, "approach": True})],
+)
+def test_the_trial_model_stays_close_to_direct_solves(sensor, layout, region, p, seed, options):
+    """A trial's readout model (force, height, point, hand) against direct MoM solves of the
+    same frames: within 0.5 fF and 5 % of the finger's signal at every pair."""
+    reg, path, hand, c = _trial_model(sensor, layout, region, p, seed, **options)
+    rest = sensor.capacitance(p)[0]
+    frames = np.random.default_rng(seed).choice(path.force_n.size, 5, replace=False)
+    if not path.contact.all():  # include frames above the skin
+        frames = np.r_[frames[:3], np.flatnonzero(~path.contact)[[0, -5]]]
+    for i in frames:
+        handling = Handling(path.shear_n[i : i + 1], hand.push, hand.push_force_n[i : i + 1])
+        direct = sensor.capacitance(
+            p, Touch(reg.surface, tuple(path.uv_mm[i])), path.force_n[i : i + 1], handling,
+            heights_mm=path.height_mm[i : i + 1],
+        )[0]
+        err = np.abs(c[i] - direct)
+        assert err.max() < 0.5e-3, (i, err.max())
+        assert err.max() < 0.05 * np.abs(direct - rest).max()
+
+
+def test_readout_has_no_staircase_and_the_papers_snr(sensor):
+    """1 fF per conversion, averaged: the output grid is finer than the noise, the noise is the
+    model's σ, and every pair's SNR is over 60 dB (paper §3)."""
+    cfg = ReadoutConfig()
+    c = sensor.capacitance([0, 0, 0])[0]
+    rng = np.random.default_rng(0)
+    meas = readout(np.repeat(c[None], 4000, axis=0), np.zeros(4000), rng, cfg, np.zeros(c.size))
+    sigma = noise_pf(c, cfg)
+    np.testing.assert_allclose(meas.std(axis=0), sigma, rtol=0.1)
+    assert cfg.output_step_pf < 0.5 * sigma.min()
+    assert len(np.unique(meas[:, np.argmin(c)])) > 10  # many levels, not a 1-fF staircase
+    assert np.all(20 * np.log10(c / sigma) > 60.0)
+    with pytest.raises(EctskinError, match="samples_per_frame"):
+        ReadoutConfig(samples_per_frame=0)
 
 
 def test_readout_is_smooth_in_the_force(sensor):
@@ -174,9 +224,10 @@ def test_simulation_is_deterministic_and_independent_of_workers(layout):
         np.testing.assert_array_equal(ta.markers, tb.markers)
     t = next(t for t in a.trials if t.meta["kind"] == "touch")
     assert np.all(t.labels == t.region) and t.region > 0
-    assert np.all((t.force >= 0.3) & (t.force <= 2.0))
-    # readout quantised to 1 fF
-    np.testing.assert_allclose(t.capacitance * 1000, np.round(t.capacitance * 1000), atol=1e-6)
+    assert np.all((t.force >= 0.25) & (t.force <= 2.1))  # the range, plus the tremor
+    # the output grid: 1 fF per conversion over 256 conversions
+    step = ReadoutConfig().output_step_pf
+    np.testing.assert_allclose(t.capacitance / step, np.round(t.capacitance / step), atol=1e-6)
     nc = a.trials[0]
     assert nc.meta["kind"] == "no_contact" and np.all(nc.labels == 0)
 
@@ -186,6 +237,48 @@ def test_lifts_give_per_frame_contact_labels():
     t = simulate_experiment(proto, workers=1, progress=False).trials[0]
     assert set(np.unique(t.labels)) == {0, t.region}
     assert np.all(t.force[t.labels == 0] == 0)
+
+
+def test_the_finger_is_human(layout):
+    """Force wanders and trembles at 8-12 Hz; the point rolls and slides a little, inside the
+    region; with approach and hover the finger is above the skin at recorded heights."""
+    proto = Protocol(push_max_n=0.0)
+    reg = layout.region(5)
+    lo, hi = region_bounds(reg, proto.touch_margin)
+    path = finger_path(900, 30.0, np.asarray([reg.centre_mm]), lo, hi, proto, np.random.default_rng(1))
+    assert path.contact.all() and np.all(path.height_mm == 0)
+    f = path.force_n
+    spectrum = np.abs(np.fft.rfft(f - f.mean())) ** 2
+    hz = np.fft.rfftfreq(f.size, 1 / 30.0)
+    band = (hz >= 8) & (hz <= 12)
+    assert spectrum[band].sum() > 10 * spectrum[(hz > 4) & (hz < 7.5)].sum()  # a tremor peak
+    assert 0.01 < np.std(np.diff(f)) / f.mean() < 0.1
+    spread = path.uv_mm.std(axis=0)
+    assert np.all((spread > 0.1) & (spread < 1.5))
+    assert np.all((path.uv_mm >= lo) & (path.uv_mm <= hi))
+    assert np.allclose(np.linalg.norm(path.shear_n, axis=1) / f, np.linalg.norm(path.shear_n[0]) / f[0])
+    hov = finger_path(
+        900, 30.0, np.asarray([reg.centre_mm]), lo, hi, Protocol(approach=True, hover=True),
+        np.random.default_rng(2),
+    )
+    assert not hov.contact[0] and not hov.contact[-1] and hov.contact.any()
+    assert hov.height_mm[0] == pytest.approx(Protocol().approach_height_mm)
+    assert np.all(hov.force_n[~hov.contact] == 0) and np.all(hov.height_mm[~hov.contact] > 0)
+    with pytest.raises(EctskinError, match="tremor_hz"):
+        Protocol(tremor_hz=(8.0, 20.0))
+    with pytest.raises(EctskinError, match="force_range_n"):
+        Protocol(force_range_n=(0.3, 500.0))
+
+
+def test_deformation_signals_are_much_smaller_than_inflation_and_touch(sensor, char):
+    """§4.2: the hand's push moves the readout far less than inflation and touch do."""
+    rest = sensor.capacitance([0, 20, 20])[0]
+    push = Handling(push=Touch("right", (0.0, 100.0)), push_force_n=np.array([[-1.0, 0.5, 0.0]]))
+    pushed = sensor.capacitance([0, 20, 20], None, [0.0], push)[0]
+    moved = np.abs(pushed / rest - 1).max()
+    infl = np.abs([p["inflation_change"] for p in char["pairs"]]).max()
+    touch = np.median([np.abs(t["touch_only_change"]).max() for t in char["touches"]])
+    assert 1e-4 < moved < 0.1 * infl and moved < 0.1 * touch
 
 
 def test_live_twin_streams_touch_and_inflation():
@@ -216,3 +309,18 @@ def test_touch_dwells_move_the_finger_within_its_region(layout):
     means = [t.capacitance[s].mean(axis=0) for s in segments]
     assert np.abs(means[0] - means[1]).max() > 2e-3  # a different placement reads differently
     assert np.all(t.labels == t.region)
+
+
+def test_trials_carry_the_fingers_ground_truth(layout):
+    proto = Protocol(levels_ml=(0.0,), touch_trials=1, duration_s=4.0, hover=True, approach=True, seed=4)
+    rec = simulate_experiment(proto, workers=1, progress=False)
+    rest, touch = rec.trials
+    assert rest.has_ground_truth and not rest.contact.any() and np.isnan(rest.finger_height_mm).all()
+    assert touch.has_ground_truth and touch.finger_surface == layout.region(touch.region).surface
+    on = touch.contact
+    assert on.any() and (~on).any()
+    assert np.all(touch.finger_height_mm[on] == 0) and np.all(touch.finger_height_mm[~on] > 0)
+    assert np.all(touch.force[~on] == 0) and np.all(touch.force[on] > 0)
+    np.testing.assert_array_equal(touch.labels != 0, on)
+    reg = layout.region(touch.region)
+    assert np.all((touch.finger_uv_mm[:, 0] > reg.u_mm[0]) & (touch.finger_uv_mm[:, 0] < reg.u_mm[1]))

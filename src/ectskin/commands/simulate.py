@@ -24,8 +24,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, default=30.0, help="trial duration, s (default 30)")
     p.add_argument("--fps", type=float, default=30.0, help="frame rate, Hz (default 30)")
     p.add_argument("--finger-radius", type=float, default=8.0, help="fingertip radius, mm (default 8)")
-    p.add_argument("--snr-db", type=float, default=66.0, help="readout SNR, dB (default 66)")
+    p.add_argument(
+        "--snr-db", type=float, default=66.0,
+        help="the readout's frame-to-frame gain noise as an SNR, dB (default 66; see twin/readout.py)",
+    )
     p.add_argument("--lifts", action="store_true", help="lift the finger now and then (per-frame labels)")
+    p.add_argument("--hover", action="store_true", help="the finger hovers above the skin at times")
+    p.add_argument(
+        "--approach", action="store_true", help="each touch starts with the finger coming down"
+    )
+    p.add_argument(
+        "--push-max", type=float, default=2.0,
+        help="the experimenter's hand pushes the body with up to this force, N (0: no hand)",
+    )
     p.add_argument("--layout", help="layout JSON file (default: the paper's layout)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=None, help="parallel processes (default: all cores)")
@@ -47,8 +58,11 @@ def run(args: argparse.Namespace) -> int:
         frame_rate_hz=args.fps,
         finger_radius_mm=args.finger_radius,
         lifts=args.lifts,
+        hover=args.hover,
+        approach=args.approach,
+        push_max_n=args.push_max,
         seed=args.seed,
-        readout=ReadoutConfig(snr_db=args.snr_db),
+        readout=ReadoutConfig(gain_snr_db=args.snr_db),
     )
     layout = load_layout(args.layout) if args.layout else default_layout()
     for v in protocol.levels_ml:  # refuse impossible levels before any work

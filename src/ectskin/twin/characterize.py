@@ -23,9 +23,12 @@ from scipy.interpolate import CubicSpline
 from ectskin._files import save_figure_atomic, write_json_atomic
 from ectskin.io.calibration import relative_change
 from ectskin.layout import SensorLayout, default_layout
-from ectskin.twin.mechanics import Touch
-from ectskin.twin.readout import ReadoutConfig, readout
+from ectskin.twin.human import finger_path
+from ectskin.twin.mechanics import Handling, Touch
+from ectskin.twin.protocol import Protocol, region_bounds
+from ectskin.twin.readout import ReadoutConfig, noise_pf, readout, snr_db
 from ectskin.twin.sensor import SensorModel
+from ectskin.twin.simulate import TouchResponse
 from ectskin.viz.twin import plot_response
 
 log = logging.getLogger(__name__)
@@ -55,6 +58,7 @@ def characterize(
     figure_region: int | None = None,
     layout: SensorLayout | None = None,
     sensor: SensorModel | None = None,
+    readout_config: ReadoutConfig | None = None,
     seed: int = 0,
 ) -> dict:
     """Compute the characterisation; with ``out_dir`` also write the figures and JSON.
@@ -74,11 +78,16 @@ def characterize(
     change_part = relative_change(c_part, c0)
     same = layout.same_surface
     names = [e.name for e in layout.electrodes]
+    cfg = readout_config or ReadoutConfig()
+    noise, snr = noise_pf(c0, cfg), snr_db(c0, cfg)
     pairs = [
         {
             "pair": layout.pair_names[k],
             "electrodes": [names[i], names[j]],
             "same_face": bool(same[k]),
+            "standing_pf": float(c0[k]),
+            "noise_ff": float(noise[k] * 1000.0),
+            "snr_db": float(snr[k]),
             "inflation_change": float(change_full[k]),
         }
         for k, (i, j) in enumerate(layout.pairs)
@@ -104,6 +113,12 @@ def characterize(
         "touch_inflation_ml": p_touch.tolist(),
         "touch_force_n": float(force_n),
         "pairs": pairs,
+        "readout": {
+            "resolution_ff": cfg.resolution_pf * 1000.0,
+            "samples_per_frame": cfg.samples_per_frame,
+            "output_step_ff": cfg.output_step_pf * 1000.0,
+            "snr_db_min": float(snr.min()),
+        },
         "inflation_change_max_abs": float(np.abs(change_full).max()),
         "partial_inflation_change": change_part.tolist(),
         "partial_vs_full_correlation": float(np.corrcoef(change_part, change_full)[0, 1]),
@@ -115,18 +130,17 @@ def characterize(
         region = figure_region or next(
             (r.id for r in layout.regions if r.surface == "front"), layout.regions[0].id
         )
-        _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, same, seed)
+        _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, same, cfg, seed)
         write_json_atomic(out / "characterize.json", result)
         log.info("characterisation written to %s", out)
     return result
 
 
-def _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, same, seed):
+def _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, same, cfg, seed):
     layout = sensor.layout
     fps = 30.0
     rng = np.random.default_rng([seed, 4])
     phase = rng.uniform(0, 2 * np.pi, layout.n_pairs)
-    cfg = ReadoutConfig()
     selected = _selected_pairs(change_full, same)
     rest = np.zeros_like(p_full)
     fr = np.linspace(0, 1, 9)
@@ -144,23 +158,31 @@ def _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, s
     )
     save_figure_atomic(fig, out / "fig3_inflation.png", dpi=120)
 
-    # Fig. 4: rest 3 s, inflate to p_touch over 9 s, hold, touch region with a force ramp
+    # Fig. 4: rest 3 s, inflate to p_touch over 9 s, hold; from 15 s a finger comes down onto
+    # the region's centre (sensed before contact), presses for ~10 s with a human force (slow
+    # wander and tremor around force_n, a little roll and slide) and leaves again by 27 s
     t = np.arange(int(30 * fps)) / fps
     frac = np.clip((t - 3.0) / 9.0, 0, 1)
     c = CubicSpline(fr, _ramp_capacitance(sensor, rest, p_touch, fr), axis=0)(frac)
     reg = layout.region(region)
-    touch = Touch(reg.surface, reg.centre_mm)
-    on = (t >= 16.0) & (t < 26.0)
-    force = np.where(on, force_n * (0.6 + 0.4 * np.sin(np.pi * (t - 16.0) / 10.0)), 0.0)
-    nodes = np.linspace(0.6 * force_n, force_n, 5)
-    c_nodes = sensor.capacitance(p_touch, touch, nodes)
-    c[on] = CubicSpline(nodes, c_nodes, axis=0)(force[on])
+    lo, hi = region_bounds(reg, 0.15)
+    touch_frames = np.flatnonzero((t >= 15.0) & (t < 27.0))
+    proto = Protocol(
+        force_range_n=(0.5 * force_n, 1.5 * force_n), approach=True, push_max_n=0.0,
+        approach_s=1.5,
+    )
+    path = finger_path(
+        touch_frames.size, fps, np.asarray([reg.centre_mm]), lo, hi, proto, rng
+    )
+    response = TouchResponse(sensor, p_touch, reg.surface, path, Handling(), None, proto)
+    c[touch_frames] = response(path, Handling())
     meas = readout(c, t, rng, cfg, phase)
     c0 = meas[: int(3 * fps)].mean(axis=0)
+    on = touch_frames[path.contact]
     fig = plot_response(
         t, relative_change(meas, c0), list(layout.pair_names), selected,
         title=f"two-stage: inflate to {tuple(p_touch.tolist())} ml, then touch region {region}",
-        stages=[(3.0, "inflate"), (16.0, "touch"), (26.0, "release")],
+        stages=[(3.0, "inflate"), (15.0, "approach"), (t[on[0]], "touch"), (t[on[-1]], "lift")],
     )
     save_figure_atomic(fig, out / "fig4_touch.png", dpi=120)
 

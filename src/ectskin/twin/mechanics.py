@@ -22,10 +22,14 @@ The deformation is composed of four parts (each documented where it is computed)
    with a membrane pressure that stiffens with stretch, P(h) = k_f · h · (1 + (h/h_s)²).
 3. **Dimple** under the finger: a Gaussian indentation of depth F / k_d, k_d rising with the local
    chamber pressure.
-4. **Bending** by the touch force: a clamped beam in the y–z plane, curvature κ(z) = M(z) / EI(z)
-   (Euler–Bernoulli), the angle θ(z) = ∫κ integrated exactly (large rotation), the lever arm of the
-   lateral force taken on the deformed axis (two fixed-point passes). EI rises with the pressure
-   of the chamber at z.
+4. **Bending and twist** by the finger and the experimenter's hand (manual handling): the body
+   is a clamped Kirchhoff rod (:mod:`ectskin.twin.rod`) with section stiffnesses EI_x, EI_y and
+   GJ from a silicone modulus and the chambered cross-section (hollow over each chamber's span,
+   solid between, :meth:`Manipulator.section_stiffness`), rising with chamber pressure. Loads are
+   the finger's normal force and its tangential (friction-limited) push on the face, and the
+   hand's push at another material point; off-centre and off-axis loads twist the body and bend
+   it both ways, with large rotations. A face point at section offset (x, y') moves to
+   r(s) + R(s)·(x, y', 0).
 
 Units: mm, ml (= 1000 mm³), N, kPa (= 1e-3 N/mm²).
 """
@@ -38,6 +42,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ectskin._check import EctskinError
+from ectskin.twin import rod
 
 SIDE = {"front": 1.0, "back": -1.0}
 
@@ -61,18 +66,22 @@ class ManipulatorConfig:
     face_axial_inextensibility: float = 0.8  # (assumed; calibrated: cross-face pairs fall)
     # φ(x) = 1 − |2x/w|^n across the chamber. (assumed; calibrated with face_axial_inextensibility
     # so that every cross-face pair falls and every same-face pair rises, paper §2.2: the face
-    # wall carrying the e-skin laminate rises nearly flat; n = 2, a membrane's parabola, leaves
-    # the diagonal cross-face pairs rising; see docs/architecture.md)
+    # wall carrying the e-skin laminate rises nearly flat; with n = 2, a membrane's parabola,
+    # the diagonal cross-face pairs rise instead)
     bulge_profile_exponent: float = 8.0
     axial_strain_per_ml: float = 0.0  # (assumed) chamber span elongation per ml (off)
-    # bending: EI(z) = EI0 (1 + pressure_stiffening * P(z)/kPa)
-    bending_stiffness_nmm2: float = 5.4e4  # (assumed: 2 N near the tip -> ~20 mm deflection)
+    # bending and twist: section stiffness from the modulus and the chambered cross-section,
+    # times (1 + pressure_stiffening · P(z)/kPa) where a chamber spans z
+    # (assumed: Dragon Skin 30, 100 % modulus 0.59 MPa (Smooth-On datasheet), neo-Hookean
+    # E = 0.59 / 0.58 ≈ 1.0 MPa; incompressible, so G = E / 3)
+    modulus_mpa: float = 1.0
     pressure_stiffening_per_kpa: float = 0.05  # (assumed)
     # dimple: depth = F / (k_d0 (1 + dimple_stiffening * P_local))
     dimple_stiffness_n_per_mm: float = 1.0  # (assumed)
     dimple_stiffening_per_kpa: float = 0.05  # (assumed)
     dimple_sigma_mm: float = 9.0  # (assumed) Gaussian width of the indentation
-    beam_points: int = 241  # axial grid for the beam integration
+    rod_tol_mm: float = 0.01  # the rod's fixed point stops when the tip moves less than this
+    beam_points: int = 61  # axial grid of the rod (2 mm steps; tip error < 1e-3 of its deflection)
 
     @property
     def n_chambers(self) -> int:
@@ -87,6 +96,26 @@ class Touch:
     uv_mm: tuple[float, float]
 
 
+@dataclass(frozen=True)
+class Handling:
+    """Loads beyond the finger's normal force, per frame (F frames): manual handling.
+
+    ``shear_n`` (F, 2): the finger's tangential force on its face along the face's (x, z) axes,
+    N (the finger pushes off-axis). ``push`` and ``push_force_n`` (F, 3): where the
+    experimenter's hand pushes (a surface point) and its force in world axes, N.
+    """
+
+    shear_n: np.ndarray | None = None
+    push: Touch | None = None
+    push_force_n: np.ndarray | None = None
+
+    def n_frames(self) -> int | None:
+        for a in (self.shear_n, self.push_force_n):
+            if a is not None:
+                return int(np.shape(a)[0])
+        return None
+
+
 class Manipulator:
     """Deformation map of the manipulator surface; see the module docstring for the model."""
 
@@ -99,6 +128,7 @@ class Manipulator:
                 f"{c.bulge_profile_exponent!r}"
             )
         self._zgrid = np.linspace(0.0, c.length_mm, c.beam_points)
+        self._poses: dict = {}  # the last few rod solutions: one state is deformed many times
 
     # ------------------------------------------------------------------ inflation
     def check_inflation(self, inflation_ml) -> np.ndarray:
@@ -220,48 +250,85 @@ class Manipulator:
         return out
 
     # ------------------------------------------------------------------ bending
-    def bending_stiffness(self, z, inflation_ml) -> np.ndarray:
-        """EI(z) in N·mm²: rises with the pressure of the chamber spanning z."""
+    def section_stiffness(self, z, inflation_ml) -> np.ndarray:
+        """(n, 3) (EI_x, EI_y, GJ) in N·mm² at axial positions z.
+
+        EI_x bends the body towards the faces (about the section's x axis), EI_y sideways, GJ
+        twists it. Over a chamber's span the section is a hollow rectangle (the cavity
+        ``chamber_size_x`` × (thickness − 2 ``chamber_wall``)), between chambers it is solid;
+        the transition follows the chamber window ψ(z). Torsion: Bredt's thin-walled tube for
+        the hollow section, Saint-Venant's rectangle (with its series for β) for the solid one.
+        Pressure stiffens a chamber's span by (1 + ``pressure_stiffening_per_kpa`` · P).
+        """
         c = self.config
+        e = c.modulus_mpa  # N/mm²
+        g = e / 3.0
+        w, t = c.width_mm, c.thickness_mm
+        cw, ct = c.chamber_size_x_mm, t - 2.0 * c.chamber_wall_mm
+        solid = np.array([w * t**3 / 12, t * w**3 / 12, _rect_torsion(w, t)])
+        hollow = np.array(
+            [
+                (w * t**3 - cw * ct**3) / 12,
+                (t * w**3 - ct * cw**3) / 12,
+                _bredt_torsion(w, t, (w - cw) / 2, c.chamber_wall_mm),
+            ]
+        )
+        window = np.clip(np.sum(self._chamber_window_z(np.asarray(z, float)), axis=0), 0, 1)
+        section = solid[None] + window[:, None] * (hollow - solid)[None]
         pk = self.pressure_kpa(inflation_ml)
-        local = np.tensordot(pk, self._chamber_window_z(z), axes=1)
-        return c.bending_stiffness_nmm2 * (1.0 + c.pressure_stiffening_per_kpa * local)
+        local = np.tensordot(pk, self._chamber_window_z(np.asarray(z, float)), axes=1)
+        return section * np.array([e, e, g])[None] * (1.0 + c.pressure_stiffening_per_kpa * local)[:, None]
 
-    def centreline(self, force_n, touch: Touch | None, inflation_ml, iterations: int = 2):
-        """Deformed beam axis for each frame's force.
+    def _load_point(self, point: Touch, inflation_ml) -> tuple[float, tuple[float, float]]:
+        """Arc position and section offset (x, y) of a surface point (rest, on the axis grid)."""
+        c = self.config
+        u, v = point.uv_mm
+        s_mm = float(self.axial_position(np.array([v]), inflation_ml)[0])
+        if point.surface in SIDE:
+            return s_mm, (float(u), SIDE[point.surface] * c.thickness_mm / 2)
+        if point.surface in ("right", "left"):
+            return s_mm, ((1.0 if point.surface == "right" else -1.0) * c.width_mm / 2, float(u))
+        raise EctskinError(f"unknown surface {point.surface!r}: expected front, back, right or left")
 
-        Returns ``(zs, Y, Z, theta)``: the stretched rest grid (n_z,) and per frame (F, n_z) the
-        axis position (Y, Z) and section rotation θ. A force on the front face (pushing −y) bends
-        towards −y; on the back face towards +y. Moment at section z from a lateral force F at the
-        touch section z_t: M(z) = F · (Z(z_t) − Z(z)) for z < z_t (lever on the deformed axis).
+    def pose(self, force_n, touch: Touch | None, inflation_ml, handling: Handling | None = None):
+        """The deformed axis for each frame.
+
+        Returns ``(zs, r, R)``: the stretched rest grid (n_z,), the axis (F, n_z, 3) and the
+        section frames (F, n_z, 3, 3). The finger presses along the face's inward normal (front
+        −y, back +y) with ``force_n`` and pushes along the face with ``handling.shear_n``; the
+        hand pushes at ``handling.push`` with ``handling.push_force_n``.
         """
         force = np.atleast_1d(np.asarray(force_n, dtype=np.float64))
+        key = _pose_key(force, touch, inflation_ml, handling)
+        if key in self._poses:
+            return self._poses[key]
         zs = self.axial_position(self._zgrid, inflation_ml)
-        n_f = force.size
-        if touch is None or touch.surface not in SIDE:
-            zeros = np.zeros((n_f, zs.size))
-            return zs, zeros, np.broadcast_to(zs, (n_f, zs.size)).copy(), zeros
-        side = SIDE[touch.surface]
-        zt = float(self.axial_position(np.array([touch.uv_mm[1]]), inflation_ml)[0])
-        ei = self.bending_stiffness(self._zgrid, inflation_ml)
-        dz = np.diff(zs)
-        Z = np.broadcast_to(zs, (n_f, zs.size)).copy()
-        for _ in range(iterations):
-            zt_def = np.array([np.interp(zt, zs, Z[f]) for f in range(n_f)])
-            lever = np.clip(zt_def[:, None] - Z, 0.0, None) * (zs[None, :] <= zt)
-            kappa = -side * force[:, None] * lever / ei[None, :]  # (F, n_z), 1/mm
-            theta = np.concatenate(
-                [np.zeros((n_f, 1)), np.cumsum(0.5 * (kappa[:, 1:] + kappa[:, :-1]) * dz, axis=1)],
-                axis=1,
+        n_h = handling.n_frames() if handling is not None else None
+        if n_h is not None and n_h != force.size:
+            raise EctskinError(
+                f"handling gives {n_h} frames of loads but the finger force {force.size}"
             )
-            s, co = np.sin(theta), np.cos(theta)
-            Y = np.concatenate(
-                [np.zeros((n_f, 1)), np.cumsum(0.5 * (s[:, 1:] + s[:, :-1]) * dz, axis=1)], axis=1
-            )
-            Z = np.concatenate(
-                [np.zeros((n_f, 1)), np.cumsum(0.5 * (co[:, 1:] + co[:, :-1]) * dz, axis=1)], axis=1
-            )
-        return zs, Y, Z, theta
+        loads = []
+        if touch is not None:
+            s_t, off = self._load_point(touch, inflation_ml)
+            vec = np.zeros((force.size, 3))
+            if touch.surface in SIDE:
+                vec[:, 1] = -SIDE[touch.surface] * force
+            if handling is not None and handling.shear_n is not None:
+                shear = np.asarray(handling.shear_n, dtype=np.float64).reshape(force.size, 2)
+                vec[:, 0] += shear[:, 0]
+                vec[:, 2] += shear[:, 1]
+            loads.append(rod.PointLoad(s_t, off, vec))
+        if handling is not None and handling.push is not None:
+            s_h, off = self._load_point(handling.push, inflation_ml)
+            push = np.asarray(handling.push_force_n, dtype=np.float64).reshape(force.size, 3)
+            loads.append(rod.PointLoad(s_h, off, push))
+        stiffness = self.section_stiffness(self._zgrid, inflation_ml)
+        r, rot = rod.solve(zs, stiffness, loads, force.size, tol_mm=self.config.rod_tol_mm)
+        if len(self._poses) >= 8:
+            self._poses.pop(next(iter(self._poses)))
+        self._poses[key] = (zs, r, rot)
+        return zs, r, rot
 
     def dimple_depth_mm(self, force_n, touch: Touch, inflation_ml) -> np.ndarray:
         """Indentation depth under the finger, F / k_d with k_d rising with local pressure."""
@@ -279,6 +346,7 @@ class Manipulator:
         inflation_ml,
         touch: Touch | None = None,
         force_n=0.0,
+        handling: Handling | None = None,
     ) -> np.ndarray:
         """Map rest surface coordinates to deformed 3D points, one set per force value.
 
@@ -289,6 +357,7 @@ class Manipulator:
         inflation_ml : (n_chambers,) chamber volumes.
         touch : the finger's contact, or None.
         force_n : scalar or (F,) touch force per frame.
+        handling : the finger's shear and the hand's push per frame (F rows), or None.
 
         Returns
         -------
@@ -320,30 +389,27 @@ class Manipulator:
             raise EctskinError(
                 f"unknown surface {surface!r}: expected front, back, right or left"
             )
-        zs, Y, Z, theta = self.centreline(force, touch, p)
+        zs, r, rot = self.pose(force, touch, p, handling)
         zq = self.axial_position(z, p)
-        # interpolate the axis at each point's stretched axial position (per frame)
-        out = np.empty((force.size, uv.shape[0], 3))
-        for f in range(force.size):
-            yc = np.interp(zq, zs, Y[f])
-            zc = np.interp(zq, zs, Z[f])
-            th = np.interp(zq, zs, theta[f])
-            out[f, :, 0] = xs[f]
-            out[f, :, 1] = yc + yprime[f] * np.cos(th)
-            out[f, :, 2] = zc - yprime[f] * np.sin(th)
-        return out
+        # the axis and the section frame at each point's stretched axial position (per frame)
+        j = np.clip(np.searchsorted(zs, zq) - 1, 0, zs.size - 2)
+        w = ((zq - zs[j]) / (zs[j + 1] - zs[j]))[None, :, None]
+        axis = (1 - w) * r[:, j] + w * r[:, j + 1]  # (F, n, 3)
+        frames = (1 - w[..., None]) * rot[:, j] + w[..., None] * rot[:, j + 1]  # (F, n, 3, 3)
+        local = np.stack([xs, yprime, np.zeros_like(yprime)], axis=-1)  # (F, n, 3)
+        return axis + np.einsum("fnij,fnj->fni", frames, local)
 
-    def surface_normal(self, surface: str, uv_mm, inflation_ml, touch=None, force_n=0.0, h=0.05):
+    def surface_normal(
+        self, surface: str, uv_mm, inflation_ml, touch=None, force_n=0.0, handling=None, h=0.05
+    ):
         """(F, n, 3) outward unit normal of the deformed surface (finite differences)."""
         uv = np.asarray(uv_mm, dtype=np.float64).reshape(-1, 2)
-        du = np.array([h, 0.0])
-        dv = np.array([0.0, h])
-        pu = self.deform(surface, uv + du, inflation_ml, touch, force_n) - self.deform(
-            surface, uv - du, inflation_ml, touch, force_n
-        )
-        pv = self.deform(surface, uv + dv, inflation_ml, touch, force_n) - self.deform(
-            surface, uv - dv, inflation_ml, touch, force_n
-        )
+        steps = np.array([[h, 0.0], [-h, 0.0], [0.0, h], [0.0, -h]])
+        pts = self.deform(
+            surface, (uv[None] + steps[:, None]).reshape(-1, 2), inflation_ml, touch, force_n, handling
+        ).reshape(-1, 4, uv.shape[0], 3)
+        pu = pts[:, 0] - pts[:, 1]
+        pv = pts[:, 2] - pts[:, 3]
         n = np.cross(pu, pv)
         n /= np.linalg.norm(n, axis=-1, keepdims=True)
         # orient outward: front +y, back -y, right +x, left -x (at rest)
@@ -352,3 +418,28 @@ class Manipulator:
         flip = np.sign(n[..., axis]) != sign
         n[flip] *= -1
         return n
+
+
+def _rect_torsion(a: float, b: float) -> float:
+    """Torsion constant J of a solid a × b rectangle (a ≥ b), Saint-Venant's series (mm⁴)."""
+    a, b = max(a, b), min(a, b)
+    n = np.arange(1, 40, 2)
+    beta = (1 - 192 * b / (np.pi**5 * a) * np.sum(np.tanh(n * np.pi * a / (2 * b)) / n**5)) / 3
+    return float(beta * a * b**3)
+
+
+def _bredt_torsion(w: float, t: float, wall_side: float, wall_face: float) -> float:
+    """Torsion constant of a thin-walled rectangular tube (Bredt): 4 A_m² / ∮ds/t (mm⁴)."""
+    bm, hm = w - wall_side, t - wall_face  # median line
+    return float(4 * (bm * hm) ** 2 / (2 * bm / wall_face + 2 * hm / wall_side))
+
+
+def _pose_key(force, touch, inflation, handling) -> tuple:
+    """A hashable digest of a pose's inputs (arrays by their bytes)."""
+    def arr(a):
+        return None if a is None else np.ascontiguousarray(a, dtype=np.float64).tobytes()
+
+    h = None
+    if handling is not None:
+        h = (arr(handling.shear_n), handling.push, arr(handling.push_force_n))
+    return (arr(force), touch, arr(inflation), h)

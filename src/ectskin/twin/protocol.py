@@ -19,6 +19,9 @@ from ectskin._check import EctskinError, check_option
 from ectskin.layout import SensorLayout
 from ectskin.twin.readout import MocapConfig, ReadoutConfig
 
+#: The strongest press a finger gives in these trials (N); beyond it the model is not meant to go.
+MAX_FINGER_FORCE_N = 20.0
+
 
 @dataclass(frozen=True)
 class Protocol:
@@ -33,6 +36,21 @@ class Protocol:
     seed: int = 0
     force_range_n: tuple[float, float] = (0.3, 2.0)  # (assumed) finger force range
     force_knot_s: float = 2.5  # (assumed) the force changes smoothly on this time scale
+    # the human finger (see ectskin.twin.human; all assumed): tremor band and size, roll/slide
+    tremor_hz: tuple[float, float] = (8.0, 12.0)
+    tremor_rel: float = 0.02
+    slide_mm: float = 0.5
+    slide_tau_s: float = 3.0
+    shear_ratio: float = 0.3  # tangential / normal force, drawn per trial in [0, this]
+    # options: approach from above and retreat at the ends, hover periods, lift and re-press
+    approach: bool = False
+    approach_s: float = 1.0
+    approach_height_mm: float = 100.0  # (assumed) from where the finger is barely sensed
+    hover: bool = False
+    hover_max_mm: float = 15.0
+    # the experimenter's hand (manual handling): push up to this force, wandering on this scale
+    push_max_n: float = 2.0  # (assumed) a light push, about 200 g-force; 0 switches the hand off
+    push_knot_s: float = 3.0
     # where the finger lands in its region: "aimed" = the region's centre plus the experimenter's
     # Gaussian scatter (touch_scatter_mm, clipped to the region shrunk by touch_margin);
     # "uniform" = anywhere in the region shrunk by touch_margin per side
@@ -40,7 +58,7 @@ class Protocol:
     touch_scatter_mm: float = 3.0  # (assumed) human aiming scatter, per axis
     touch_margin: float = 0.15  # keep touches this fraction of the region size inside each edge
     touch_dwells: int = 1  # finger placements per touch trial: it slides to a new point D-1 times
-    lifts: bool = False  # lift the finger now and then, with per-frame contact labels
+    lifts: bool = False  # lift the finger now and then (lift and re-press), per-frame labels
     finger_radius_mm: float = 8.0  # (assumed)
     force_nodes: int = 5  # MoM solves per touch trial (Chebyshev nodes in force)
     readout: ReadoutConfig = field(default_factory=ReadoutConfig)
@@ -51,14 +69,18 @@ class Protocol:
             raise EctskinError("protocol: levels_ml must hold at least one inflation level")
         if self.touch_trials < 0:
             raise EctskinError(f"protocol: touch_trials must be >= 0, got {self.touch_trials}")
-        if not (self.duration_s > 0 and self.frame_rate_hz > 0):
+        if not (0 < self.duration_s < 1e5 and 0 < self.frame_rate_hz <= 1e4):
             raise EctskinError(
-                f"protocol: duration_s and frame_rate_hz must be > 0, got {self.duration_s}, "
+                f"protocol: duration_s and frame_rate_hz must be finite and > 0 (at most 1e5 s "
+                f"and 1e4 Hz), got {self.duration_s}, "
                 f"{self.frame_rate_hz}"
             )
         lo, hi = self.force_range_n
-        if not 0 < lo < hi:
-            raise EctskinError(f"protocol: force_range_n must be 0 < low < high, got {self.force_range_n}")
+        if not (0 < lo < hi <= MAX_FINGER_FORCE_N):
+            raise EctskinError(
+                f"protocol: force_range_n must be 0 < low < high <= {MAX_FINGER_FORCE_N} N (a "
+                f"finger's press), got {self.force_range_n}"
+            )
         check_option("touch_placement", self.touch_placement, ("aimed", "uniform"), source="protocol")
         if self.touch_scatter_mm < 0:
             raise EctskinError(f"protocol: touch_scatter_mm must be >= 0, got {self.touch_scatter_mm}")
@@ -66,6 +88,29 @@ class Protocol:
             raise EctskinError(f"protocol: touch_margin must be in [0, 0.5), got {self.touch_margin}")
         if self.touch_dwells < 1:
             raise EctskinError(f"protocol: touch_dwells must be >= 1, got {self.touch_dwells}")
+        lo_hz, hi_hz = self.tremor_hz
+        if not 0 < lo_hz <= hi_hz < self.frame_rate_hz / 2:
+            raise EctskinError(
+                f"protocol: tremor_hz must be 0 < low <= high < frame_rate_hz / 2 (Nyquist), got "
+                f"{self.tremor_hz}"
+            )
+        for name in ("tremor_rel", "slide_mm", "shear_ratio", "push_max_n"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise EctskinError(f"protocol: {name} must be a finite number >= 0, got {v!r}")
+        if self.tremor_rel >= 0.5:
+            raise EctskinError(f"protocol: tremor_rel must be < 0.5, got {self.tremor_rel}")
+        for name in ("slide_tau_s", "approach_s", "approach_height_mm", "hover_max_mm", "push_knot_s"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise EctskinError(f"protocol: {name} must be a finite number > 0, got {v!r}")
+        if self.hover_max_mm < 1.0:
+            raise EctskinError(f"protocol: hover_max_mm must be >= 1, got {self.hover_max_mm}")
+        if not (isinstance(self.finger_radius_mm, int | float) and 2.0 <= self.finger_radius_mm <= 30.0):
+            raise EctskinError(
+                f"protocol: finger_radius_mm must be a fingertip's radius, 2 to 30 mm, got "
+                f"{self.finger_radius_mm!r}"
+            )
         if self.force_nodes < 2:
             raise EctskinError(f"protocol: force_nodes must be >= 2, got {self.force_nodes}")
         if self.touch_trials == 0 and not self.no_contact_trial:
@@ -101,7 +146,7 @@ class Protocol:
                 if k in m:
                     m[k] = tuple(m[k])
             d["mocap"] = MocapConfig(**m)
-        for k in ("levels_ml", "force_range_n"):
+        for k in ("levels_ml", "force_range_n", "tremor_hz"):
             if k in d:
                 d[k] = tuple(d[k])
         return cls(**d)
@@ -122,6 +167,14 @@ class TrialPlan:
     start_s: float  # start on the experiment clock
     marker_delay_frames: int
     occluded: bool
+
+
+def region_bounds(region, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) corners (u, v) of ``region`` shrunk by ``margin`` of its size on each side."""
+    du, dv = region.u_mm[1] - region.u_mm[0], region.v_mm[1] - region.v_mm[0]
+    lo = np.array([region.u_mm[0] + margin * du, region.v_mm[0] + margin * dv])
+    hi = np.array([region.u_mm[1] - margin * du, region.v_mm[1] - margin * dv])
+    return lo, hi
 
 
 def plan_trials(protocol: Protocol, layout: SensorLayout) -> list[TrialPlan]:
@@ -159,10 +212,7 @@ def plan_trials(protocol: Protocol, layout: SensorLayout) -> list[TrialPlan]:
                 face = faces[j % 2] if by_face[faces[j % 2]] else faces[1 - j % 2]
                 reg = seqs[face][counters[face] % len(seqs[face])]
                 counters[face] += 1
-                m = protocol.touch_margin
-                du, dv = reg.u_mm[1] - reg.u_mm[0], reg.v_mm[1] - reg.v_mm[0]
-                lo = np.array([reg.u_mm[0] + m * du, reg.v_mm[0] + m * dv])
-                hi = np.array([reg.u_mm[1] - m * du, reg.v_mm[1] - m * dv])
+                lo, hi = region_bounds(reg, protocol.touch_margin)
                 if protocol.touch_placement == "uniform":
                     pts = rng.uniform(lo, hi, size=(protocol.touch_dwells, 2))
                 else:

@@ -27,7 +27,7 @@ from ectskin.electrostatics import (
 )
 from ectskin.electrostatics.meshing import orthonormal_frame, rectangle_quads, strip_quads
 from ectskin.layout import SensorLayout
-from ectskin.twin.mechanics import Manipulator, Touch
+from ectskin.twin.mechanics import Handling, Manipulator, Touch
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +75,27 @@ class Finger:
     radius_mm: float = 8.0  # (assumed) adult fingertip
     shaft_length_mm: float = 50.0
     skin_cover_mm: float = 1.0  # (assumed) sealing layer between the wires and the finger
+    # (assumed) effective contact modulus E* of the fingertip pulp: soft tissue of ~0.05-0.2 MPa
+    # under light touch; with R = 8 mm a 2 N press flattens a disc of ~4 mm radius
+    pulp_modulus_mpa: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in ("radius_mm", "shaft_length_mm", "pulp_modulus_mpa"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+                raise EctskinError(f"finger: {name} must be a positive number, got {v!r}")
+        if not (np.isfinite(self.skin_cover_mm) and self.skin_cover_mm >= 0):
+            raise EctskinError(f"finger: skin_cover_mm must be >= 0, got {self.skin_cover_mm!r}")
+
+    def indentation_mm(self, force_n: float) -> float:
+        """Hertz indentation δ = (9F² / (16 R E*²))^(1/3) of the pulp (mm), capped at R/2."""
+        f = max(float(force_n), 0.0)
+        d = (9 * f**2 / (16 * self.radius_mm * self.pulp_modulus_mpa**2)) ** (1 / 3)
+        return min(d, self.radius_mm / 2)
+
+    def contact_radius_mm(self, force_n: float) -> float:
+        """Hertz contact radius a = √(R δ) (mm)."""
+        return float(np.sqrt(self.radius_mm * self.indentation_mm(force_n)))
 
 
 def _planar(quads3: np.ndarray) -> np.ndarray:
@@ -177,12 +198,16 @@ class SensorModel:
         self._pairs = layout.pairs
 
     # ------------------------------------------------------------------ geometry
-    def electrode_panels(self, inflation_ml, touch: Touch | None, forces) -> list[Panels]:
+    def electrode_panels(
+        self, inflation_ml, touch: Touch | None, forces, handling: Handling | None = None
+    ) -> list[Panels]:
         """Deformed electrode panels, one :class:`Panels` per force value."""
         forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
         per_force: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in forces]
         for surface, (quads, cond) in self._rest.items():
-            xyz = self.manipulator.deform(surface, quads.reshape(-1, 2), inflation_ml, touch, forces)
+            xyz = self.manipulator.deform(
+                surface, quads.reshape(-1, 2), inflation_ml, touch, forces, handling
+            )
             xyz = xyz.reshape(forces.size, len(quads), 4, 3)
             for f in range(forces.size):
                 per_force[f].append((xyz[f], cond))
@@ -195,14 +220,35 @@ class SensorModel:
         ]
 
     def finger_panels(
-        self, inflation_ml, touch: Touch, forces, *, sphere_n: int | None = None
+        self,
+        inflation_ml,
+        touch: Touch,
+        forces,
+        handling: Handling | None = None,
+        *,
+        heights_mm=None,
+        sphere_n: int | None = None,
     ) -> list[Panels]:
-        """The grounded finger resting on the deformed skin at each force (conductor n_el)."""
+        """The grounded finger on (or above) the deformed skin at each force (conductor n_el).
+
+        In contact (height 0) the fingertip's pulp flattens against the skin: the sphere's cap
+        beyond the contact plane is pressed flat, a disc of the Hertz radius a = √(R δ) with the
+        indentation δ = (9F² / (16 R E*²))^(1/3) (:attr:`Finger.pulp_modulus_mpa`), so the
+        contact patch grows with force. Above the skin (``heights_mm`` > 0, force 0) the round
+        fingertip hovers that far above the skin's surface.
+        """
         forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
+        heights = (
+            np.zeros(forces.size)
+            if heights_mm is None
+            else np.broadcast_to(np.asarray(heights_mm, dtype=np.float64), forces.shape)
+        )
         fg, d = self.finger, self.discretisation
         uv = np.asarray([touch.uv_mm])
-        pts = self.manipulator.deform(touch.surface, uv, inflation_ml, touch, forces)[:, 0]
-        nrm = self.manipulator.surface_normal(touch.surface, uv, inflation_ml, touch, forces)[:, 0]
+        pts = self.manipulator.deform(touch.surface, uv, inflation_ml, touch, forces, handling)[:, 0]
+        nrm = self.manipulator.surface_normal(
+            touch.surface, uv, inflation_ml, touch, forces, handling
+        )[:, 0]
         out = []
         cond = self.n_electrodes
         # the fingertip: the half of a cubed sphere facing the skin, chosen once in the sphere's
@@ -212,16 +258,16 @@ class SensorModel:
         # of ~0.1 % in the readout)
         unit = sphere_panels(np.zeros(3), fg.radius_mm, sphere_n or d.finger_sphere_n, cond)
         keep = unit.centres[:, 2] < -1e-6 * fg.radius_mm
-        for p, n in zip(pts, nrm):
-            centre = p + n * (fg.radius_mm + fg.skin_cover_mm)
+        for p, n, force, height in zip(pts, nrm, forces, heights):
+            depth = fg.indentation_mm(force) if height <= 0 else 0.0
+            centre = p + n * (fg.radius_mm + fg.skin_cover_mm + max(height, 0.0) - depth)
             e1, e2 = orthonormal_frame(n)
             rot = np.stack([e1, e2, n], axis=1)  # local (x, y, z) -> world, z onto n
+            c_loc, u_loc, v_loc = _flatten_cap(
+                unit.centres[keep], unit.u[keep], unit.v[keep], fg.radius_mm - depth
+            )
             tip = Panels(
-                centre + unit.centres[keep] @ rot.T,
-                unit.u[keep] @ rot.T,
-                unit.v[keep] @ rot.T,
-                unit.conductor[keep],
-                cond + 1,
+                centre + c_loc @ rot.T, u_loc @ rot.T, v_loc @ rot.T, unit.conductor[keep], cond + 1
             )
             shaft = cylinder_panels(
                 centre,
@@ -235,7 +281,9 @@ class SensorModel:
             out.append(Panels.concatenate([tip, shaft]))
         return out
 
-    def cavity_cells(self, inflation_ml, touch: Touch | None, forces) -> tuple[np.ndarray, np.ndarray]:
+    def cavity_cells(
+        self, inflation_ml, touch: Touch | None, forces, handling: Handling | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Centres (F, M, 3) mm and volumes (F, M) mm³ of the chamber cavities' sample cells.
 
         Each footprint cell (``cavity_cell_mm``) spans from the deformed front face to the
@@ -247,8 +295,8 @@ class SensorModel:
         wall = self.manipulator.config.chamber_wall_mm
         n_t = self.discretisation.cavity_layers
         uv, area = self._cavity_uv
-        front = self.manipulator.deform("front", uv, inflation_ml, touch, forces)  # (F, n, 3)
-        back = self.manipulator.deform("back", uv, inflation_ml, touch, forces)
+        front = self.manipulator.deform("front", uv, inflation_ml, touch, forces, handling)
+        back = self.manipulator.deform("back", uv, inflation_ml, touch, forces, handling)
         span = back - front
         gap = np.linalg.norm(span, axis=2)  # (F, n)
         inner = np.maximum(gap - 2.0 * wall, 0.0)
@@ -279,33 +327,39 @@ class SensorModel:
 
     # ------------------------------------------------------------------ readout
     def capacitance(
-        self, inflation_ml, touch: Touch | None = None, forces=0.0, *, with_finger: bool = True
+        self,
+        inflation_ml,
+        touch: Touch | None = None,
+        forces=0.0,
+        handling: Handling | None = None,
+        *,
+        heights_mm=None,
+        with_finger: bool = True,
     ) -> np.ndarray:
-        """(F, n_pairs) ECT readout C_ij = −K_ij in pF for each force value (Eq. 1).
+        """(F, n_pairs) ECT readout C_ij = −K_ij in pF for each state (Eq. 1).
 
-        Without a touch, ``forces`` only sets how many (identical) rows are returned.
-        ``with_finger=False`` keeps the touch's mechanics (bending, dimple) but leaves the finger
-        out of the electrostatics: the bending-only part of a touch response.
+        One row per value of ``forces`` (the finger's normal force; with ``heights_mm`` > 0 the
+        finger hovers that high above ``touch``'s point instead, force 0) and of the per-frame
+        ``handling`` loads. Without a touch and handling, ``forces`` only sets how many
+        (identical) rows are returned. ``with_finger=False`` keeps the loads' mechanics (bending,
+        dimple) but leaves the finger out of the electrostatics: the deformation-only part.
         """
         forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
         n_rows = forces.size
-        if touch is None:
-            forces = forces[:1]  # one solve: without contact the force changes nothing
+        static = touch is None and handling is None
+        if static:
+            forces = forces[:1]  # one solve: nothing changes from row to row
         if self._with_cavities:
-            pts, vols = self.cavity_cells(inflation_ml, touch, forces)
+            pts, vols = self.cavity_cells(inflation_ml, touch, forces, handling)
         else:
             pts, vols = [None] * forces.size, [None] * forces.size
-        if touch is None:
-            panels = self.electrode_panels(inflation_ml, None, forces)
-            row = self._readout(_without_finger(panels[0], self.n_electrodes), (pts[0], vols[0]))
-            return np.repeat(row[None, :], n_rows, axis=0)
-        electrodes = self.electrode_panels(inflation_ml, touch, forces)
+        electrodes = self.electrode_panels(inflation_ml, touch, forces, handling)
         out = np.empty((forces.size, len(self._pairs)))
-        if not with_finger:
+        if touch is None or not with_finger:
             for f, pe in enumerate(electrodes):
                 out[f] = self._readout(_without_finger(pe, self.n_electrodes), (pts[f], vols[f]))
-            return out
-        fingers = self.finger_panels(inflation_ml, touch, forces)
+            return np.repeat(out, n_rows, axis=0) if static else out
+        fingers = self.finger_panels(inflation_ml, touch, forces, handling, heights_mm=heights_mm)
         for f, (pe, pf) in enumerate(zip(electrodes, fingers)):
             try:
                 out[f] = self._readout(Panels.concatenate([pe, pf]), (pts[f], vols[f]))
@@ -313,13 +367,22 @@ class SensorModel:
                 # a coarse fingertip panel very close to a fine wire-end panel can make the
                 # collocation matrix indefinite: refine the fingertip and solve again
                 log.debug("refining the fingertip at %s, %s N", touch, forces[f])
+                one = None if handling is None else _handling_rows(handling, f)
+                h = None if heights_mm is None else np.atleast_1d(heights_mm)[f : f + 1]
                 pf = self.finger_panels(
-                    inflation_ml, touch, forces[f : f + 1], sphere_n=2 * self.discretisation.finger_sphere_n
+                    inflation_ml,
+                    touch,
+                    forces[f : f + 1],
+                    one,
+                    heights_mm=h,
+                    sphere_n=2 * self.discretisation.finger_sphere_n,
                 )[0]
                 out[f] = self._readout(Panels.concatenate([pe, pf]), (pts[f], vols[f]))
         return out
 
-    def marker_positions(self, inflation_ml, touch: Touch | None = None, forces=0.0) -> np.ndarray:
+    def marker_positions(
+        self, inflation_ml, touch: Touch | None = None, forces=0.0, handling: Handling | None = None
+    ) -> np.ndarray:
         """(F, n_markers, 3) marker positions in mm for each force value."""
         forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
         out = np.empty((forces.size, self.layout.n_markers, 3))
@@ -328,8 +391,21 @@ class SensorModel:
             by_surface.setdefault(m.surface, []).append(k)
         for surface, idx in by_surface.items():
             uv = np.asarray([self.layout.markers[k].uv_mm for k in idx])
-            out[:, idx] = self.manipulator.deform(surface, uv, inflation_ml, touch, forces)
+            out[:, idx] = self.manipulator.deform(surface, uv, inflation_ml, touch, forces, handling)
         return out
+
+
+def _flatten_cap(centres, u, v, plane: float):
+    """Press the part of a fingertip below z = −``plane`` (its own frame, pole at −z) flat onto
+    that plane: centres are projected and the panels' edge vectors lose their z component."""
+    below = centres[:, 2] < -plane
+    if not below.any():
+        return centres, u, v
+    centres, u, v = centres.copy(), u.copy(), v.copy()
+    centres[below, 2] = -plane
+    u[below, 2] = 0.0
+    v[below, 2] = 0.0
+    return centres, u, v
 
 
 def _cavity_grid(c, cell_mm: float) -> tuple[np.ndarray, np.ndarray]:
@@ -345,6 +421,14 @@ def _cavity_grid(c, cell_mm: float) -> tuple[np.ndarray, np.ndarray]:
         X, Z = np.meshgrid(xs, zs)
         cells.append(np.c_[X.ravel(), Z.ravel()])
     return np.concatenate(cells), hx * hz
+
+
+def _handling_rows(handling: Handling, f: int) -> Handling:
+    """The loads of row ``f`` only."""
+    def row(a):
+        return None if a is None else np.asarray(a)[f : f + 1]
+
+    return Handling(row(handling.shear_n), handling.push, row(handling.push_force_n))
 
 
 def _without_finger(panels: Panels, n_electrodes: int) -> Panels:

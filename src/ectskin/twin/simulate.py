@@ -1,14 +1,14 @@
 """Run an experiment protocol in the digital twin and return a :class:`~ectskin.io.Recording`.
 
-What is computed once and what per frame (the reason the full protocol runs in about a minute):
+What is computed once, per trial and per frame:
 
 * once per experiment and worker: the sensor's rest-state panels (:class:`SensorModel`);
-* once per trial: the inflation state (bulge heights, pressures), the touch point, and the
-  method-of-moments solves at ``protocol.force_nodes`` Chebyshev nodes spanning the trial's force
-  range (one solve for a trial without contact). Capacitance is smooth in force, so a degree-(K−1)
-  Chebyshev interpolant is exact to far below the readout noise (checked in the tests);
-* per frame: the force, the interpolated capacitance, the beam bending and marker positions
-  (vectorised over frames), and the readout / motion-capture noise models.
+* once per trial: the experimenter's plan (the finger's path and force, the hand's push; see
+  :mod:`ectskin.twin.human`), the inflation state, and the method-of-moments solves of
+  :class:`TouchResponse` (about a dozen for a touch trial, one without contact);
+* per frame: the readout from :class:`TouchResponse`'s smooth model of the frame's state, the
+  rod's equilibrium for the markers (vectorised over frames), and the readout and
+  motion-capture noise models.
 
 Each trial draws from its own random stream ``(seed, index)``, so the result does not depend on
 the number of workers.
@@ -23,47 +23,18 @@ from dataclasses import asdict
 
 import numpy as np
 from numpy.polynomial import chebyshev
-from scipy.interpolate import PchipInterpolator
 from threadpoolctl import threadpool_limits
 
 from ectskin import __version__
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import SensorLayout, default_layout
-from ectskin.twin.mechanics import Manipulator, ManipulatorConfig, Touch
-from ectskin.twin.protocol import Protocol, TrialPlan, plan_trials
+from ectskin.twin.human import finger_path, hand_push
+from ectskin.twin.mechanics import Handling, Manipulator, ManipulatorConfig, Touch
+from ectskin.twin.protocol import Protocol, TrialPlan, plan_trials, region_bounds
 from ectskin.twin.readout import mocap, readout
 from ectskin.twin.sensor import Discretisation, Finger, SensorModel
 
 log = logging.getLogger(__name__)
-
-
-def force_profile(
-    n_frames: int, frame_rate_hz: float, rng: np.random.Generator, protocol: Protocol
-) -> np.ndarray:
-    """(n_frames,) smooth random touch force in N: monotone cubic (PCHIP) through random knots."""
-    lo, hi = protocol.force_range_n
-    duration = n_frames / frame_rate_hz
-    n_knots = max(2, int(np.ceil(duration / protocol.force_knot_s)) + 1)
-    tk = np.linspace(0.0, duration, n_knots)
-    fk = rng.uniform(lo, hi, n_knots)
-    t = np.arange(n_frames) / frame_rate_hz
-    return np.clip(PchipInterpolator(tk, fk)(t), lo, hi)
-
-
-def contact_mask(n_frames: int, frame_rate_hz: float, rng: np.random.Generator) -> np.ndarray:
-    """(n_frames,) bool: finger on the skin; contact 4–10 s, lifted 1.5–4 s, alternating."""
-    mask = np.zeros(n_frames, dtype=bool)
-    t = float(rng.uniform(0.5, 2.0))
-    on = True
-    i = int(t * frame_rate_hz)
-    mask[:i] = False
-    while i < n_frames:
-        dur = rng.uniform(4.0, 10.0) if on else rng.uniform(1.5, 4.0)
-        j = min(n_frames, i + int(dur * frame_rate_hz))
-        mask[i:j] = on
-        on = not on
-        i = j
-    return mask
 
 
 def chebyshev_nodes(lo: float, hi: float, k: int) -> np.ndarray:
@@ -72,54 +43,177 @@ def chebyshev_nodes(lo: float, hi: float, k: int) -> np.ndarray:
     return 0.5 * (lo + hi) + 0.5 * (hi - lo) * x
 
 
-def capacitance_over_force(
-    sensor: SensorModel, inflation, touch: Touch, forces: np.ndarray, n_nodes: int
-) -> np.ndarray:
-    """(n, n_pairs) capacitance for every force in ``forces`` from ``n_nodes`` MoM solves.
+def _cheb_fit(x_lo: float, x_hi: float, nodes: np.ndarray, values: np.ndarray, x: np.ndarray):
+    """Evaluate at ``x`` the Chebyshev interpolant of ``values`` (K, P) given at ``nodes``."""
+    if x_hi - x_lo < 1e-12:
+        return np.repeat(values[:1], np.size(x), axis=0)
+    xn = (2 * nodes - (x_lo + x_hi)) / (x_hi - x_lo)
+    coef = chebyshev.chebfit(xn, values, nodes.size - 1)
+    return chebyshev.chebval((2 * np.asarray(x) - (x_lo + x_hi)) / (x_hi - x_lo), coef).T
 
-    Chebyshev interpolation of degree n_nodes − 1 over [min, max] of the forces.
+
+class TouchResponse:
+    """The readout of one touch trial as a smooth function of the frame's state.
+
+    The finger's state moves along a few smooth coordinates within a trial, so the trial needs a
+    handful of method-of-moments solves, not one per frame:
+
+    * the force F (contact) or the height h (above the skin): a Chebyshev interpolant at the
+      trial's mean point, over the trial's force range (``force_nodes`` solves) and over log h
+      (``force_nodes`` + 2 solves, only if the finger leaves the skin). The finger's off-axis
+      push is a fixed fraction of F, so it rides along;
+    * the point (u, v) on the skin: a quadratic in (u − ū, v − v̄) from a 5-point stencil and
+      one diagonal point, ``slide_step_mm`` apart, at the middle force (5 solves; the middle
+      Chebyshev node is the stencil's centre), added to the frames in contact;
+    * the hand's push m (fixed direction, varying magnitude): a slope at the middle force
+      (1 solve), added to every frame.
+
+    The model's error against direct solves is bounded in the tests.
     """
-    lo, hi = float(forces.min()), float(forces.max())
-    if hi - lo < 1e-9:
-        return np.repeat(sensor.capacitance(inflation, touch, [lo]), forces.size, axis=0)
-    nodes = chebyshev_nodes(lo, hi, n_nodes)
-    c_nodes = sensor.capacitance(inflation, touch, nodes)  # (K, n_pairs)
-    x_nodes = (2 * nodes - (lo + hi)) / (hi - lo)
-    coef = chebyshev.chebfit(x_nodes, c_nodes, n_nodes - 1)
-    x = (2 * forces - (lo + hi)) / (hi - lo)
-    return chebyshev.chebval(x, coef).T
+
+    slide_step_mm = 1.0
+
+    def __init__(self, sensor, inflation, surface, path, handling, push_dir, protocol):
+        self.sensor, self.p, self.surface = sensor, inflation, surface
+        self.n_solves = 0  # method-of-moments solves this trial took
+        self.shear_per_n = np.zeros(2)
+        on = path.contact
+        if on.any():
+            self.shear_per_n = (path.shear_n[on] / path.force_n[on, None]).mean(axis=0)
+        self.push_dir = push_dir
+        self.push_point = handling.push
+        self.uv0 = path.uv_mm[on].mean(axis=0) if on.any() else path.uv_mm.mean(axis=0)
+        mags = self._push_magnitude(handling)
+        self.m0 = float(mags.mean()) if mags is not None else 0.0
+        dm = float(np.ptp(mags)) / 2 if mags is not None else 0.0
+        k = protocol.force_nodes | 1  # odd: the middle node is the range's centre
+        self.f_lo = self.f_hi = 0.0
+        if on.any():
+            self.f_lo, self.f_hi = float(path.force_n[on].min()), float(path.force_n[on].max())
+        self.f_nodes = chebyshev_nodes(self.f_lo, self.f_hi, k)
+        self.c_nodes = self._solve(self.f_nodes) if on.any() else None
+        f_mid = np.array([0.5 * (self.f_lo + self.f_hi)])
+        if on.any():
+            centre = self.c_nodes[k // 2]
+        else:  # the finger never lands: the stencil is taken at the lowest height
+            centre = None
+        off = ~on
+        if off.any():
+            h = np.log(path.height_mm[off])
+            self.h_lo, self.h_hi = float(h.min()), float(h.max())
+            self.h_nodes = chebyshev_nodes(self.h_lo, self.h_hi, k + 2)
+            self.c_hover = self._solve(np.zeros(k + 2), heights=np.exp(self.h_nodes))
+        heights = None if on.any() else np.exp([self.h_lo])
+        forces = f_mid if on.any() else np.zeros(1)
+        if centre is None:
+            centre = self._solve(forces, heights=heights)[0]
+        d = self.slide_step_mm
+        stencil = np.stack(
+            [self._solve(forces, du=du, heights=heights)[0] for du in ((d, 0), (-d, 0), (0, d), (0, -d), (d, d))]
+        )
+        self.g_u = (stencil[0] - stencil[1]) / (2 * d)
+        self.g_v = (stencil[2] - stencil[3]) / (2 * d)
+        self.g_uu = (stencil[0] - 2 * centre + stencil[1]) / d**2
+        self.g_vv = (stencil[2] - 2 * centre + stencil[3]) / d**2
+        # C(d, d) = C + d(g_u + g_v) + d²(g_uu + g_vv)/2 + d² g_uv
+        self.g_uv = (
+            stencil[4] - centre - d * (self.g_u + self.g_v) - 0.5 * d**2 * (self.g_uu + self.g_vv)
+        ) / d**2
+        self.h_slope = None
+        if dm > 0:
+            self.h_slope = (self._solve(forces, dm=dm, heights=heights)[0] - centre) / dm
+
+    def _push_magnitude(self, handling):
+        if handling.push_force_n is None or self.push_dir is None:
+            return None
+        return np.asarray(handling.push_force_n) @ self.push_dir
+
+    def _handling(self, forces, m):
+        forces = np.atleast_1d(forces)
+        shear = forces[:, None] * self.shear_per_n[None, :]
+        push = None
+        if self.push_point is not None:
+            push = np.repeat((m * self.push_dir)[None, :], forces.size, axis=0)
+        return Handling(shear_n=shear, push=self.push_point, push_force_n=push)
+
+    def _solve(self, forces, *, du=(0.0, 0.0), dm=0.0, heights=None):
+        self.n_solves += np.size(forces)
+        touch = Touch(self.surface, (float(self.uv0[0] + du[0]), float(self.uv0[1] + du[1])))
+        handling = self._handling(forces, self.m0 + dm)
+        return self.sensor.capacitance(self.p, touch, forces, handling, heights_mm=heights)
+
+    def __call__(self, path, handling) -> np.ndarray:
+        """(n, n_pairs) readout of every frame of ``path``."""
+        n = path.force_n.size
+        out = np.empty((n, self.sensor.layout.n_pairs))
+        on = path.contact
+        if on.any():
+            out[on] = _cheb_fit(self.f_lo, self.f_hi, self.f_nodes, self.c_nodes, path.force_n[on])
+        off = ~on
+        if off.any():
+            out[off] = _cheb_fit(
+                self.h_lo, self.h_hi, self.h_nodes, self.c_hover, np.log(path.height_mm[off])
+            )
+        # the point's quadratic applies in contact (above the skin the finger's point matters far
+        # less, and hover frames are taken at the trial's mean point), or everywhere if the
+        # finger never lands (then the stencil was taken at the lowest height)
+        where = on if on.any() else np.ones(n, dtype=bool)
+        du = path.uv_mm[where] - self.uv0
+        u, v = du[:, :1], du[:, 1:]
+        out[where] += (
+            self.g_u * u + self.g_v * v + 0.5 * self.g_uu * u**2 + 0.5 * self.g_vv * v**2
+            + self.g_uv * u * v
+        )
+        mags = self._push_magnitude(handling)
+        if self.h_slope is not None and mags is not None:
+            out += self.h_slope * (mags - self.m0)[:, None]
+        return out
 
 
 def simulate_trial(
     plan: TrialPlan, protocol: Protocol, sensor: SensorModel, drift_phase: np.ndarray
 ) -> Trial:
-    """Simulate one planned trial: mechanics → MoM → readout and motion-capture models."""
+    """Simulate one planned trial: the experimenter → mechanics → MoM → readout and mocap models."""
     rng = np.random.default_rng([protocol.seed, 1, plan.index])
     n = protocol.n_frames
     fps = protocol.frame_rate_hz
     t = np.arange(n) / fps
     p = plan.inflation
+    n_markers = sensor.layout.n_markers
+    truth = {  # per-frame ground truth; without a finger: no contact, no point, no height
+        "contact": np.zeros(n, dtype=bool),
+        "finger_uv_mm": np.full((n, 2), np.nan),
+        "force_n": np.zeros(n),
+        "finger_height_mm": np.full(n, np.nan),
+    }
     labels = np.zeros(n, dtype=np.int16)
-    force = np.zeros(n)
+    n_solves = 1
     if plan.kind == "touch":
-        force = force_profile(n, fps, rng, protocol)
-        contact = contact_mask(n, fps, rng) if protocol.lifts else np.ones(n, dtype=bool)
-        force[~contact] = 0.0
-        labels[contact] = plan.region
-        c_true = np.empty((n, sensor.layout.n_pairs))
-        markers_true = np.empty((n, sensor.layout.n_markers, 3))
-        # one finger placement per dwell, each for an equal share of the trial
-        for uv, frames in zip(plan.touch_uv_mm, np.array_split(np.arange(n), len(plan.touch_uv_mm))):
-            touch = Touch(plan.surface, uv)
-            on = frames[contact[frames]]
-            if on.size:
-                c_true[on] = capacitance_over_force(sensor, p, touch, force[on], protocol.force_nodes)
-            markers_true[frames] = sensor.marker_positions(p, touch, force[frames])
-        if (~contact).any():
-            c_true[~contact] = sensor.capacitance(p, None, [0.0])[0]
+        reg = sensor.layout.region(plan.region)
+        lo, hi = region_bounds(reg, protocol.touch_margin)
+        path = finger_path(n, fps, np.asarray(plan.touch_uv_mm), lo, hi, protocol, rng)
+        hand = hand_push(n, fps, protocol, rng, sensor.manipulator.config)
+        push_dir = None
+        if hand.push_force_n is not None:
+            norms = np.linalg.norm(hand.push_force_n, axis=1)
+            push_dir = hand.push_force_n[int(np.argmax(norms))] / max(norms.max(), 1e-12)
+        handling = Handling(path.shear_n, hand.push, hand.push_force_n)
+        response = TouchResponse(sensor, p, plan.surface, path, hand, push_dir, protocol)
+        c_true = response(path, hand)
+        n_solves = response.n_solves
+        touch = Touch(plan.surface, tuple(path.uv_mm.mean(axis=0)))
+        markers_true = sensor.marker_positions(p, touch, path.force_n, handling)
+        labels[path.contact] = plan.region
+        truth.update(
+            contact=path.contact,
+            finger_uv_mm=path.uv_mm,
+            force_n=path.force_n,
+            finger_height_mm=path.height_mm,
+        )
     else:
         c_true = np.repeat(sensor.capacitance(p, None, [0.0]), n, axis=0)
         markers_true = np.repeat(sensor.marker_positions(p, None, [0.0]), n, axis=0)
+        markers_true = markers_true.reshape(n, n_markers, 3)
     cap = readout(c_true, plan.start_s + t, rng, protocol.readout, drift_phase)
     markers = mocap(markers_true, rng, protocol.mocap, plan.marker_delay_frames, plan.occluded)
     meta = {
@@ -130,6 +224,7 @@ def simulate_trial(
         "marker_delay_frames": plan.marker_delay_frames,
         "occluded": plan.occluded,
         "start_s": plan.start_s,
+        "mom_solves": n_solves,
     }
     return Trial(
         name=plan.name,
@@ -139,7 +234,11 @@ def simulate_trial(
         inflation=p,
         region=plan.region,
         markers=markers,
-        force=force,
+        force=truth["force_n"],
+        contact=truth["contact"],
+        finger_uv_mm=truth["finger_uv_mm"],
+        finger_height_mm=truth["finger_height_mm"],
+        finger_surface=plan.surface,
         meta=meta,
     )
 
