@@ -42,7 +42,8 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ectskin._check import EctskinError
-from ectskin.twin import rod
+from ectskin.twin.rod import PointLoad
+from ectskin.twin.rod import solve as solve_rod
 
 SIDE = {"front": 1.0, "back": -1.0}
 
@@ -318,13 +319,13 @@ class Manipulator:
                 shear = np.asarray(handling.shear_n, dtype=np.float64).reshape(force.size, 2)
                 vec[:, 0] += shear[:, 0]
                 vec[:, 2] += shear[:, 1]
-            loads.append(rod.PointLoad(s_t, off, vec))
+            loads.append(PointLoad(s_t, off, vec))
         if handling is not None and handling.push is not None:
             s_h, off = self._load_point(handling.push, inflation_ml)
             push = np.asarray(handling.push_force_n, dtype=np.float64).reshape(force.size, 3)
-            loads.append(rod.PointLoad(s_h, off, push))
+            loads.append(PointLoad(s_h, off, push))
         stiffness = self.section_stiffness(self._zgrid, inflation_ml)
-        r, rot = rod.solve(zs, stiffness, loads, force.size, tol_mm=self.config.rod_tol_mm)
+        r, rot = solve_rod(zs, stiffness, loads, force.size, tol_mm=self.config.rod_tol_mm)
         if len(self._poses) >= 8:
             self._poses.pop(next(iter(self._poses)))
         self._poses[key] = (zs, r, rot)
