@@ -6,7 +6,7 @@ import pytest
 
 from ectskin import EctskinError
 from ectskin.layout import default_layout
-from ectskin.twin import Protocol, SensorModel, Touch, plan_trials, simulate_experiment
+from ectskin.twin import Finger, Protocol, SensorModel, Touch, plan_trials, simulate_experiment
 from ectskin.twin.characterize import characterize
 from ectskin.twin.human import finger_path, hand_push
 from ectskin.twin.live import LiveTwin
@@ -268,6 +268,10 @@ def test_the_finger_is_human(layout):
         Protocol(tremor_hz=(8.0, 20.0))
     with pytest.raises(EctskinError, match="force_range_n"):
         Protocol(force_range_n=(0.3, 500.0))
+    with pytest.raises(EctskinError, match="push_max_n must be at most"):
+        Protocol(push_max_n=50.0)
+    with pytest.raises(EctskinError, match="finger: pulp_modulus_mpa"):
+        Finger(pulp_modulus_mpa=-1.0)
 
 
 def test_deformation_signals_are_much_smaller_than_inflation_and_touch(sensor, char):

@@ -21,6 +21,8 @@ from ectskin.twin.readout import MocapConfig, ReadoutConfig
 
 #: The strongest press a finger gives in these trials (N); beyond it the model is not meant to go.
 MAX_FINGER_FORCE_N = 20.0
+#: The strongest push of the handling hand (N).
+MAX_HAND_PUSH_N = 10.0
 
 
 @dataclass(frozen=True)
@@ -98,6 +100,11 @@ class Protocol:
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise EctskinError(f"protocol: {name} must be a finite number >= 0, got {v!r}")
+        if self.push_max_n > MAX_HAND_PUSH_N:
+            raise EctskinError(
+                f"protocol: push_max_n must be at most {MAX_HAND_PUSH_N} N (a hand handling the "
+                f"soft body; more buckles it beyond what the rod model carries), got {self.push_max_n}"
+            )
         if self.tremor_rel >= 0.5:
             raise EctskinError(f"protocol: tremor_rel must be < 0.5, got {self.tremor_rel}")
         for name in ("slide_tau_s", "approach_s", "approach_height_mm", "hover_max_mm", "push_knot_s"):
