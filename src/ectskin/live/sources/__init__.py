@@ -37,7 +37,13 @@ from ectskin.layout import SensorLayout
 from ectskin.live.sources.base import COUNTERS, Frame, FrameSource
 from ectskin.live.sources.lines import LineSource
 from ectskin.live.sources.lsl import LslSource
-from ectskin.live.sources.protocol import MAX_LINE_BYTES, LineError, ParsedLine, parse_line
+from ectskin.live.sources.protocol import (
+    MAX_LINE_BYTES,
+    MAX_SEQ,
+    LineError,
+    ParsedLine,
+    parse_line,
+)
 from ectskin.live.sources.replay import ReplaySource
 from ectskin.live.sources.serial import SerialSource
 from ectskin.live.sources.sim import TwinSource, TwinStep, demo_scenario
@@ -116,6 +122,7 @@ def _tcp_spec(spec: str, rest: str) -> tuple[str, int]:
 __all__ = [
     "COUNTERS",
     "MAX_LINE_BYTES",
+    "MAX_SEQ",
     "SOURCE_KINDS",
     "SOURCE_SPECS",
     "Frame",
