@@ -25,7 +25,14 @@ are averaged channel-wise (NaN-aware) into the reference c_0; frames are calibra
 c = (c_t − c_0)/c_0. Touch uses the touch reference (the paper's rest state: capture it untouched
 and uninflated), tracking its own reference (the paper's "prior knowledge": the state at the start
 of the trajectory, with the marker coordinates of that moment as the decoder's initial coordinates).
-``capture_reference(which="both"|"touch"|"track")`` re-captures one or both. Initial marker
+``capture_reference(which="both"|"touch"|"track")`` re-captures one or both.
+
+A capture window is judged before it is used (:mod:`ectskin.live.reference`): the touch reference
+refuses a window in which a frame is touched or inflated (when the source knows: replay, sim, a
+line with ``label=``) and captures again from the next frames, keeping the reference in use
+meanwhile; motion of the markers and drift of a channel far beyond its noise are warned about
+(both references). :meth:`reference_state` (also ``stats["reference"]``) says which frames the
+reference in use came from, when, with which warnings, and why the last window was refused. Initial marker
 coordinates are the mean markers of the reference frames when the source provides markers, else
 ``reference_markers`` (e.g. the twin's rest pose). A channel whose reference is missing or zero is
 calibrated to NaN (shown as null) and fed to the models as 0 (no change).
@@ -60,6 +67,11 @@ logger = logging.getLogger(__name__)
 
 POLICIES = ("skip-to-newest", "block")
 REFERENCE_KINDS = ("both", "touch", "track")
+#: Problems of a capture window (:func:`ectskin.live.reference.check_window`) that make a
+#: reference refuse it and capture again; the others are warned about. The touch reference is the
+#: rest state (untouched, uninflated); the tracking reference is the state at the start of the
+#: trajectory, which may be inflated.
+REFUSED_BY = {"touch": ("contact", "inflation"), "tracking": ()}
 
 
 class LiveEngine:
@@ -174,6 +186,8 @@ class LiveEngine:
         self._win_n = 0
         self._init_markers: np.ndarray | None = None
         self._warned: set[str] = set()
+        self._refusals = {"touch": 0, "tracking": 0}
+        self._last_refusal: dict[str, str | None] = {"touch": None, "tracking": None}
 
     # ------------------------------------------------------------------ public API
     def capture_reference(self, which: str = "both") -> None:
@@ -192,6 +206,29 @@ class LiveEngine:
     @property
     def reference_ready(self) -> bool:
         return self._ref_touch.c0 is not None
+
+    def reference_state(self) -> dict[str, Any]:
+        """The state of both references, for the dashboard and the final summary (JSON-able).
+
+        Per reference (``touch``, ``tracking``): ``state`` ("waiting" for frames, "capturing",
+        "retrying" after a refused window, "ready"), ``in_use`` (frames, source times,
+        ``captured_utc`` and ``warnings`` of the reference in use, or None), ``refusals`` (windows
+        refused so far) and ``last_refusal`` (why the last window was refused, None after an
+        accepted one).
+        """
+        out = {}
+        for name, ref in (("touch", self._ref_touch), ("tracking", self._ref_track)):
+            if ref.capturing:
+                state = "retrying" if self._last_refusal[name] else "capturing"
+            else:
+                state = "ready" if ref.c0 is not None else "waiting"
+            out[name] = {
+                "state": state,
+                "in_use": ref.info,
+                "refusals": self._refusals[name],
+                "last_refusal": self._last_refusal[name],
+            }
+        return out
 
     @property
     def stats(self) -> dict[str, Any]:
@@ -374,19 +411,59 @@ class LiveEngine:
         self._win_pos = (self._win_pos + 1) % k
         self._win_n += 1
         for name, ref in (("touch", self._ref_touch), ("tracking", self._ref_track)):
-            if ref.capturing and ref.add(c, f.markers, f.seq):
-                self._reference_done(name, ref, f)
+            if ref.capturing and ref.add(
+                c, f.markers, f.seq, t=f.t, label=f.label, inflation=f.inflation
+            ):
+                self._reference_window_done(name, ref, f)
 
-    def _reference_done(self, name: str, ref: ReferenceCapture, f) -> None:
+    def _reference_window_done(self, name: str, ref: ReferenceCapture, f) -> None:
+        """A capture window is complete: refuse it (touch: contact or inflation; capture again)
+        or accept it, with a warning for what else was wrong (motion, drift, …)."""
+        found = ref.last_check.messages(self.layout.pair_names)
+        refusing = REFUSED_BY[name]
+        refused = [msg for kind, msg in found.items() if kind in refusing]
+        warned = [msg for kind, msg in found.items() if kind not in refusing]
+        frames = f"frames {ref.seqs[0]}..{ref.seqs[-1]}"
+        if refused:
+            self._refusals[name] += 1
+            k = self._refusals[name]
+            text = f"{name} reference refused ({frames}): {'; '.join(refused)}"
+            self._last_refusal[name] = text
+            if k <= 3 or k % 10 == 0:
+                logger.warning(
+                    "%s. The skin must be untouched and uninflated while the reference is "
+                    "captured; capturing again from the next %d frames (refusal #%d)",
+                    text,
+                    self.reference_frames,
+                    k,
+                )
+            ref.start(self.reference_frames)
+            return
+        self._last_refusal[name] = None
+        ref.accept(warned)
+        self._reference_done(name, ref, f, warned)
+
+    def _reference_done(self, name: str, ref: ReferenceCapture, f, warned: list[str]) -> None:
         bad = np.flatnonzero(np.isnan(ref.c0))
         if bad.size:
             names = ", ".join(self.layout.pair_names[j] for j in bad[:8])
             logger.warning(
                 "%s reference: %d channel(s) without a usable reference (%s); they "
-                "calibrate to NaN and enter the models as 0", name, bad.size, names
+                "calibrate to NaN and enter the models as 0",
+                name,
+                bad.size,
+                names,
             )
         text = f"{name} reference captured from frames {ref.seqs[0]}..{ref.seqs[-1]}"
-        logger.info("%s", text)
+        if warned:
+            text += f", but: {'; '.join(warned)}"
+            logger.warning(
+                "%s. Re-capture it with the skin untouched, uninflated and still (the "
+                "dashboard's button, or restart)",
+                text,
+            )
+        else:
+            logger.info("%s", text)
         if self.recorder is not None:
             try:
                 self.recorder.add_event(text, t_s=f.t)
@@ -411,7 +488,15 @@ class LiveEngine:
 
     def _process(self, f) -> Output:
         raw = f.capacitance
-        out = Output(seq=f.seq, t=f.t, raw=raw, label=f.label, markers_true=f.markers)
+        out = Output(
+            seq=f.seq,
+            t=f.t,
+            raw=raw,
+            label=f.label,
+            markers_true=f.markers,
+            trial=f.trial,
+            inflation=f.inflation,
+        )
         c0 = self._ref_touch.c0
         if c0 is not None:
             cal = relative_change(raw, c0)  # Eq. 2; NaN where the reference channel is unusable
@@ -489,8 +574,8 @@ class LiveEngine:
             "policy": self.policy,
             "reference_ready": self._ref_touch.c0 is not None,
             "reference_capturing": self._ref_touch.capturing or self._ref_track.capturing,
+            "reference": self.reference_state(),
         }
         if self.recorder is not None:
             stats.update(self.recorder.stats)
         return stats
-
