@@ -553,7 +553,8 @@ def test_cli_live_replay_with_models_jsonl_and_record(tmp_path, capsys):
     assert lines[5]["touch"] is None and len(lines[-1]["touch"]["probs"]) == C
     assert read_recording(rec).n_frames == n
     err = capsys.readouterr().err
-    assert "final: frames 60, processed 60, dropped 0" in err
+    assert "final (the source ended): frames 60, processed 60, dropped 0" in err
+    assert "touch reference: frames 0..9, captured " in err
     # a track model but a source without markers: a clear error, exit code 2
     from ectskin.learn.models import C2DT, C2DTConfig
 
