@@ -211,10 +211,16 @@ class ReferenceCapture:
 
     def accept(self, warnings_: list[str] | None = None) -> None:
         """Make the completed window the reference in use."""
-        caps = np.stack(self._caps)  # (n, n_pairs)
+        # (n_pairs, n): each channel's frames contiguous, so its mean is reduced the way
+        # touch_reference() reduces the rest-state frames (pairwise, along each channel), and a
+        # window over the rest trial gives its reference bit for bit
+        per_channel = np.ascontiguousarray(np.stack(self._caps).T)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # a channel never finite: NaN
-            c0 = caps.mean(axis=0) if np.isfinite(caps).all() else np.nanmean(caps, axis=0)
+            if np.isfinite(per_channel).all():
+                c0 = per_channel.mean(axis=1)
+            else:
+                c0 = np.nanmean(per_channel, axis=1)
             seen = [m for m in self._markers if m is not None]
             m = np.nanmean(np.stack(seen), axis=0) if seen else None
         scale = np.nanmax(np.abs(c0)) if np.isfinite(c0).any() else 0.0
