@@ -296,6 +296,14 @@ def test_page_follows_a_replayed_recording(tmp_path):
             assert stats["dashboard"]["reference_requests"] == 1
             page.wait_for_selector('#reference-status[data-state="ready"]', timeout=20_000)
 
+            # The badge: "live" only while frames keep coming (issue 12).
+            states = page.evaluate("""() => {
+                const b = window.ectskinDashboard.badge;
+                return [b(true, 'running', 100), b(true, 'running', 5000), b(true, 'ended', 100),
+                        b(true, 'error', 100), b(false, 'running', 100), b(true, 'running', null)]
+                       .map(x => x[0]); }""")
+            assert states == ["open", "stale", "ended", "error", "closed", "waiting"]
+
             # The source ends: the badge no longer says "live" (issue 12).
             engine.stop()
             page.wait_for_selector('#connection-status[data-state="ended"]', timeout=10_000)

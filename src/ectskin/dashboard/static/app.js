@@ -78,23 +78,26 @@
     errEl.textContent = msg.error ? "engine: " + msg.error : "";
     updateBadge();
   }
-  // The badge says "live" only while the engine runs and frames keep coming.
-  function updateBadge() {
-    const age = state.lastFrameWall ? performance.now() - state.lastFrameWall : 0;
-    if (!state.wsOpen) {
-      setConnection(state.engine === "ended" ? "ended" : "closed",
-                    state.engine === "ended" ? "ended (server gone)" : "disconnected, retrying…");
-    } else if (state.engine === "ended") {
-      setConnection("ended", "ended: the source stopped; last frame shown");
-    } else if (state.engine === "error") {
-      setConnection("error", "stopped by an error");
-    } else if (state.lastFrameWall && age > STALE_MS) {
-      setConnection("stale", "stale: no frame for " + (age / 1000).toFixed(0) + " s");
-    } else if (state.engine === "waiting" && !state.lastFrameWall) {
-      setConnection("waiting", "waiting for frames");
-    } else {
-      setConnection("open", "live");
+  // The badge says "live" only while the engine runs and frames keep coming: [data-state, text]
+  // from the websocket being open, the engine's state and the age of the last frame (ms, null
+  // before the first).
+  function badge(wsOpen, engine, ageMs) {
+    if (!wsOpen) {
+      return engine === "ended" ? ["ended", "ended (server gone)"]
+                                : ["closed", "disconnected, retrying…"];
     }
+    if (engine === "ended") return ["ended", "ended: the source stopped; last frame shown"];
+    if (engine === "error") return ["error", "stopped by an error"];
+    if (ageMs !== null && ageMs > STALE_MS) {
+      return ["stale", "stale: no frame for " + (ageMs / 1000).toFixed(0) + " s"];
+    }
+    if (ageMs === null) return ["waiting", "waiting for frames"];
+    return ["open", "live"];
+  }
+  function updateBadge() {
+    const age = state.lastFrameWall ? performance.now() - state.lastFrameWall : null;
+    const [st, text] = badge(state.wsOpen, state.engine, age);
+    setConnection(st, text);
   }
   function setConnection(s, text) {
     const el = $("connection-status");
@@ -790,7 +793,7 @@
 
   // ------------------------------------------------------------------ start
   // For the browser test: the page's state and its pure helpers.
-  window.ectskinDashboard = { state, chartRange, MIN_SPAN_RAW_PF, MIN_SPAN_CALIBRATED };
+  window.ectskinDashboard = { state, badge, chartRange, MIN_SPAN_RAW_PF, MIN_SPAN_CALIBRATED };
   document.querySelectorAll('input[name="chart-mode"]').forEach((el) => {
     el.addEventListener("change", () => { state.mode = el.value; state.chartDirty = true; });
   });
