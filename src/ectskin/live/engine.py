@@ -27,12 +27,10 @@ and uninflated), tracking its own reference (the paper's "prior knowledge": the 
 of the trajectory, with the marker coordinates of that moment as the decoder's initial coordinates).
 ``capture_reference(which="both"|"touch"|"track")`` re-captures one or both.
 
-A capture window is judged before it is used (:mod:`ectskin.live.reference`): the touch reference
-refuses a window in which a frame is touched or inflated (when the source knows: replay, sim, a
-line with ``label=``) and captures again from the next frames, keeping the reference in use
-meanwhile; motion of the markers and drift of a channel far beyond its noise are warned about
-(both references). :meth:`reference_state` (also ``stats["reference"]``) says which frames the
-reference in use came from, when, with which warnings, and why the last window was refused. Initial marker
+A capture window is judged before use (:mod:`ectskin.live.reference`): the touch reference refuses
+one with a touched or inflated frame (when the source knows) and captures again; marker motion and
+channel drift far beyond the noise are warned about. :meth:`reference_state` (and
+``stats["reference"]``) says where, when and how the references in use were taken. Initial marker
 coordinates are the mean markers of the reference frames when the source provides markers, else
 ``reference_markers`` (e.g. the twin's rest pose). A channel whose reference is missing or zero is
 calibrated to NaN (shown as null) and fed to the models as 0 (no change).
@@ -61,17 +59,11 @@ from ectskin.layout import SensorLayout
 from ectskin.live.meter import Meter
 from ectskin.live.output import Output, json_list
 from ectskin.live.predictors import bind_predictors
-from ectskin.live.reference import ReferenceCapture
+from ectskin.live.reference import REFERENCE_KINDS, ReferenceCapture, References
 
 logger = logging.getLogger(__name__)
 
 POLICIES = ("skip-to-newest", "block")
-REFERENCE_KINDS = ("both", "touch", "track")
-#: Problems of a capture window (:func:`ectskin.live.reference.check_window`) that make a
-#: reference refuse it and capture again; the others are warned about. The touch reference is the
-#: rest state (untouched, uninflated); the tracking reference is the state at the start of the
-#: trajectory, which may be inflated.
-REFUSED_BY = {"touch": ("contact", "inflation"), "tracking": ()}
 
 
 class LiveEngine:
@@ -179,15 +171,12 @@ class LiveEngine:
         self._error: str | None = None
         self.latest: Output | None = None
         # inference-loop state
-        self._ref_touch = ReferenceCapture(n_pairs, n_markers)
-        self._ref_track = ReferenceCapture(n_pairs, n_markers)
+        self._refs = References(n_pairs, n_markers, layout.pair_names)
         self._win = np.zeros((self.window, n_pairs))
         self._win_pos = 0
         self._win_n = 0
         self._init_markers: np.ndarray | None = None
         self._warned: set[str] = set()
-        self._refusals = {"touch": 0, "tracking": 0}
-        self._last_refusal: dict[str, str | None] = {"touch": None, "tracking": None}
 
     # ------------------------------------------------------------------ public API
     def capture_reference(self, which: str = "both") -> None:
@@ -205,30 +194,12 @@ class LiveEngine:
 
     @property
     def reference_ready(self) -> bool:
-        return self._ref_touch.c0 is not None
+        return self._refs.touch.c0 is not None
 
     def reference_state(self) -> dict[str, Any]:
-        """The state of both references, for the dashboard and the final summary (JSON-able).
-
-        Per reference (``touch``, ``tracking``): ``state`` ("waiting" for frames, "capturing",
-        "retrying" after a refused window, "ready"), ``in_use`` (frames, source times,
-        ``captured_utc`` and ``warnings`` of the reference in use, or None), ``refusals`` (windows
-        refused so far) and ``last_refusal`` (why the last window was refused, None after an
-        accepted one).
-        """
-        out = {}
-        for name, ref in (("touch", self._ref_touch), ("tracking", self._ref_track)):
-            if ref.capturing:
-                state = "retrying" if self._last_refusal[name] else "capturing"
-            else:
-                state = "ready" if ref.c0 is not None else "waiting"
-            out[name] = {
-                "state": state,
-                "in_use": ref.info,
-                "refusals": self._refusals[name],
-                "last_refusal": self._last_refusal[name],
-            }
-        return out
+        """The state of both references, for the dashboard and the final summary (JSON-able;
+        :meth:`ectskin.live.reference.References.state`)."""
+        return self._refs.state()
 
     @property
     def stats(self) -> dict[str, Any]:
@@ -394,10 +365,7 @@ class LiveEngine:
         with self._lock:
             which, self._pending_capture = self._pending_capture, None
         if which is not None:
-            if which in ("both", "touch"):
-                self._ref_touch.start(self.reference_frames)
-            if which in ("both", "track"):
-                self._ref_track.start(self.reference_frames)
+            self._refs.start(which, self.reference_frames)
             logger.info(
                 "capturing the %s reference from the next %d frames",
                 "touch and tracking" if which == "both" else which,
@@ -410,60 +378,11 @@ class LiveEngine:
         self._win[self._win_pos] = c
         self._win_pos = (self._win_pos + 1) % k
         self._win_n += 1
-        for name, ref in (("touch", self._ref_touch), ("tracking", self._ref_track)):
-            if ref.capturing and ref.add(
-                c, f.markers, f.seq, t=f.t, label=f.label, inflation=f.inflation
-            ):
-                self._reference_window_done(name, ref, f)
+        for name, ref, text in self._refs.add(f):
+            self._reference_done(name, ref, f, text)
 
-    def _reference_window_done(self, name: str, ref: ReferenceCapture, f) -> None:
-        """A capture window is complete: refuse it (touch: contact or inflation; capture again)
-        or accept it, with a warning for what else was wrong (motion, drift, …)."""
-        found = ref.last_check.messages(self.layout.pair_names)
-        refusing = REFUSED_BY[name]
-        refused = [msg for kind, msg in found.items() if kind in refusing]
-        warned = [msg for kind, msg in found.items() if kind not in refusing]
-        frames = f"frames {ref.seqs[0]}..{ref.seqs[-1]}"
-        if refused:
-            self._refusals[name] += 1
-            k = self._refusals[name]
-            text = f"{name} reference refused ({frames}): {'; '.join(refused)}"
-            self._last_refusal[name] = text
-            if k <= 3 or k % 10 == 0:
-                logger.warning(
-                    "%s. The skin must be untouched and uninflated while the reference is "
-                    "captured; capturing again from the next %d frames (refusal #%d)",
-                    text,
-                    self.reference_frames,
-                    k,
-                )
-            ref.start(self.reference_frames)
-            return
-        self._last_refusal[name] = None
-        ref.accept(warned)
-        self._reference_done(name, ref, f, warned)
-
-    def _reference_done(self, name: str, ref: ReferenceCapture, f, warned: list[str]) -> None:
-        bad = np.flatnonzero(np.isnan(ref.c0))
-        if bad.size:
-            names = ", ".join(self.layout.pair_names[j] for j in bad[:8])
-            logger.warning(
-                "%s reference: %d channel(s) without a usable reference (%s); they "
-                "calibrate to NaN and enter the models as 0",
-                name,
-                bad.size,
-                names,
-            )
-        text = f"{name} reference captured from frames {ref.seqs[0]}..{ref.seqs[-1]}"
-        if warned:
-            text += f", but: {'; '.join(warned)}"
-            logger.warning(
-                "%s. Re-capture it with the skin untouched, uninflated and still (the "
-                "dashboard's button, or restart)",
-                text,
-            )
-        else:
-            logger.info("%s", text)
+    def _reference_done(self, name: str, ref: ReferenceCapture, f, text: str) -> None:
+        """A reference was accepted (``text`` says how, :meth:`References.add` logged it)."""
         if self.recorder is not None:
             try:
                 self.recorder.add_event(text, t_s=f.t)
@@ -497,7 +416,7 @@ class LiveEngine:
             trial=f.trial,
             inflation=f.inflation,
         )
-        c0 = self._ref_touch.c0
+        c0 = self._refs.touch.c0
         if c0 is not None:
             cal = relative_change(raw, c0)  # Eq. 2; NaN where the reference channel is unusable
             out.calibrated = cal
@@ -511,7 +430,7 @@ class LiveEngine:
                     out.touch_cls = int(np.argmax(probs))
                 except Exception:
                     self._model_error("touch")
-        c0t = self._ref_track.c0
+        c0t = self._refs.tracking.c0
         if self.track is not None and c0t is not None and self._init_markers is not None:
             k = self.window
             order = (self._win_pos + np.arange(k)) % k  # oldest first
@@ -572,8 +491,8 @@ class LiveEngine:
             "fps_in": round(fps_in, 2),
             "fps_out": round(fps_out, 2),
             "policy": self.policy,
-            "reference_ready": self._ref_touch.c0 is not None,
-            "reference_capturing": self._ref_touch.capturing or self._ref_track.capturing,
+            "reference_ready": self._refs.touch.c0 is not None,
+            "reference_capturing": self._refs.capturing,
             "reference": self.reference_state(),
         }
         if self.recorder is not None:

@@ -17,21 +17,26 @@ frames of its capture window and, when the window is complete, judges them
   :data:`DRIFT_REL_MIN` of the channel's level. White noise of any size passes; a touch that
   starts or ends, or a skin still settling, does not.
 
-What the engine does with the verdict is its policy (:mod:`ectskin.live.engine`): the touch
-reference refuses a window with contact or inflation and captures again, and warns about motion
-and drift; the tracking reference only warns.
+:class:`References` holds the engine's two references and the policy: the touch reference (the
+rest state) refuses a window with contact or inflation and captures again, keeping the reference
+in use meanwhile; both warn about the rest (motion, drift; contact for tracking, whose reference
+is the state at the start of the trajectory and may be inflated).
 """
 
 from __future__ import annotations
 
 import datetime
+import logging
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ectskin.io.calibration import REFERENCE_RTOL
+
+logger = logging.getLogger(__name__)
 
 #: A marker "moved" during the capture when its mean position differs by more than this (mm)
 #: between the two halves of the window (motion-capture noise is ~0.2 mm per frame).
@@ -43,6 +48,10 @@ DRIFT_REL_MIN = 1e-4
 #: Windows shorter than this are not judged for drift and motion (too few frames for a noise
 #: estimate); contact and inflation are always checked.
 MIN_JUDGED_FRAMES = 6
+#: Problems of a window (:meth:`WindowCheck.messages` kinds) that make a reference refuse it and
+#: capture again; the others are warned about.
+REFUSED_BY = {"touch": ("contact", "inflation"), "tracking": ()}
+REFERENCE_KINDS = ("both", "touch", "track")
 
 
 @dataclass
@@ -245,3 +254,120 @@ class ReferenceCapture:
         if m is None:
             return fallback
         return m
+
+
+class References:
+    """The live engine's two references, ``touch`` and ``tracking`` (:class:`ReferenceCapture`),
+    with the policy of :data:`REFUSED_BY` and the account that :meth:`state` gives.
+
+    :meth:`start` begins a capture of ``frames`` frames (``which``: one of
+    :data:`REFERENCE_KINDS`); :meth:`add` feeds one frame to the captures in progress and returns
+    the references whose window it completed and accepted, each with the line that says how (also
+    logged: a warning when something was wrong); a refused window is logged (the first three
+    refusals, then every tenth) and captured again.
+    """
+
+    def __init__(self, n_pairs: int, n_markers: int, pair_names: Sequence[str]):
+        self.touch = ReferenceCapture(n_pairs, n_markers)
+        self.tracking = ReferenceCapture(n_pairs, n_markers)
+        self.pair_names = list(pair_names)
+        self.frames = 0
+        self.refusals = {"touch": 0, "tracking": 0}
+        self.last_refusal: dict[str, str | None] = {"touch": None, "tracking": None}
+
+    def _named(self) -> tuple[tuple[str, ReferenceCapture], ...]:
+        return (("touch", self.touch), ("tracking", self.tracking))
+
+    def start(self, which: str, frames: int) -> None:
+        self.frames = frames
+        if which in ("both", "touch"):
+            self.touch.start(frames)
+        if which in ("both", "track"):
+            self.tracking.start(frames)
+
+    @property
+    def capturing(self) -> bool:
+        return self.touch.capturing or self.tracking.capturing
+
+    def add(self, f) -> list[tuple[str, ReferenceCapture, str]]:
+        """Feed frame ``f`` (a :class:`~ectskin.live.sources.Frame`) to the captures in progress;
+        returns ``(name, reference, text)`` for each reference it completed and accepted."""
+        done = []
+        for name, ref in self._named():
+            if ref.capturing and ref.add(
+                f.capacitance, f.markers, f.seq, t=f.t, label=f.label, inflation=f.inflation
+            ):
+                warned = self._judge(name, ref)
+                if warned is not None:
+                    done.append((name, ref, self._accepted(name, ref, warned)))
+        return done
+
+    def _accepted(self, name: str, ref: ReferenceCapture, warned: list[str]) -> str:
+        """Log an accepted reference; returns the line that says how it was taken."""
+        bad = np.flatnonzero(np.isnan(ref.c0))
+        if bad.size:
+            logger.warning(
+                "%s reference: %d channel(s) without a usable reference (%s); they calibrate to "
+                "NaN and enter the models as 0",
+                name,
+                bad.size,
+                ", ".join(self.pair_names[j] for j in bad[:8]),
+            )
+        text = f"{name} reference captured from frames {ref.seqs[0]}..{ref.seqs[-1]}"
+        if not warned:
+            logger.info("%s", text)
+            return text
+        text += f", but: {'; '.join(warned)}"
+        logger.warning(
+            "%s. Re-capture it with the skin untouched, uninflated and still (the dashboard's "
+            "button, or restart)",
+            text,
+        )
+        return text
+
+    def _judge(self, name: str, ref: ReferenceCapture) -> list[str] | None:
+        """Refuse the completed window (returns None, capture restarted) or accept it (returns
+        its warnings)."""
+        found = ref.last_check.messages(self.pair_names)
+        refused = [msg for kind, msg in found.items() if kind in REFUSED_BY[name]]
+        warned = [msg for kind, msg in found.items() if kind not in REFUSED_BY[name]]
+        if not refused:
+            self.last_refusal[name] = None
+            ref.accept(warned)
+            return warned
+        self.refusals[name] += 1
+        k = self.refusals[name]
+        text = f"{name} reference refused (frames {ref.seqs[0]}..{ref.seqs[-1]}): " + "; ".join(
+            refused
+        )
+        self.last_refusal[name] = text
+        if k <= 3 or k % 10 == 0:
+            logger.warning(
+                "%s. The skin must be untouched and uninflated while the reference is captured; "
+                "capturing again from the next %d frames (refusal #%d)",
+                text,
+                self.frames,
+                k,
+            )
+        ref.start(self.frames)
+        return None
+
+    def state(self) -> dict[str, Any]:
+        """Both references, JSON-able. Per reference (``touch``, ``tracking``): ``state``
+        ("waiting" for frames, "capturing", "retrying" after a refused window, "ready"),
+        ``in_use`` (frames, source times, ``captured_utc`` and ``warnings`` of the reference in
+        use, or None), ``refusals`` (windows refused so far) and ``last_refusal`` (why the last
+        window was refused; None after an accepted one)."""
+        out = {}
+        for name, ref in self._named():
+            if ref.capturing:
+                state = "retrying" if self.last_refusal[name] else "capturing"
+            else:
+                state = "ready" if ref.c0 is not None else "waiting"
+            out[name] = {
+                "state": state,
+                "in_use": ref.info,
+                "refusals": self.refusals[name],
+                "last_refusal": self.last_refusal[name],
+            }
+        return out
