@@ -205,6 +205,7 @@ def test_live_record_is_closed_complete_on_sigterm_and_sighup(tmp_path, sig):
     assert rc == 0, "".join(lines)
     assert read_recording(out).n_frames > 10  # complete: no allow_partial needed
     assert any(f"{signal.Signals(sig).name} received" in ln for ln in lines)
+    assert any(ln.startswith("final (interrupted)") for ln in lines)
 
 
 def test_dashboard_stops_after_duration(tmp_path):

@@ -287,10 +287,12 @@ def _run(args: argparse.Namespace, touch, track, ref_markers) -> int:
             jsonl = _JsonLines(args.jsonl, engine.stop)
         t0 = time.monotonic()
         if args.dashboard:
-            stats = _serve(engine, args, run_kwargs, jsonl)
+            stats, interrupted = _serve(engine, args, run_kwargs, jsonl)
         else:
-            stats = _console(engine, run_kwargs, jsonl, status=args.jsonl != "-")
-        if args.duration is not None and time.monotonic() - t0 >= args.duration:
+            stats, interrupted = _console(engine, run_kwargs, jsonl, status=args.jsonl != "-")
+        if interrupted:
+            ended = "interrupted"
+        elif args.duration is not None and time.monotonic() - t0 >= args.duration:
             ended = f"--duration {args.duration:g} s passed"
         elif args.max_frames is not None and stats.get("frames") == args.max_frames:
             ended = f"--max-frames {args.max_frames} reached"
@@ -340,8 +342,8 @@ def _reference_line(ref: dict) -> str:
     return text
 
 
-def _console(engine, run_kwargs, jsonl, status: bool) -> dict:
-    """Run in this thread; one status line per second on stderr."""
+def _console(engine, run_kwargs, jsonl, status: bool) -> tuple[dict, bool]:
+    """Run in this thread; one status line per second on stderr. Returns (stats, interrupted)."""
     last = [0.0]
 
     def on_output(out) -> None:
@@ -366,14 +368,16 @@ def _console(engine, run_kwargs, jsonl, status: bool) -> dict:
             )
 
     try:
-        return engine.run(on_output=on_output, **run_kwargs)
+        return engine.run(on_output=on_output, **run_kwargs), False
     except KeyboardInterrupt:
         log.info("interrupted")
         engine.stop()
-        return engine.stats
+        return engine.stats, True
 
 
-def _serve(engine, args, run_kwargs, jsonl) -> dict:
+def _serve(engine, args, run_kwargs, jsonl) -> tuple[dict, bool]:
+    """Serve the dashboard until the engine ends (or Ctrl-C). Returns (stats, interrupted)."""
+
     def ready(url: str) -> None:
         until = (
             "until Ctrl-C"
@@ -397,6 +401,6 @@ def _serve(engine, args, run_kwargs, jsonl) -> dict:
         )
     except KeyboardInterrupt:
         log.info("interrupted")
-    else:
-        print("live engine finished; dashboard stopped", file=sys.stderr)
-    return engine.stats
+        return engine.stats, True
+    print("live engine finished; dashboard stopped", file=sys.stderr)
+    return engine.stats, False
