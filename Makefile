@@ -21,11 +21,24 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/ectskin demo
 
-# Chromium (Debian) for the dashboard's browser test; skipped where apt is unavailable.
+# Chromium (Debian) for the dashboard's browser test. Fails loudly when it cannot be installed:
+# a missing browser must stop `make test`, not turn the browser test into a silent skip.
+CHROMIUM ?= /usr/bin/chromium
 browser:
-	@if [ ! -x /usr/bin/chromium ] && command -v apt-get >/dev/null; then \
-		(apt-get update -qq && apt-get install -y -qq chromium chromium-driver) >/dev/null \
-		|| echo "could not install chromium: the browser test will be skipped"; fi
+	@if [ ! -x "$(CHROMIUM)" ]; then \
+		if ! command -v apt-get >/dev/null; then \
+			echo "make browser: $(CHROMIUM) is missing and apt-get is not available; install Chromium there (the dashboard's browser test needs it)" >&2; \
+			exit 1; \
+		fi; \
+		if ! (apt-get update -qq && apt-get install -y -qq chromium chromium-driver) >/dev/null; then \
+			echo "make browser: could not install chromium with apt-get (the dashboard's browser test needs it)" >&2; \
+			exit 1; \
+		fi; \
+		if [ ! -x "$(CHROMIUM)" ]; then \
+			echo "make browser: apt-get installed chromium, but $(CHROMIUM) is still missing" >&2; \
+			exit 1; \
+		fi; \
+	fi
 
 test: $(STAMP) browser
 	$(BIN)/python -m pytest

@@ -88,20 +88,22 @@ def _predictors(layout, touch_run, track_run, tmp: Path):
 
 
 def _recording(layout, n_frames: int, frame_rate_hz: float, seed: int = 0):
-    """A synthetic recording: one trial of slowly varying readouts with markers."""
+    """A synthetic recording: one trial of slowly varying readouts with markers, after one second
+    at rest (where the engine captures its reference, as a session should begin)."""
     from ectskin.io.recording import Recording, Trial
 
     rng = np.random.default_rng(seed)
     t = np.arange(n_frames) / frame_rate_hz
+    moving = np.clip(t - 1.0, 0.0, None)  # 0 during the first second
     base = 0.05 + 0.2 * rng.random(layout.n_pairs)
     cap = base * (
         1
-        + 0.1 * np.sin(2 * np.pi * 0.3 * t)[:, None]
+        + 0.1 * np.sin(2 * np.pi * 0.3 * moving)[:, None]
         + 0.001 * rng.standard_normal((n_frames, layout.n_pairs))
     )
     markers = np.zeros((n_frames, layout.n_markers, 3))
     markers[:, :, 2] = np.linspace(24, 120, layout.n_markers)
-    markers[:, :, 0] = 25 + np.sin(2 * np.pi * 0.2 * t)[:, None]
+    markers[:, :, 0] = 25 + np.sin(2 * np.pi * 0.2 * moving)[:, None]
     labels = (np.arange(n_frames) // 90) % layout.n_classes
     return Recording(layout, [Trial("bench", cap, t, labels, markers=markers)], frame_rate_hz)
 

@@ -7,11 +7,13 @@ from __future__ import annotations
 
 import itertools
 import json
+import os
 import re
 import socket
 import threading
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -116,9 +118,19 @@ def hub(engine):
     return Hub(LAYOUT, engine)
 
 
+#: What a browser on this machine sends as Host: TestClient's default "testserver" is not a
+#: loopback name, and the dashboard refuses it (DNS rebinding).
+BASE = "http://127.0.0.1:8765"
+WS = "ws://127.0.0.1:8765/ws"  # TestClient joins a relative websocket URL with ws://testserver
+
+
+def local_client(app) -> TestClient:
+    return TestClient(app, base_url=BASE)
+
+
 @pytest.fixture
 def client(hub):
-    with TestClient(create_app(hub)) as c:
+    with local_client(create_app(hub)) as c:
         yield c
 
 
@@ -244,7 +256,7 @@ def test_history_is_sampled_at_the_client_rate():
         hub.publish(make_output(k))
     frames = hub.history_message()["frames"]
     assert [f["seq"] for f in frames] == [0]
-    assert set(frames[0]) == {"seq", "t", "raw", "calibrated", "age_s"}
+    assert set(frames[0]) == {"seq", "t", "raw", "calibrated", "trial", "inflation", "age_s"}
     assert 0 <= frames[0]["age_s"] < 1.0
     old = Hub(LAYOUT, history_s=0.05)
     old.publish(make_output(0))
@@ -257,7 +269,9 @@ def test_page_and_static_files_are_served(client):
     r = client.get("/")
     assert r.status_code == 200 and "text/html" in r.headers["content-type"]
     for needed in ('id="strip-chart"', 'id="capture-reference"', 'id="predicted-class"',
-                   'id="markers-moved"', 'id="frames-count"', "/static/app.js"):
+                   'id="markers-moved"', 'id="frames-count"', "/static/app.js",
+                   'id="marker-errors"', 'id="trial-info"', 'id="reference-detail"',
+                   "untouched and uninflated", "estimated (model)", "true (motion capture)"):
         assert needed in r.text
     js = client.get("/static/app.js")
     assert js.status_code == 200 and "WebSocket" in js.text
@@ -290,7 +304,7 @@ def test_api_stats_reads_the_engine(client, engine):
 
 def test_api_stats_without_engine_uses_the_newest_output():
     hub = Hub(LAYOUT)
-    with TestClient(create_app(hub)) as c:
+    with local_client(create_app(hub)) as c:
         assert c.get("/api/stats").json()["dashboard"]["published"] == 0
         hub.publish(make_output(7))
         s = c.get("/api/stats").json()
@@ -301,25 +315,92 @@ def test_reference_post_calls_the_engine(client, engine):
     r = client.post("/api/reference")
     assert r.status_code == 200 and r.json() == {"ok": True, "reference_requests": 1}
     assert engine.captures == 1
-    r = client.post("/api/reference", headers={"Origin": "http://testserver"})  # same origin
+    r = client.post("/api/reference", headers={"Origin": BASE})  # same origin
     assert r.status_code == 200 and engine.captures == 2
     assert client.get("/api/stats").json()["dashboard"]["reference_requests"] == 2
     assert client.get("/api/reference").status_code == 405
 
 
 def test_reference_post_from_another_site_is_refused(client, engine):
-    for origin in ("http://evil.example", "null", "http://testserver.evil.example"):
+    for origin in ("http://evil.example", "null", "http://127.0.0.1.evil.example:8765"):
         r = client.post("/api/reference", headers={"Origin": origin})
         assert r.status_code == 403, origin
     assert engine.captures == 0
 
 
+# --------------------------------------------------------------------------- DNS rebinding
+def test_host_names_and_addresses_are_parsed_and_judged():
+    from ectskin.dashboard.security import host_allowed, split_host
+
+    assert split_host("127.0.0.1:8765") == "127.0.0.1"
+    assert split_host("[::1]:8765") == "::1" and split_host("::1") == "::1"
+    assert split_host("LocalHost.:80") == "localhost" and split_host("rig.lab") == "rig.lab"
+    for ok in ("127.0.0.1:8765", "127.3.4.5", "localhost:1", "app.localhost", "[::1]:8765"):
+        assert host_allowed(ok), ok
+    for bad in ("evil.example:8765", "127.0.0.1.evil.example", "localhost.evil.example", "",
+                None, "192.168.1.20:8765", "0.0.0.0:8765"):
+        assert not host_allowed(bad), bad
+    assert host_allowed("rig.lab:8765", ["rig.lab"]) and host_allowed("RIG.LAB", ["rig.lab:80"])
+
+
+def test_dns_rebinding_requests_are_refused(client, engine):
+    """Issue 12, defect 1: a page from evil.example re-pointed at 127.0.0.1 sends Host and Origin
+    evil.example; Origin equals Host, so only the Host check can refuse it."""
+    evil = {"Host": "evil.example:8765", "Origin": "http://evil.example:8765"}
+    r = client.post("/api/reference", headers=evil)
+    assert r.status_code == 403 and r.json() == {"ok": False, "error": "host not allowed"}
+    assert engine.captures == 0
+    for path in ("/", "/api/stats", "/api/meta", "/static/app.js"):  # nothing leaks either
+        assert client.get(path, headers={"Host": "evil.example:8765"}).status_code == 403, path
+    from starlette.websockets import WebSocketDisconnect
+
+    with (
+        pytest.raises(WebSocketDisconnect) as info,
+        client.websocket_connect("ws://evil.example:8765/ws", headers=evil) as ws,
+    ):
+        ws.receive_json()
+    assert info.value.code == 1008
+    # a configured name is served
+    with local_client(create_app(Hub(LAYOUT, engine), allowed_hosts=["rig.lab"])) as c:
+        r = c.post("/api/reference", headers={"Host": "rig.lab:8765",
+                                              "Origin": "http://rig.lab:8765"})
+    assert r.status_code == 200 and engine.captures == 1
+
+
+def test_dns_rebinding_reproduction_against_a_real_server():
+    """The issue's reproduction against a running server: the curl POST and a raw websocket
+    handshake with Host and Origin evil.example are refused; the same from 127.0.0.1 works."""
+    import httpx
+
+    engine = FakeEngine()
+    with DashboardServer(engine, port=0) as server:
+        port = server.port
+        evil = {"Host": f"evil.example:{port}", "Origin": f"http://evil.example:{port}"}
+        r = httpx.post(f"http://127.0.0.1:{port}/api/reference", headers=evil)
+        assert r.status_code == 403 and engine.captures == 0
+
+        def handshake(host: str, origin: str) -> str:
+            with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
+                s.sendall(
+                    f"GET /ws HTTP/1.1\r\nHost: {host}\r\nOrigin: {origin}\r\n"
+                    "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+                    "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+                    "Sec-WebSocket-Version: 13\r\n\r\n".encode()
+                )
+                return s.recv(4096).decode("latin-1").split("\r\n")[0]
+
+        assert " 403 " in handshake(f"evil.example:{port}", f"http://evil.example:{port}")
+        assert " 101 " in handshake(f"127.0.0.1:{port}", f"http://127.0.0.1:{port}")
+        assert httpx.post(f"http://127.0.0.1:{port}/api/reference").status_code == 200
+    assert engine.captures == 1
+
+
 def test_reference_post_errors_are_reported():
-    with TestClient(create_app(Hub(LAYOUT))) as c:
+    with local_client(create_app(Hub(LAYOUT))) as c:
         r = c.post("/api/reference")
     assert r.status_code == 409 and "no live engine attached" in r.json()["error"]
     eng = FakeEngine(fail=EctskinError("reference: source has no frames yet"))
-    with TestClient(create_app(Hub(LAYOUT, eng))) as c:
+    with local_client(create_app(Hub(LAYOUT, eng))) as c:
         r = c.post("/api/reference")
     assert r.status_code == 409 and r.json() == {
         "ok": False, "error": "reference: source has no frames yet"}
@@ -333,11 +414,13 @@ def test_create_app_refuses_a_non_hub():
 # --------------------------------------------------------------------------- websocket
 def test_websocket_sends_meta_history_then_frames(client, hub):
     hub.publish(make_output(0))  # before the client connects: becomes history
-    with client.websocket_connect("/ws") as ws:
+    with client.websocket_connect(WS) as ws:
         meta = ws.receive_json()
         assert meta["type"] == "meta" and meta["pair_names"] == list(LAYOUT.pair_names)
         history = ws.receive_json()
         assert history["type"] == "history" and [f["seq"] for f in history["frames"]] == [0]
+        status = ws.receive_json()
+        assert status == {"type": "status", "engine": "waiting", "error": None, "published": 1}
         first = ws.receive_json()  # the newest output at connection time comes at once
         assert first["type"] == "frame" and first["seq"] == 0
         t = threading.Thread(target=lambda: [hub.publish(FakeOutput(k)) for k in (1, 2)])
@@ -359,9 +442,9 @@ def test_websocket_sends_meta_history_then_frames(client, hub):
 
 def test_websocket_frames_with_masked_channels_are_valid_json(client, hub):
     hub.publish(make_output(5, nan_channel=3))
-    with client.websocket_connect("/ws") as ws:
-        ws.receive_json()
-        ws.receive_json()
+    with client.websocket_connect(WS) as ws:
+        for kind in ("meta", "history", "status"):
+            assert ws.receive_json()["type"] == kind
         text = ws.receive_text()
     msg = json.loads(text)  # strict JSON: a bare NaN would not parse in the browser
     assert "NaN" not in text and msg["raw"][3] is None and msg["raw"][4] == pytest.approx(1.045)
@@ -372,7 +455,7 @@ def test_websocket_from_another_site_is_refused(client):
 
     with (
         pytest.raises(WebSocketDisconnect) as info,
-        client.websocket_connect("/ws", headers={"Origin": "http://evil.example"}) as ws,
+        client.websocket_connect(WS, headers={"Origin": "http://evil.example"}) as ws,
     ):
         ws.receive_json()
     assert info.value.code == 1008
@@ -394,8 +477,8 @@ def test_stream_is_throttled_and_ends_on_the_newest_frame():
     with DashboardServer(None, hub=hub, port=0) as server:
         url = f"ws://127.0.0.1:{server.port}/ws"
         with connect(url) as ws:
-            assert json.loads(ws.recv(timeout=5))["type"] == "meta"
-            assert json.loads(ws.recv(timeout=5))["type"] == "history"
+            for kind in ("meta", "history", "status"):
+                assert json.loads(ws.recv(timeout=5))["type"] == kind
             n_pub = 1500
 
             def publish():
@@ -466,6 +549,64 @@ def test_server_runs_the_engine_and_reports_its_errors():
         s = httpx.get(server.url + "api/stats").json()
     assert s["dashboard"]["engine_error"] == "RuntimeError: serial port vanished"
     assert s["dashboard"]["engine_running"] is False
+
+
+def test_pages_are_told_when_the_engine_ends():
+    """Issue 12: the "live" badge stayed after the source ended. The stream says so: a status
+    message "running", then "ended" after the last frame."""
+    from websockets.sync.client import connect
+
+    engine = FakeEngine(n_frames=30, rate_hz=30)
+    with DashboardServer(engine, port=0) as server, connect(
+        f"ws://127.0.0.1:{server.port}/ws"
+    ) as ws:
+        states, seqs = [], []
+        deadline = time.monotonic() + 15
+        while "ended" not in states and time.monotonic() < deadline:
+            msg = json.loads(ws.recv(timeout=5))
+            if msg["type"] == "status":
+                states.append(msg["engine"])
+            elif msg["type"] == "frame":
+                seqs.append(msg["seq"])
+        assert states[-1] == "ended" and "running" in states, states
+        assert seqs and seqs[-1] == 29  # the last frame came before "ended"
+        s = server.hub.stats()["dashboard"]
+        assert s["engine_state"] == "ended" and s["engine_running"] is False
+
+
+def test_serve_returns_when_the_engine_ends_unless_told_to_keep_serving(monkeypatch):
+    """Issue 12: `live --dashboard --duration` kept serving after the duration. serve() returns
+    once the engine has ended (and the pages were told); keep_serving waits for Ctrl-C."""
+    from ectskin.dashboard import serve
+    from ectskin.dashboard import server as server_module
+
+    made = []
+    real = server_module.DashboardServer
+
+    def remember(*args, **kwargs):
+        made.append(real(*args, **kwargs))
+        return made[-1]
+
+    monkeypatch.setattr(server_module, "DashboardServer", remember)
+
+    done = threading.Event()
+    engine = FakeEngine(n_frames=5)
+    t0 = time.monotonic()
+    th = threading.Thread(target=lambda: (serve(engine, port=0), done.set()), daemon=True)
+    th.start()
+    assert done.wait(15), "serve() kept running after the engine ended"
+    assert time.monotonic() - t0 < 10 and engine.processed == 5
+    kept = threading.Event()
+    th = threading.Thread(
+        target=lambda: (serve(FakeEngine(n_frames=5), port=0, keep_serving=True), kept.set()),
+        daemon=True,
+    )
+    th.start()
+    assert not kept.wait(2.5)  # still serving the last frame
+    made[-1].stop()  # what Ctrl-C does
+    assert kept.wait(10)
+    with pytest.raises(EctskinError, match="live engine stopped: RuntimeError: port vanished"):
+        serve(FakeEngine(fail=RuntimeError("port vanished")), port=0)
 
 
 def test_server_port_in_use_is_a_clear_error():
@@ -540,7 +681,7 @@ def test_hub_with_the_real_engine():
     trial = Trial("rest", np.ones((5, LAYOUT.n_pairs)), np.arange(5) / 30.0, np.zeros(5))
     engine = LiveEngine(ReplaySource(Recording(LAYOUT, [trial], 30.0)), reference_markers=REST)
     hub = Hub(LAYOUT, engine)
-    with TestClient(create_app(hub)) as c:
+    with local_client(create_app(hub)) as c:
         meta = c.get("/api/meta").json()
         stats = c.get("/api/stats").json()
         assert c.post("/api/reference").json()["ok"]
@@ -550,3 +691,56 @@ def test_hub_with_the_real_engine():
     assert meta["electrodes"][4]["surface"] == "back"  # the dashboard's own fields win
     assert stats["frames"] == 0 and stats["latency_ms_p50"] is None
     assert stats["reference_ready"] is False
+
+
+# --------------------------------------------------------------------------- skips never fail CI
+REPO = Path(__file__).resolve().parents[2]
+BROWSER_TEST = REPO / "tests" / "dashboard" / "test_dashboard_browser.py"
+
+
+def test_browser_test_fails_in_ci_instead_of_skipping(tmp_path):
+    """Issue 12: without Chromium the browser test skipped silently, also in CI. With CI set it
+    must fail; on a developer's machine it may still skip."""
+    import subprocess
+    import sys
+
+    env = dict(os.environ, ECTSKIN_CHROMIUM=str(tmp_path / "no-chromium"), CI="true")
+    argv = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(BROWSER_TEST)]
+    r = subprocess.run(argv, env=env, cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert r.returncode != 0, r.stdout
+    assert "the dashboard's browser test must run in CI" in r.stdout
+    env["CI"] = ""
+    r = subprocess.run(argv, env=env, cwd=REPO, capture_output=True, text=True, timeout=300)
+    # a module skipped at collection: pytest exits 5 (no tests ran) and reports the skip
+    assert r.returncode in (0, 5) and "SKIPPED [1]" in r.stdout, r.stdout
+
+
+def test_make_browser_fails_loudly_when_chromium_cannot_be_installed(tmp_path):
+    """Issue 12: `make browser` printed a line and succeeded when apt-get failed, so `make test`
+    went on and the browser test skipped. Now the target fails."""
+    import shutil
+    import subprocess
+
+    make = shutil.which("make")
+    assert make, "make is needed to run the project's targets"
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "apt-get").write_text('#!/bin/sh\necho "E: Could not resolve host" >&2\nexit 100\n')
+    (fake / "apt-get").chmod(0o755)
+    argv = [make, "-s", "-C", str(REPO), "browser", f"CHROMIUM={tmp_path / 'no-chromium'}"]
+    r = subprocess.run(argv, env=dict(os.environ, PATH=f"{fake}:{os.environ['PATH']}"),
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode != 0 and "could not install chromium with apt-get" in r.stderr, r.stderr
+    empty = tmp_path / "empty"  # no apt-get at all
+    empty.mkdir()
+    r = subprocess.run(argv, env=dict(os.environ, PATH=str(empty)), capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode != 0 and "apt-get is not available" in r.stderr, r.stderr
+    # with the browser there it succeeds and installs nothing
+    chromium = tmp_path / "chromium"
+    chromium.write_text("#!/bin/sh\n")
+    chromium.chmod(0o755)
+    argv[-1] = f"CHROMIUM={chromium}"
+    r = subprocess.run(argv, env=dict(os.environ, PATH=str(empty)), capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 0, r.stderr

@@ -187,6 +187,122 @@ def test_capture_reference_on_command_touch_only():
         eng.capture_reference("everything")
 
 
+# ------------------------------------------------------------------ reference at rest (issue 12)
+def test_touch_reference_refuses_a_window_with_contact_and_captures_again(caplog):
+    """The newcomer's trap: a replay that starts with a touch. The touch reference must not be
+    taken from the touched frames; it is taken from the first window at rest."""
+    n = 30
+    cap = np.full((n, P), 10.0)
+    cap[:12] = 11.0  # touched for the first 12 frames
+    labels = np.zeros(n)
+    labels[:12] = 10
+    src = ReplaySource(_rec(cap, labels=labels), speed=math.inf)
+    eng = LiveEngine(src, touch=FakeTouch(), reference_frames=5, policy="block")
+    outs: list[Output] = []
+    with caplog.at_level("WARNING"):
+        eng.run(on_output=outs.append)
+    ref = eng.reference_state()["touch"]
+    # windows 0..4, 5..9 and 10..14 hold touched frames: refused; 15..19 is the first at rest
+    assert ref["refusals"] == 3 and ref["state"] == "ready"
+    assert ref["in_use"]["frames"] == [15, 19] and ref["in_use"]["warnings"] == []
+    assert [o.calibrated is None for o in outs[:19]] == [True] * 19
+    assert outs[19].calibrated is not None and np.all(outs[-1].calibrated == 0.0)
+    refused = [r.getMessage() for r in caplog.records if "reference refused" in r.getMessage()]
+    assert "touch reference refused (frames 0..4): 5 frame(s) with contact (label 10" in refused[0]
+    assert "must be untouched and uninflated" in refused[0]
+    # the tracking reference does not refuse (its state may be anything), it warns
+    assert eng.reference_state()["tracking"]["refusals"] == 0
+
+
+def test_touch_reference_refuses_an_inflated_window():
+    cap = np.full((20, P), 10.0)
+    rec = Recording(
+        LAYOUT,
+        [
+            Trial("inflated", cap[:10] + 1, np.arange(10) / 30, np.zeros(10), inflation=(20, 0, 0)),
+            Trial("rest", cap[10:], np.arange(10) / 30, np.zeros(10), inflation=(0, 0, 0)),
+        ],
+        30.0,
+    )
+    eng = LiveEngine(ReplaySource(rec, speed=math.inf), reference_frames=5, policy="block")
+    eng.run()
+    state = eng.reference_state()
+    assert state["touch"]["refusals"] == 2 and state["touch"]["in_use"]["frames"] == [10, 14]
+    assert state["tracking"]["in_use"]["frames"] == [0, 4]  # the start of the trajectory
+
+
+def _unlabelled(cap, markers=None):
+    """A custom source whose frames carry no label and no inflation (a live device)."""
+    return _ListSource(
+        [
+            Frame(i, i / 30, cap[i], markers=None if markers is None else markers[i])
+            for i in range(len(cap))
+        ]
+    )
+
+
+def test_reference_warns_on_drift_far_above_the_noise_but_not_on_noise(caplog):
+    rng = np.random.default_rng(3)
+    noisy = 10 + 0.05 * rng.standard_normal((40, P))  # large white noise: no warning
+    eng = LiveEngine(_unlabelled(noisy), reference_frames=30, policy="block")
+    eng.run()
+    assert eng.reference_state()["touch"]["in_use"]["warnings"] == []
+    # a touch that begins half-way through the capture: +0.5 % on 3 channels, noise 0.001 %
+    cap = 10 + 1e-4 * rng.standard_normal((40, P))
+    cap[15:, [2, 7, 20]] *= 1.005
+    eng = LiveEngine(_unlabelled(cap), reference_frames=30, policy="block")
+    with caplog.at_level("WARNING"):
+        eng.run()
+    ref = eng.reference_state()["touch"]
+    assert ref["state"] == "ready" and ref["refusals"] == 0  # accepted (labels unknown), but:
+    (warning,) = ref["in_use"]["warnings"]
+    assert "3 channel(s) changed during the capture far beyond their noise" in warning
+    assert LAYOUT.pair_names[7] in warning
+    assert any("Re-capture it with the skin untouched" in r.getMessage() for r in caplog.records)
+
+
+def test_reference_warns_when_the_markers_move():
+    cap = np.full((30, P), 10.0)
+    markers = np.zeros((30, M, 3))
+    markers[:, 4, 1] = np.linspace(0, 6, 30)  # the tip slides 6 mm during the capture
+    eng = LiveEngine(_unlabelled(cap, markers), reference_frames=30, policy="block")
+    eng.run()
+    (warning,) = eng.reference_state()["tracking"]["in_use"]["warnings"]
+    assert warning.startswith("markers moved 3.") and "more than 1 mm" in warning
+
+
+def test_sim_starts_at_rest_so_the_reference_is_taken_there():
+    """The default sim scenario rests (untouched, uninflated) long enough for the default
+    reference (30 frames), so the engine captures it at once, without a refusal."""
+    from itertools import islice
+
+    from ectskin.live.sources import TwinSource, demo_scenario
+
+    steps = list(islice(demo_scenario(LAYOUT, seed=0), 3))
+    assert steps[0].region is None and steps[0].inflation_ml == (0.0, 0.0, 0.0)
+    assert steps[0].duration_s * 30 >= 30 and steps[1].region == 10  # the issue's touch follows
+
+    class Twin:  # the LiveTwin protocol; labels = the touched region
+        layout, frame_rate_hz = LAYOUT, 30.0
+        region = None
+
+        def set_inflation(self, p):
+            pass
+
+        def set_touch(self, region, force_n=1.0):
+            self.region = region
+
+        def next_frame(self):
+            r = self.region or 0
+            return np.full(P, 10.0 + r), np.zeros((M, 3)), r
+
+    src = TwinSource(Twin(), paced=False, scenario=steps)
+    eng = LiveEngine(src, touch=FakeTouch(), reference_frames=30, policy="block")
+    eng.run()
+    ref = eng.reference_state()["touch"]
+    assert ref["refusals"] == 0 and ref["in_use"]["frames"] == [0, 29]
+
+
 # ------------------------------------------------------------------ policies
 def test_block_processes_every_frame_in_order():
     cap = 10 + np.random.default_rng(2).random((60, P))
@@ -437,7 +553,8 @@ def test_cli_live_replay_with_models_jsonl_and_record(tmp_path, capsys):
     assert lines[5]["touch"] is None and len(lines[-1]["touch"]["probs"]) == C
     assert read_recording(rec).n_frames == n
     err = capsys.readouterr().err
-    assert "final: frames 60, processed 60, dropped 0" in err
+    assert "final (the source ended): frames 60, processed 60, dropped 0" in err
+    assert "touch reference: frames 0..9, captured " in err
     # a track model but a source without markers: a clear error, exit code 2
     from ectskin.learn.models import C2DT, C2DTConfig
 

@@ -217,14 +217,204 @@ def test_cli_record(tmp_path, capsys):
 
     src = write_recording(_recording(), tmp_path / "in.h5")
     out = tmp_path / "cli.h5"
-    assert main(["record", str(out), "--source", f"replay:{src}", "--speed", "inf"]) == 0
-    assert "recorded 285 frames in 3 trial(s)" in capsys.readouterr().out
+    assert main(["record", "-o", str(out), "--source", f"replay:{src}", "--speed", "inf"]) == 0
+    printed = capsys.readouterr().out
+    assert f"recorded 285 frames in 3 trial(s) to {out}: timestamps span" in printed
+    assert "(nominal 30 fps;" in printed
     back = read_recording(out)
     assert back.n_frames == 285 and back.meta["source"] == f"replay:{src}"
     # refusing to overwrite, and a bad spec: exit code 2 and one clear line, no traceback
-    assert main(["record", str(out), "--source", f"replay:{src}"]) == 2
-    assert "exists" in capsys.readouterr().err
+    assert main(["record", "-o", str(out), "--source", f"replay:{src}"]) == 2
+    assert f"{out} exists; pass --overwrite to replace it" in capsys.readouterr().err
     assert main(["record", str(tmp_path / "y.h5"), "--source", "usb:3"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("ectskin record: error: Invalid value for 'source kind'")
     assert "Traceback" not in err
+    # the old positional form and the old --force still work
+    argv = ["record", str(out), "--source", f"replay:{src}", "--speed", "inf", "--force"]
+    assert main(argv) == 0
+    capsys.readouterr()
+    assert main(["record", "--source", "sim"]) == 2
+    assert "needs an output recording: give -o/--out PATH" in capsys.readouterr().err
+
+
+def test_cli_record_never_writes_onto_the_file_it_replays(tmp_path, capsys):
+    from ectskin.cli import main
+
+    src = write_recording(_recording(), tmp_path / "in.h5")
+    before = src.read_bytes()
+    for spelled in (str(src), str(tmp_path / "." / "in.h5")):
+        argv = ["record", "-o", spelled, "--source", f"replay:{src}", "--overwrite"]
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert "is the file the source" in err and "refusing to write onto" in err
+    assert src.read_bytes() == before
+    with pytest.raises(EctskinError, match="own input"):
+        record_main(f"replay:{src}", src, overwrite=True)
+
+
+def test_source_given_as_a_file_suggests_replay(tmp_path, capsys):
+    from ectskin.cli import main
+
+    src = write_recording(_recording(), tmp_path / "s.h5")
+    assert main(["record", "-o", str(tmp_path / "o.h5"), "--source", str(src)]) == 2
+    assert f"to replay a recording, write replay:{src}" in capsys.readouterr().err
+
+
+def _slow_recording(fps: float) -> Recording:
+    """Nominally 30 fps, but the frames' timestamps are 1/fps apart (a source that fell behind)."""
+    n = 60
+    trial = Trial("t", 20 + np.zeros((n, P)), np.arange(n) / fps, np.zeros(n))
+    return Recording(LAYOUT, [trial], 30.0)
+
+
+def test_record_reports_rate_from_timestamps_and_warns_below_nominal(tmp_path, caplog, capsys):
+    """Issue 12: `record` printed the wall-clock seconds and no warning while the source delivered
+    17 fps of a nominal 30. The summary must say what the timestamps say."""
+    from ectskin.cli import main
+
+    slow = write_recording(_slow_recording(15.0), tmp_path / "slow.h5")
+    with caplog.at_level("WARNING"):
+        summary = record_main(f"replay:{slow}", tmp_path / "a.h5", speed=math.inf)
+    assert summary["rate_hz"] == pytest.approx(15.0)
+    assert summary["timestamps_s"] == pytest.approx(59 / 15)
+    assert summary["nominal_hz"] == 30.0
+    (warning,) = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert "delivered 15.0 frames per second, fewer than its nominal 30" in warning
+    assert (
+        main(
+            ["record", "-o", str(tmp_path / "b.h5"), "--source", f"replay:{slow}", "--speed", "inf"]
+        )
+        == 0
+    )
+    assert "timestamps span 3.9 s at 15.0 fps (nominal 30 fps;" in capsys.readouterr().out
+    # at the nominal rate: no warning; trials whose clocks restart are summed, not overlapped
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        summary = record_main(
+            f"replay:{_nominal_recording(tmp_path)}", tmp_path / "c.h5", speed=math.inf
+        )
+    assert not [r for r in caplog.records if r.levelname == "WARNING"]
+    assert summary["rate_hz"] == pytest.approx(30.0)
+    assert summary["timestamps_s"] == pytest.approx(3 * 59 / 30)
+
+
+def _nominal_recording(tmp_path):
+    """Three trials at exactly 30 fps, each with its own clock starting at 0."""
+    trials = [
+        Trial(f"t{k}", 20 + np.zeros((60, P)), np.arange(60) / 30.0, np.zeros(60)) for k in range(3)
+    ]
+    return write_recording(Recording(LAYOUT, trials, 30.0), tmp_path / "nominal.h5")
+
+
+class _SlowTwin:
+    """The LiveTwin protocol; a new touch state takes 0.3 s to solve (as the MoM twin's does)."""
+
+    layout, frame_rate_hz = LAYOUT, 30.0
+    region = None
+
+    def set_inflation(self, p):
+        pass
+
+    def set_touch(self, region, force_n=1.0):
+        if region:
+            time.sleep(0.3)
+        self.region = region
+
+    def next_frame(self):
+        r = self.region or 0
+        return np.full(P, 10.0 + r), np.zeros((M, 3)), r
+
+
+def test_sim_timestamps_show_a_pause_of_the_twin():
+    """A paced twin that pauses to solve a new state shows the pause in its timestamps (as a
+    device's clock would), so the rate they give is what was really delivered."""
+    from ectskin.live.sources import TwinSource, TwinStep
+
+    steps = [TwinStep(0.2, (0, 0, 0), None), TwinStep(0.2, (0, 0, 0), 4)]
+    frames = list(TwinSource(_SlowTwin(), paced=True, scenario=steps))
+    ts = np.array([f.t for f in frames])
+    assert len(frames) == 12 and np.all(np.diff(ts) > 0)
+    assert ts[6] - ts[5] > 0.25  # the 0.3 s solve, not one frame period
+
+
+def test_sim_trials_metadata_match_their_frames(tmp_path):
+    """Issue 12: a recorded sim trial said region 0 while its frames said 10. Each step of the
+    scenario is now a trial whose region and inflation are those of its frames."""
+    from itertools import islice
+
+    from ectskin.io.calibration import rest_trials
+    from ectskin.live.sources import TwinSource, TwinStep, demo_scenario
+
+    scenario = [
+        TwinStep(0.2, (0, 0, 0), None),
+        TwinStep(0.2, (0, 0, 0), 10, 1.5),
+        TwinStep(0.2, (20, 20, 10), 4),
+    ]
+    src = TwinSource(_SlowTwin(), paced=False, scenario=scenario)
+    out = tmp_path / "sim.h5"
+    with Recorder(out, LAYOUT, 30.0, trial_info=src.trial_info) as r:
+        for f in src:
+            r.write(f)
+    rec = read_recording(out)
+    assert [t.name for t in rec.trials] == ["sim_0000", "sim_0001", "sim_0002"]
+    for t, step in zip(rec.trials, scenario, strict=True):
+        assert t.region == (step.region or 0)
+        np.testing.assert_array_equal(t.labels, t.region)
+        assert t.inflation == tuple(float(v) for v in step.inflation_ml)
+    assert rec.trials[0].meta["kind"] == "no_contact" and rec.trials[1].meta["kind"] == "touch"
+    assert [t.name for t in rest_trials(rec)] == ["sim_0000"]  # offline Eq. 2 finds the rest
+    # the real twin: the default scenario's first touch (region 10, the issue's) likewise
+    steps = list(islice(demo_scenario(LAYOUT, seed=0, rest_s=0.1, step_s=0.1), 2))
+    src = TwinSource(paced=False, scenario=steps)
+    frames = list(src)
+    assert {f.trial for f in frames} == {"sim_0000", "sim_0001"}
+    for f in frames:
+        assert f.label == src.trial_info(f.trial)["region"] and f.inflation == (0.0, 0.0, 0.0)
+    assert frames[-1].label == 10
+
+
+def _stop_with(sig: int, argv: list[str], wait_for: str) -> tuple[int, str]:
+    """Run ``python -m ectskin.cli ARGV``, wait until stderr shows ``wait_for`` and ~1 s more,
+    send ``sig``; returns (exit code, stderr)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ectskin.cli", *argv],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    lines: list[str] = []
+    seen = threading.Event()
+
+    def reader():
+        for line in proc.stderr:
+            lines.append(line)
+            if wait_for in line:
+                seen.set()
+
+    th = threading.Thread(target=reader, daemon=True)
+    th.start()
+    try:
+        assert seen.wait(60), "".join(lines)
+        time.sleep(1.0)
+        os.kill(proc.pid, sig)
+        rc = proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    th.join(timeout=5)
+    return rc, "".join(lines)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_record_closes_the_file_complete_on_sigterm_and_sighup(tmp_path, sig):
+    """Issue 12, defect 10: `kill PID` or a closed terminal left the recording incomplete, and
+    every reader then refused it."""
+    src = write_recording(_recording(), tmp_path / "in.h5")
+    out = tmp_path / "rec.h5"
+    argv = ["record", "-o", str(out), "--source", f"replay:{src}", "--loop"]
+    rc, err = _stop_with(sig, argv, "recording replay:")
+    assert rc == 0, err
+    rec = read_recording(out)  # complete: no allow_partial needed
+    assert rec.n_frames > 10
+    assert f"{signal.Signals(sig).name} received; closing the recording" in err

@@ -87,6 +87,9 @@ def test_parse_line_fields_and_values():
         (",".join(["1"] * 27 + ["inf"]), "malformed", "channel 28 of 28: 'inf' is not finite"),
         ("t=abc;" + ",".join(["1"] * 28), "malformed", "field 't' must be a number"),
         ("seq=-1;" + ",".join(["1"] * 28), "malformed", "field 'seq' must be >= 0"),
+        # a garbled counter is one bad line, not 1e23 frames lost (issue 12, defect 8)
+        ("seq=" + "9" * 23 + ";" + ",".join(["1"] * 28), "malformed", "'seq' must be at most"),
+        ("seq=" + "9" * 5000 + ";" + ",".join(["1"] * 28), "malformed", "(5000 characters)"),
         ("foo=1;" + ",".join(["1"] * 28), "malformed", "unknown field 'foo'"),
         ("t=1;t=2;" + ",".join(["1"] * 28), "malformed", "field 't' given twice"),
         ("t=1;", "malformed", "no channel values"),
@@ -396,6 +399,56 @@ def test_tcp_overlong_line_is_discarded():
     assert src.counters["malformed"] == 1
     assert any("line 2: longer than 65536 bytes" in p for p in src.problems)
     assert frames[1].capacitance[0] == 3.0
+
+
+def _ten_mb_session():
+    """A good line, one 10 MB line (sent in 64 kB pieces, as a stream delivers it), a good line."""
+    good = _line(np.full(P, 3.0)).encode()
+    piece = b"1," * 32768
+    return [good] + [piece] * 160 + [b"1\n", good.replace(b"3.0", b"4.0")]
+
+
+def _check_one_problem(src, frames):
+    """Issue 12, defect 7: the 10 MB line is ONE malformed line, reported as line 2, and it takes
+    one frame number (the next frame is seq 2, not seq 81)."""
+    assert src.counters["malformed"] == 1, list(src.problems)
+    (problem,) = src.problems
+    assert "line 2: longer than 65536 bytes" in problem
+    assert [f.seq for f in frames] == [0, 2] and src.counters["seq_gaps"] == 1
+    assert frames[1].capacitance[0] == 4.0
+
+
+def test_tcp_ten_megabyte_line_is_one_problem():
+    server = _LineServer([_ten_mb_session()])
+    src = open_source(f"tcp:127.0.0.1:{server.port}")
+    frames = []
+    safety = _safety(src, 30.0)
+    try:
+        for f in src:
+            frames.append(f)
+            if len(frames) == 2:
+                break
+    finally:
+        safety.cancel()
+        src.close()
+        server.close()
+    _check_one_problem(src, frames)
+
+
+def test_serial_ten_megabyte_line_is_one_problem():
+    port = _FlakyPort(_ten_mb_session())
+    src = SerialSource("socket://rig:7000", opener=lambda *a: port)
+    frames = []
+    safety = _safety(src, 30.0)
+    try:
+        for f in src:
+            frames.append(f)
+            if len(frames) == 2:
+                break
+    finally:
+        safety.cancel()
+        src.close()
+    _check_one_problem(src, frames)
 
 
 # ------------------------------------------------------------------ lsl

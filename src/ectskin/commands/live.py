@@ -1,7 +1,10 @@
 """``ectskin live --source SPEC``: touch recognition and tracking on a live source.
 
 Prints a status line every second (or serves the web dashboard with ``--dashboard``), optionally
-records every frame (``--record``) and writes every output as JSON lines (``--jsonl``).
+records every frame (``--record``) and writes every output as JSON lines (``--jsonl``). Every
+check that needs no source (outputs, ``--reference-markers``) runs before the source is opened,
+so a mistake costs no connection attempt. Neither output may be a file the source reads. Ctrl-C,
+SIGTERM and SIGHUP stop the run and close the recording complete.
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ import argparse
 import contextlib
 import json
 import logging
+import os
 import sys
 import time
 from pathlib import Path
@@ -17,13 +21,30 @@ from pathlib import Path
 import numpy as np
 
 from ectskin._check import EctskinError
+from ectskin.commands._options import add_overwrite
 from ectskin.dashboard import serve
-from ectskin.layout import load_layout
+from ectskin.layout import SensorLayout, default_layout, load_layout
 from ectskin.live.engine import POLICIES, LiveEngine
 from ectskin.live.recorder import Recorder
-from ectskin.live.sources import SOURCE_SPECS, open_source
+from ectskin.live.signals import stop_on_signals
+from ectskin.live.sources import SOURCE_SPECS, check_not_input, open_source
 
 HELP = "run the trained models on a live source (optionally with the web dashboard)"
+EXAMPLES = """\
+  ectskin live --source sim --dashboard --duration 60
+  ectskin live --source replay:session.h5 --touch-model runs/touch --track-model runs/track \\
+      --dashboard
+  ectskin live --source tcp:192.168.1.20:5000 --touch-model runs/touch --record rig.h5 \\
+      --jsonl rig.jsonl
+  ectskin live --source replay:crashed.h5 --allow-partial --jsonl - --max-frames 100
+
+the reference: the first --reference-frames frames (default 30 = 1 s) are the reference that
+every later frame is calibrated against (paper Eq. 2). Keep the skin UNTOUCHED and UNINFLATED
+while they are captured. A capture window with a touched or inflated frame (when the source
+knows: replay, sim, a line with label=) is refused and the capture starts again; markers that
+move or readouts that drift during it are warned about. Re-capture at any time with the
+dashboard's "Capture reference" button.
+"""
 log = logging.getLogger(__name__)
 
 
@@ -33,10 +54,31 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--track-model", metavar="RUN", help="run dir (or model.pt) of a C2DT")
     p.add_argument("--dashboard", action="store_true", help="serve the web dashboard")
     p.add_argument("--port", type=int, default=8765, help="dashboard port (default 8765)")
+    p.add_argument(
+        "--keep-serving",
+        action="store_true",
+        help="dashboard: keep serving the last frame after the source ends or --duration "
+        "passes, until Ctrl-C (default: stop then)",
+    )
+    p.add_argument(
+        "--allow-host",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="dashboard: also accept requests addressed to this host name (default: loopback "
+        "names only; protects against DNS rebinding); repeatable",
+    )
     p.add_argument("--record", metavar="OUT.h5", help="record every frame to this HDF5 file")
-    p.add_argument("--force", action="store_true", help="overwrite the --record file")
     p.add_argument(
         "--jsonl", metavar="PATH", help="write every output as a JSON line ('-' = stdout)"
+    )
+    add_overwrite(
+        p, help="replace an existing --record or --jsonl file (never a file the source reads)"
+    )
+    p.add_argument(
+        "--allow-partial",
+        action="store_true",
+        help="replay: accept a recording left incomplete (a crash, a killed recorder)",
     )
     p.add_argument("--layout", help="layout JSON for lsl/serial/tcp sources (default: the paper's)")
     p.add_argument("--speed", type=float, default=1.0, help="replay speed factor (default 1)")
@@ -45,7 +87,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--reference-frames",
         type=int,
         default=30,
-        help="frames averaged into the calibration reference (default 30 = 1 s)",
+        help="frames averaged into the calibration reference (default 30 = 1 s); keep the skin "
+        "untouched and uninflated meanwhile",
     )
     p.add_argument(
         "--reference-markers",
@@ -70,16 +113,70 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-frames", type=int, metavar="N", help="stop after N frames")
 
 
+# ---------------------------------------------------------------------------- checks at the door
+def _outputs(args: argparse.Namespace) -> list[tuple[str, str]]:
+    """(option, path) of the files this run writes."""
+    outs = [("--record", args.record)]
+    if args.jsonl != "-":
+        outs.append(("--jsonl", args.jsonl))
+    return [(opt, path) for opt, path in outs if path]
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """No output onto the source's own file, not both onto one file, none replaced without
+    ``--overwrite``."""
+    outs = _outputs(args)
+    for opt, path in outs:
+        check_not_input(path, args.source, opt)
+    if len(outs) == 2 and Path(outs[0][1]).resolve() == Path(outs[1][1]).resolve():
+        raise EctskinError(f"--record and --jsonl name the same file {outs[0][1]!r}")
+    for opt, path in outs:
+        if Path(path).exists() and not args.overwrite:
+            raise EctskinError(f"{opt} {path} exists; pass --overwrite to replace it")
+
+
+def _known_layout(args: argparse.Namespace) -> SensorLayout | None:
+    """The layout the source will use, when it is known before the source is opened (a replay
+    brings its own)."""
+    if args.layout:
+        return load_layout(args.layout)
+    return None if args.source.strip().startswith("replay:") else default_layout()
+
+
 def _load_markers(path: str) -> np.ndarray:
+    """``--reference-markers``: (n_markers, 3) finite coordinates in mm."""
     try:
-        return np.load(path) if path.endswith(".npy") else np.loadtxt(path, ndmin=2)
+        m = np.load(path) if path.endswith(".npy") else np.loadtxt(path, ndmin=2)
     except (OSError, ValueError) as exc:
         raise EctskinError(f"--reference-markers {path}: cannot read ({exc})") from None
+    m = np.asarray(m, dtype=np.float64)
+    if m.ndim != 2 or m.shape[1] != 3:
+        raise EctskinError(
+            f"--reference-markers {path}: expected (n_markers, 3) marker coordinates in mm, "
+            f"got shape {m.shape}"
+        )
+    if not np.isfinite(m).all():
+        raise EctskinError(f"--reference-markers {path}: holds non-finite coordinates")
+    return m
+
+
+def _check_markers(m: np.ndarray, path: str, layout: SensorLayout | None) -> None:
+    """``--reference-markers`` must have one row per marker of ``layout`` (when known)."""
+    if layout is not None and m.shape[0] != layout.n_markers:
+        raise EctskinError(
+            f"--reference-markers {path}: expected ({layout.n_markers}, 3) marker coordinates "
+            f"in mm for layout {layout.name!r}, got shape {m.shape}"
+        )
 
 
 def run(args: argparse.Namespace) -> int:
     if args.threads < 1:
         raise EctskinError(f"--threads must be >= 1, got {args.threads}")
+    _check_outputs(args)
+    ref_markers = None
+    if args.reference_markers:
+        ref_markers = _load_markers(args.reference_markers)
+        _check_markers(ref_markers, args.reference_markers, _known_layout(args))
     with contextlib.ExitStack() as stack:
         touch = track = None
         if args.touch_model or args.track_model:
@@ -91,25 +188,83 @@ def run(args: argparse.Namespace) -> int:
             stack.enter_context(torch_threads(args.threads))
             touch = TouchPredictor.from_run(args.touch_model) if args.touch_model else None
             track = TrackPredictor.from_run(args.track_model) if args.track_model else None
-        return _run(args, touch, track)
+        with stop_on_signals("closing the recording" if args.record else "stopping"):
+            return _run(args, touch, track, ref_markers)
 
 
-def _run(args: argparse.Namespace, touch, track) -> int:
+# ---------------------------------------------------------------------------- the run
+class _JsonLines:
+    """``--jsonl``: every output as one JSON line. A write error (a full disk) stops the engine
+    once and is kept in ``error``; the command then reports it in one line and removes the
+    incomplete file."""
+
+    def __init__(self, path: str, stop) -> None:
+        self.path = path
+        self.stop = stop
+        self.lines = 0
+        self.error: OSError | None = None
+        if path == "-":
+            self.file = sys.stdout
+        else:
+            try:
+                self.file = open(path, "w", encoding="utf-8")  # noqa: SIM115 - closed in close()
+            except OSError as exc:
+                raise EctskinError(f"--jsonl {path}: cannot open ({exc.strerror})") from None
+
+    def __call__(self, out) -> None:
+        if self.error is not None:
+            return
+        # to_json_dict() already applies the JSON policy (non-finite -> None): dump it as is
+        try:
+            self.file.write(json.dumps(out.to_json_dict(), allow_nan=False) + "\n")
+        except OSError as exc:
+            self.error = exc
+            self.stop()
+            return
+        self.lines += 1
+
+    def close(self) -> None:
+        """Close the file; on a write error remove it and raise one clear error."""
+        if self.file is not sys.stdout:
+            try:
+                self.file.close()
+            except OSError as exc:  # the last buffered lines did not fit either
+                self.error = self.error or exc
+        if self.error is None:
+            return
+        removed = ""
+        if self.file is not sys.stdout:
+            with contextlib.suppress(OSError):
+                os.remove(self.path)
+                removed = "; removed the incomplete file"
+        why = self.error.strerror or str(self.error)
+        raise EctskinError(
+            f"--jsonl {self.path}: cannot write ({why}); stopped after {self.lines} lines{removed}"
+        )
+
+
+def _run(args: argparse.Namespace, touch, track, ref_markers) -> int:
     """The command with its models loaded (``touch``/``track`` may be None)."""
-    if args.record and Path(args.record).exists() and not args.force:
-        raise EctskinError(f"{args.record} exists; pass --force to overwrite it")
-    ref_markers = _load_markers(args.reference_markers) if args.reference_markers else None
     layout = load_layout(args.layout) if args.layout else None
-    source = open_source(args.source, layout=layout, speed=args.speed, loop=args.loop)
+    source = open_source(
+        args.source,
+        layout=layout,
+        speed=args.speed,
+        loop=args.loop,
+        allow_partial=args.allow_partial,
+    )
     recorder = None
     jsonl = None
+    ended = "the source ended"
     try:
+        if ref_markers is not None:  # a replay's layout is known only now
+            _check_markers(ref_markers, args.reference_markers, source.layout)
         if args.record:
             recorder = Recorder(
                 args.record,
                 source.layout,
                 source.frame_rate_hz or 30.0,
-                overwrite=args.force,
+                overwrite=args.overwrite,
                 meta={
                     "source": args.source,
                     "touch_model": args.touch_model,
@@ -129,17 +284,29 @@ def _run(args: argparse.Namespace, touch, track) -> int:
         )
         run_kwargs = {"max_frames": args.max_frames, "duration_s": args.duration}
         if args.jsonl:
-            jsonl = sys.stdout if args.jsonl == "-" else open(args.jsonl, "w", encoding="utf-8")
+            jsonl = _JsonLines(args.jsonl, engine.stop)
+        t0 = time.monotonic()
         if args.dashboard:
-            stats = _serve(engine, args, run_kwargs, jsonl)
+            stats, interrupted = _serve(engine, args, run_kwargs, jsonl)
         else:
-            stats = _console(engine, run_kwargs, jsonl, status=args.jsonl != "-")
+            stats, interrupted = _console(engine, run_kwargs, jsonl, status=args.jsonl != "-")
+        if interrupted:
+            ended = "interrupted"
+        elif args.duration is not None and time.monotonic() - t0 >= args.duration:
+            ended = f"--duration {args.duration:g} s passed"
+        elif args.max_frames is not None and stats.get("frames") == args.max_frames:
+            ended = f"--max-frames {args.max_frames} reached"
     finally:
         source.close()
         if recorder is not None:
             recorder.close()
-        if jsonl is not None and jsonl is not sys.stdout:
+        if jsonl is not None:
             jsonl.close()
+    _summary(engine, stats, recorder, args, ended)
+    return 0
+
+
+def _summary(engine: LiveEngine, stats: dict, recorder, args, ended: str) -> None:
     keys = (
         "frames",
         "processed",
@@ -151,27 +318,37 @@ def _run(args: argparse.Namespace, touch, track) -> int:
         "latency_ms_p50",
         "latency_ms_p99",
     )
-    print("final: " + ", ".join(f"{k} {stats.get(k)}" for k in keys), file=sys.stderr)
+    print(f"final ({ended}): " + ", ".join(f"{k} {stats.get(k)}" for k in keys), file=sys.stderr)
+    refs = engine.reference_state()
+    for name, used in (("touch", engine.touch is not None), ("tracking", engine.track is not None)):
+        if used or name == "touch":
+            print(f"{name} reference: {_reference_line(refs[name])}", file=sys.stderr)
     if recorder is not None:
         print(f"recorded {recorder.frames_written} frames to {args.record}", file=sys.stderr)
-    return 0
 
 
-def _writer(jsonl):
-    if jsonl is None:
-        return None
-    # to_json_dict() already applies the JSON policy (non-finite -> None): dump it as is
-    return lambda out: jsonl.write(json.dumps(out.to_json_dict(), allow_nan=False) + "\n")
+def _reference_line(ref: dict) -> str:
+    """One line on a reference for the final summary."""
+    use = ref["in_use"]
+    if use is None:
+        why = f"; last refusal: {ref['last_refusal']}" if ref["last_refusal"] else ""
+        return f"never captured ({ref['refusals']} window(s) refused{why})"
+    a, b = use["frames"]
+    text = f"frames {a}..{b}, captured {use['captured_utc']}"
+    if ref["refusals"]:
+        text += f", after {ref['refusals']} refused window(s)"
+    if use["warnings"]:
+        text += "; WARNING: " + "; ".join(use["warnings"])
+    return text
 
 
-def _console(engine, run_kwargs, jsonl, status: bool) -> dict:
-    """Run in this thread; one status line per second on stderr."""
-    write = _writer(jsonl)
+def _console(engine, run_kwargs, jsonl, status: bool) -> tuple[dict, bool]:
+    """Run in this thread; one status line per second on stderr. Returns (stats, interrupted)."""
     last = [0.0]
 
     def on_output(out) -> None:
-        if write is not None:
-            write(out)
+        if jsonl is not None:
+            jsonl(out)
         now = time.monotonic()
         if status and now - last[0] >= 1.0:
             last[0] = now
@@ -181,8 +358,9 @@ def _console(engine, run_kwargs, jsonl, status: bool) -> dict:
             if out.markers_pred is not None and out.markers_reference is not None:
                 d = np.linalg.norm(out.markers_pred - out.markers_reference, axis=1)
                 moved = f"{np.nanmax(d):5.2f} mm"
+            ref = s.get("reference", {}).get("touch", {}).get("state", "-")
             print(
-                f"t {out.t:9.3f} s | touch {touch} | markers moved {moved} | "
+                f"t {out.t:9.3f} s | touch {touch} | markers moved {moved} | reference {ref} | "
                 f"{s['fps_out']:5.1f} fps | latency p50 {s['latency_ms_p50']} ms "
                 f"p99 {s['latency_ms_p99']} ms | dropped {s['dropped']} malformed "
                 f"{s['malformed']} reconnects {s['reconnects']}",
@@ -190,23 +368,39 @@ def _console(engine, run_kwargs, jsonl, status: bool) -> dict:
             )
 
     try:
-        return engine.run(on_output=on_output, **run_kwargs)
+        return engine.run(on_output=on_output, **run_kwargs), False
     except KeyboardInterrupt:
         log.info("interrupted")
         engine.stop()
-        return engine.stats
+        return engine.stats, True
 
 
-def _serve(engine, args, run_kwargs, jsonl) -> dict:
-
-    if jsonl is not None:
-        log.warning("--jsonl is ignored with --dashboard (the dashboard consumes the outputs)")
+def _serve(engine, args, run_kwargs, jsonl) -> tuple[dict, bool]:
+    """Serve the dashboard until the engine ends (or Ctrl-C). Returns (stats, interrupted)."""
 
     def ready(url: str) -> None:
-        print(f"dashboard at {url} (Ctrl-C to stop)", file=sys.stderr)
+        until = (
+            "until Ctrl-C"
+            if args.keep_serving
+            else "until the source ends"
+            + (f" or {args.duration:g} s pass" if args.duration else "")
+            + " (or Ctrl-C)"
+        )
+        print(f"dashboard at {url}, serving {until}", file=sys.stderr)
 
     try:
-        serve(engine, "127.0.0.1", args.port, run_kwargs=run_kwargs, on_ready=ready)
+        serve(
+            engine,
+            "127.0.0.1",
+            args.port,
+            run_kwargs=run_kwargs,
+            on_ready=ready,
+            on_output=jsonl,
+            keep_serving=args.keep_serving,
+            allowed_hosts=args.allow_host,
+        )
     except KeyboardInterrupt:
         log.info("interrupted")
-    return engine.stats
+        return engine.stats, True
+    print("live engine finished; dashboard stopped", file=sys.stderr)
+    return engine.stats, False

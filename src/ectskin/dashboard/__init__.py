@@ -2,14 +2,15 @@
 
 Modules by job: :mod:`~ectskin.dashboard.hub` (the engine → clients hand-over and rate limit),
 :mod:`~ectskin.dashboard.messages` (the ``meta`` message, strict JSON encoding),
-:mod:`~ectskin.dashboard.security` (Origin check, public-bind warning),
+:mod:`~ectskin.dashboard.security` (Host and Origin checks, public-bind warning),
 :mod:`~ectskin.dashboard.app` (the FastAPI routes and the websocket stream),
 :mod:`~ectskin.dashboard.server` (socket, engine thread, uvicorn).
 
 Typical use::
 
     from ectskin.dashboard import serve
-    serve(engine)                      # http://127.0.0.1:8765/ until Ctrl-C
+    serve(engine)                      # http://127.0.0.1:8765/ until the engine ends
+    serve(engine, keep_serving=True)   # ... then the last frame until Ctrl-C
 
 or, from code that keeps running (tests, notebooks)::
 

@@ -7,13 +7,16 @@ Routes of :func:`create_app`:
 ``GET /api/meta``           layout for drawing: pair names, regions, skins, electrodes, markers
 ``GET /api/stats``          the engine's counters (``engine.stats``) plus the dashboard's own
 ``POST /api/reference``     ``engine.capture_reference()``: re-capture the calibration reference
-``WS /ws``                  ``meta``, then ``history`` (last ~10 s at ≤ 30 Hz), then ``frame``
-                            messages (``Output.to_json_dict()``): always the newest, at most
-                            ``max_rate_hz`` per second (:class:`~ectskin.dashboard.hub.TokenBucket`)
+``WS /ws``                  ``meta``, then ``history`` (last ~10 s at ≤ 30 Hz), then ``status``
+                            (the engine is running, has ended, or failed) and ``frame`` messages
+                            (``Output.to_json_dict()``): always the newest, at most
+                            ``max_rate_hz`` per second (:class:`~ectskin.dashboard.hub.TokenBucket`);
+                            a new ``status`` whenever the engine's state changes
 ==========================  =====================================================================
 
 Non-finite numbers (NaN for masked channels) are sent as JSON ``null``
-(:mod:`ectskin.dashboard.messages`). There is no authentication: requests whose ``Origin`` is
+(:mod:`ectskin.dashboard.messages`). There is no authentication: every request must be addressed
+to a loopback host or one of ``allowed_hosts`` (DNS rebinding), and requests whose ``Origin`` is
 another site are refused (:mod:`ectskin.dashboard.security`).
 
 FastAPI is optional (the ``live`` extra): it is imported when an app is built. No
@@ -22,12 +25,13 @@ FastAPI is optional (the ``live`` extra): it is imported when an app is built. N
 """
 
 import asyncio
+from collections.abc import Iterable
 from pathlib import Path
 
 from ectskin._check import EctskinError
 from ectskin.dashboard.hub import Hub, TokenBucket
 from ectskin.dashboard.messages import encode
-from ectskin.dashboard.security import same_origin
+from ectskin.dashboard.security import HostCheck, same_origin
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 
@@ -42,8 +46,11 @@ def require_fastapi() -> None:
         ) from None
 
 
-def create_app(hub: Hub):
-    """The FastAPI application serving the page, the JSON API and the ``/ws`` stream of ``hub``."""
+def create_app(hub: Hub, allowed_hosts: Iterable[str] = ()):
+    """The FastAPI application serving the page, the JSON API and the ``/ws`` stream of ``hub``.
+
+    Requests are answered only when addressed to a loopback host (``127.0.0.1``, ``localhost``,
+    ``::1``…) or one of ``allowed_hosts`` (:class:`~ectskin.dashboard.security.HostCheck`)."""
     require_fastapi()
     from fastapi import FastAPI, Request, WebSocket
     from fastapi.responses import FileResponse, JSONResponse
@@ -58,6 +65,7 @@ def create_app(hub: Hub):
     app = FastAPI(title="ectskin live dashboard", docs_url=None, redoc_url=None,
                   openapi_url=None)
     app.state.hub = hub
+    app.add_middleware(HostCheck, allowed=tuple(allowed_hosts))
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     no_store = {"Cache-Control": "no-store"}
 
@@ -112,6 +120,8 @@ def create_app(hub: Hub):
         try:
             await ws.send_text(encode(hub.meta()))
             await ws.send_text(encode(hub.history_message()))
+            status_version, status = hub.status()
+            await ws.send_text(encode(status))
             while not sub.closed:
                 await sub.event.wait()
                 if sub.closed:
@@ -122,6 +132,10 @@ def create_app(hub: Hub):
                     if sub.closed:
                         break
                 sub.event.clear()
+                version, status = hub.status()
+                if version != status_version:
+                    await ws.send_text(encode(status))
+                    status_version = version
                 version, text = hub.encoded_latest()
                 if text is None or version == sent_version:
                     continue

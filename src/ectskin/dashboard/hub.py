@@ -5,7 +5,9 @@ The engine runs in its own thread and hands every :class:`~ectskin.live.output.O
 client is woken when a new one arrives and is sent the newest one at most ``max_rate_hz`` times a
 second (:class:`TokenBucket`; frames in between are skipped for that client, never queued), so a
 slow browser can never slow the engine down. JSON encoding happens on the server's loop, once per
-output sent, whatever the number of clients.
+output sent, whatever the number of clients. The hub also holds the engine's state (running,
+ended, error: :meth:`Hub.set_engine_state`), which every client is told at once, so that a page
+never calls a stream "live" after it has stopped.
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ logger = logging.getLogger(__name__)
 DEFAULT_MAX_RATE_HZ = 30.0
 #: Seconds of readouts replayed to a page that connects mid-run (sampled at ≤ max_rate_hz).
 DEFAULT_HISTORY_S = 10.0
+#: What the engine is doing, as the page's badge shows it.
+ENGINE_STATES = ("waiting", "running", "ended", "error")
 
 
 class TokenBucket:
@@ -127,11 +131,13 @@ class Hub:
             raise EctskinError(
                 f"dashboard: layout must be a SensorLayout, got {type(layout).__name__}"
             )
-        if not (isinstance(max_rate_hz, (int, float)) and math.isfinite(max_rate_hz)
-                and max_rate_hz > 0):
+        if not (
+            isinstance(max_rate_hz, (int, float)) and math.isfinite(max_rate_hz) and max_rate_hz > 0
+        ):
             raise EctskinError(f"dashboard: max_rate_hz must be a number > 0, got {max_rate_hz!r}")
-        if not (isinstance(history_s, (int, float)) and math.isfinite(history_s)
-                and history_s >= 0):
+        if not (
+            isinstance(history_s, (int, float)) and math.isfinite(history_s) and history_s >= 0
+        ):
             raise EctskinError(f"dashboard: history_s must be a number >= 0, got {history_s!r}")
         if engine is not None:
             for attr in ("stats", "capture_reference"):
@@ -157,8 +163,9 @@ class Hub:
         self._last_history_t = -math.inf
         self.messages_sent = 0
         self.reference_requests = 0
-        self.engine_error: str | None = None
-        self.engine_running = False
+        self._engine_state = "waiting"
+        self._engine_error: str | None = None
+        self._status_version = 0
 
     # ------------------------------------------------------------- engine side (any thread)
     def publish(self, output: Any) -> None:
@@ -190,6 +197,43 @@ class Hub:
         """``(version, output)`` of the newest output (``(0, None)`` before the first)."""
         with self._lock:
             return self._version, self._latest
+
+    def set_engine_state(self, state: str, error: str | None = None) -> None:
+        """The engine is ``"running"``, has ``"ended"`` (its source ended, or its duration
+        passed) or stopped with an ``"error"``; clients are told at once (a ``status`` message),
+        so a page never shows "live" for a stream that has stopped."""
+        if state not in ENGINE_STATES:
+            raise EctskinError(
+                f"dashboard: engine state must be one of {ENGINE_STATES}, got {state!r}"
+            )
+        with self._lock:
+            self._engine_state, self._engine_error = state, error
+            self._status_version += 1
+            subscribers = tuple(self._subscribers)
+        for sub in subscribers:
+            sub.wake()
+
+    @property
+    def engine_state(self) -> str:
+        return self._engine_state
+
+    @property
+    def engine_running(self) -> bool:
+        return self._engine_state == "running"
+
+    @property
+    def engine_error(self) -> str | None:
+        return self._engine_error
+
+    def status(self) -> tuple[int, dict[str, Any]]:
+        """``(version, {"type": "status", "engine": state, "error": ..., "published": n})``."""
+        with self._lock:
+            return self._status_version, {
+                "type": "status",
+                "engine": self._engine_state,
+                "error": self._engine_error,
+                "published": self._version,
+            }
 
     # ------------------------------------------------------------- server side
     def meta(self) -> dict[str, Any]:
@@ -225,6 +269,7 @@ class Hub:
             "sent": self.messages_sent,
             "reference_requests": self.reference_requests,
             "engine_running": self.engine_running,
+            "engine_state": self.engine_state,
             "engine_error": self.engine_error,
         }
         return to_jsonable(stats)
@@ -235,8 +280,9 @@ class Hub:
             raise EctskinError("dashboard: no live engine attached, nothing to re-capture")
         self.engine.capture_reference()
         self.reference_requests += 1
-        logger.info("reference re-capture requested from the dashboard (#%d)",
-                    self.reference_requests)
+        logger.info(
+            "reference re-capture requested from the dashboard (#%d)", self.reference_requests
+        )
         return {"ok": True, "reference_requests": self.reference_requests}
 
     def encoded_latest(self) -> tuple[int, str | None]:
@@ -252,15 +298,16 @@ class Hub:
         return version, text
 
     def history_message(self) -> dict[str, Any]:
-        """``{"type": "history", "frames": [{seq, t, raw, calibrated, age_s}, ...]}``, oldest
-        first; ``age_s`` is how long ago (s) the frame was published, for the page's time axis."""
+        """``{"type": "history", "frames": [{seq, t, raw, calibrated, trial, inflation, age_s},
+        ...]}``, oldest first; ``age_s`` is how long ago (s) the frame was published, for the
+        page's time axis."""
         now = time.monotonic()
         with self._lock:
             items = [(t, out) for t, out in self._history if t >= now - self.history_s]
         frames = []
         for t, out in items:
             d = frame_dict(out)
-            frame = {k: d.get(k) for k in ("seq", "t", "raw", "calibrated")}
+            frame = {k: d.get(k) for k in ("seq", "t", "raw", "calibrated", "trial", "inflation")}
             frame["age_s"] = round(now - t, 4)
             frames.append(frame)
         return {"type": "history", "frames": frames}

@@ -25,7 +25,12 @@ are averaged channel-wise (NaN-aware) into the reference c_0; frames are calibra
 c = (c_t − c_0)/c_0. Touch uses the touch reference (the paper's rest state: capture it untouched
 and uninflated), tracking its own reference (the paper's "prior knowledge": the state at the start
 of the trajectory, with the marker coordinates of that moment as the decoder's initial coordinates).
-``capture_reference(which="both"|"touch"|"track")`` re-captures one or both. Initial marker
+``capture_reference(which="both"|"touch"|"track")`` re-captures one or both.
+
+A capture window is judged before use (:mod:`ectskin.live.reference`): the touch reference refuses
+one with a touched or inflated frame (when the source knows) and captures again; marker motion and
+channel drift far beyond the noise are warned about. :meth:`reference_state` (and
+``stats["reference"]``) says where, when and how the references in use were taken. Initial marker
 coordinates are the mean markers of the reference frames when the source provides markers, else
 ``reference_markers`` (e.g. the twin's rest pose). A channel whose reference is missing or zero is
 calibrated to NaN (shown as null) and fed to the models as 0 (no change).
@@ -54,12 +59,11 @@ from ectskin.layout import SensorLayout
 from ectskin.live.meter import Meter
 from ectskin.live.output import Output, json_list
 from ectskin.live.predictors import bind_predictors
-from ectskin.live.reference import ReferenceCapture
+from ectskin.live.reference import REFERENCE_KINDS, ReferenceCapture, References
 
 logger = logging.getLogger(__name__)
 
 POLICIES = ("skip-to-newest", "block")
-REFERENCE_KINDS = ("both", "touch", "track")
 
 
 class LiveEngine:
@@ -167,8 +171,7 @@ class LiveEngine:
         self._error: str | None = None
         self.latest: Output | None = None
         # inference-loop state
-        self._ref_touch = ReferenceCapture(n_pairs, n_markers)
-        self._ref_track = ReferenceCapture(n_pairs, n_markers)
+        self._refs = References(n_pairs, n_markers, layout.pair_names)
         self._win = np.zeros((self.window, n_pairs))
         self._win_pos = 0
         self._win_n = 0
@@ -191,7 +194,12 @@ class LiveEngine:
 
     @property
     def reference_ready(self) -> bool:
-        return self._ref_touch.c0 is not None
+        return self._refs.touch.c0 is not None
+
+    def reference_state(self) -> dict[str, Any]:
+        """The state of both references, for the dashboard and the final summary (JSON-able;
+        :meth:`ectskin.live.reference.References.state`)."""
+        return self._refs.state()
 
     @property
     def stats(self) -> dict[str, Any]:
@@ -357,10 +365,7 @@ class LiveEngine:
         with self._lock:
             which, self._pending_capture = self._pending_capture, None
         if which is not None:
-            if which in ("both", "touch"):
-                self._ref_touch.start(self.reference_frames)
-            if which in ("both", "track"):
-                self._ref_track.start(self.reference_frames)
+            self._refs.start(which, self.reference_frames)
             logger.info(
                 "capturing the %s reference from the next %d frames",
                 "touch and tracking" if which == "both" else which,
@@ -373,20 +378,11 @@ class LiveEngine:
         self._win[self._win_pos] = c
         self._win_pos = (self._win_pos + 1) % k
         self._win_n += 1
-        for name, ref in (("touch", self._ref_touch), ("tracking", self._ref_track)):
-            if ref.capturing and ref.add(c, f.markers, f.seq):
-                self._reference_done(name, ref, f)
+        for name, ref, text in self._refs.add(f):
+            self._reference_done(name, ref, f, text)
 
-    def _reference_done(self, name: str, ref: ReferenceCapture, f) -> None:
-        bad = np.flatnonzero(np.isnan(ref.c0))
-        if bad.size:
-            names = ", ".join(self.layout.pair_names[j] for j in bad[:8])
-            logger.warning(
-                "%s reference: %d channel(s) without a usable reference (%s); they "
-                "calibrate to NaN and enter the models as 0", name, bad.size, names
-            )
-        text = f"{name} reference captured from frames {ref.seqs[0]}..{ref.seqs[-1]}"
-        logger.info("%s", text)
+    def _reference_done(self, name: str, ref: ReferenceCapture, f, text: str) -> None:
+        """A reference was accepted (``text`` says how, :meth:`References.add` logged it)."""
         if self.recorder is not None:
             try:
                 self.recorder.add_event(text, t_s=f.t)
@@ -411,8 +407,16 @@ class LiveEngine:
 
     def _process(self, f) -> Output:
         raw = f.capacitance
-        out = Output(seq=f.seq, t=f.t, raw=raw, label=f.label, markers_true=f.markers)
-        c0 = self._ref_touch.c0
+        out = Output(
+            seq=f.seq,
+            t=f.t,
+            raw=raw,
+            label=f.label,
+            markers_true=f.markers,
+            trial=f.trial,
+            inflation=f.inflation,
+        )
+        c0 = self._refs.touch.c0
         if c0 is not None:
             cal = relative_change(raw, c0)  # Eq. 2; NaN where the reference channel is unusable
             out.calibrated = cal
@@ -426,7 +430,7 @@ class LiveEngine:
                     out.touch_cls = int(np.argmax(probs))
                 except Exception:
                     self._model_error("touch")
-        c0t = self._ref_track.c0
+        c0t = self._refs.tracking.c0
         if self.track is not None and c0t is not None and self._init_markers is not None:
             k = self.window
             order = (self._win_pos + np.arange(k)) % k  # oldest first
@@ -487,10 +491,10 @@ class LiveEngine:
             "fps_in": round(fps_in, 2),
             "fps_out": round(fps_out, 2),
             "policy": self.policy,
-            "reference_ready": self._ref_touch.c0 is not None,
-            "reference_capturing": self._ref_touch.capturing or self._ref_track.capturing,
+            "reference_ready": self._refs.touch.c0 is not None,
+            "reference_capturing": self._refs.capturing,
+            "reference": self.reference_state(),
         }
         if self.recorder is not None:
             stats.update(self.recorder.stats)
         return stats
-

@@ -24,8 +24,10 @@ class Output:
 
     ``raw`` (n_pairs,) pF; ``calibrated`` (n_pairs,) Eq. 2 against the touch reference (None until
     a reference exists); ``touch_probs`` (n_classes,) and ``touch_cls``; ``markers_pred``,
-    ``markers_reference``, ``markers_true`` (n_markers, 3) mm; ``latency_ms`` from the frame's
-    arrival to this output; ``stats`` a snapshot of :attr:`LiveEngine.stats`.
+    ``markers_reference``, ``markers_true`` (n_markers, 3) mm; ``label``, ``trial`` and
+    ``inflation`` (ml) as the frame carried them (None when the source does not know);
+    ``latency_ms`` from the frame's arrival to this output; ``stats`` a snapshot of
+    :attr:`LiveEngine.stats`.
     """
 
     seq: int
@@ -38,6 +40,8 @@ class Output:
     markers_reference: np.ndarray | None = None
     markers_true: np.ndarray | None = None
     label: int | None = None
+    trial: str | None = None
+    inflation: tuple[float, ...] | None = None
     latency_ms: float = 0.0
     stats: dict[str, Any] = field(default_factory=dict)
 
@@ -62,6 +66,8 @@ class Output:
             "touch": touch,
             "markers": markers,
             "label": None if self.label is None else int(self.label),
+            "trial": self.trial,
+            "inflation": None if self.inflation is None else [float(v) for v in self.inflation],
             "latency_ms": float(self.latency_ms),
             "stats": dict(self.stats),
         }

@@ -33,7 +33,7 @@ import numpy as np
 from ectskin._check import EctskinError
 from ectskin.io.hdf5 import RecordingWriter
 from ectskin.layout import SensorLayout
-from ectskin.live.sources import open_source
+from ectskin.live.sources import check_not_input, open_source
 
 logger = logging.getLogger(__name__)
 
@@ -341,6 +341,59 @@ class Recorder:
         self.frames_written += n
 
 
+class ClockStats:
+    """What a stream's timestamps say: how much source time it spans and at what frame rate.
+
+    ``add(t, arrival)`` per frame. The source clock may restart (a device reset, a replayed
+    trial): each run of increasing timestamps is a *segment*, and the span is the sum of the
+    segments' spans. ``rate_hz`` = frame intervals / span (NaN with fewer than two frames in a
+    segment); ``delivered_hz`` the same over the arrival times (``perf_counter``).
+    """
+
+    def __init__(self) -> None:
+        self.frames = 0
+        self.segments = 0
+        self._done_s = 0.0  # span of the closed segments
+        self._first: float | None = None  # first and last timestamp of the open segment
+        self._last: float | None = None
+        self.first_arrival: float | None = None
+        self.last_arrival: float | None = None
+
+    def add(self, t: float, arrival: float) -> None:
+        if self._last is None or not t > self._last:  # the first frame, or the clock restarted
+            if self._last is not None:
+                self._done_s += self._last - self._first
+            self._first = t
+            self.segments += 1
+        self._last = t
+        self.frames += 1
+        if self.first_arrival is None:
+            self.first_arrival = arrival
+        self.last_arrival = arrival
+
+    @property
+    def span_s(self) -> float:
+        """Seconds of source time the timestamps cover."""
+        return self._done_s + (0.0 if self._last is None else self._last - self._first)
+
+    @property
+    def rate_hz(self) -> float:
+        """Frames per second according to the timestamps."""
+        span = self.span_s
+        return (self.frames - self.segments) / span if span > 0 else math.nan
+
+    @property
+    def delivered_hz(self) -> float:
+        """Frames per second as they arrived (wall clock)."""
+        if self.first_arrival is None or self.last_arrival <= self.first_arrival:
+            return math.nan
+        return (self.frames - 1) / (self.last_arrival - self.first_arrival)
+
+
+#: ``record_main`` warns when the timestamps show fewer than this fraction of the nominal rate.
+LOW_RATE_FRACTION = 0.9
+
+
 def record_main(
     source_spec: str,
     out_path: str | Path,
@@ -357,16 +410,21 @@ def record_main(
     """Record from ``source_spec`` (see :func:`~ectskin.live.sources.open_source`) into
     ``out_path`` for ``duration_s`` seconds (None: until the source ends or Ctrl-C).
 
-    Returns a summary: frames recorded, trials, seconds, the source's counters and whether it
-    was interrupted. ``on_frame(frame)`` is called after each frame is queued (progress).
+    Returns a summary: ``frames`` recorded, ``trials``, ``seconds`` (wall clock), what the
+    timestamps say (``timestamps_s`` spanned, ``rate_hz``; :class:`ClockStats`), the
+    ``nominal_hz`` stored in the file, ``delivered_hz`` (arrivals), the source's ``counters``
+    and whether it was ``interrupted``. Warns when the timestamps show fewer frames per second
+    than nominal (:data:`LOW_RATE_FRACTION`): a source that could not keep up, or frames lost
+    upstream. ``on_frame(frame)`` is called after each frame is queued (progress).
+
+    Never writes onto the file it replays, even with ``overwrite``.
     """
     if duration_s is not None and not duration_s > 0:
         raise EctskinError(f"duration must be > 0 seconds, got {duration_s!r}")
     out_path = Path(out_path)
+    check_not_input(out_path, source_spec, "the output")
     if out_path.exists() and not overwrite:
-        raise EctskinError(
-            f"{out_path} exists; pass overwrite=True (ectskin record --force) to replace it"
-        )
+        raise EctskinError(f"{out_path} exists; refusing to replace it without overwrite")
     source = open_source(source_spec, layout=layout, speed=speed, loop=loop)
     rate = frame_rate_hz or source.frame_rate_hz or 30.0
     recorder = Recorder(
@@ -383,6 +441,7 @@ def record_main(
         timer = threading.Timer(duration_s, source.close)
         timer.daemon = True
     interrupted = False
+    clock = ClockStats()
     t0 = time.perf_counter()
     logger.info(
         "recording %s -> %s%s",
@@ -395,6 +454,7 @@ def record_main(
             timer.start()
         for frame in source:
             recorder.write(frame)
+            clock.add(frame.t, frame.arrival)
             if on_frame is not None:
                 on_frame(frame)
     except KeyboardInterrupt:
@@ -410,6 +470,10 @@ def record_main(
         "frames": recorder.frames_written,
         "trials": list(recorder.trials),
         "seconds": time.perf_counter() - t0,
+        "timestamps_s": clock.span_s,
+        "rate_hz": clock.rate_hz,
+        "delivered_hz": clock.delivered_hz,
+        "nominal_hz": float(rate),
         "counters": source.counters,
         "interrupted": interrupted,
     }
@@ -419,4 +483,16 @@ def record_main(
         len(summary["trials"]),
         out_path,
     )
+    if clock.rate_hz < LOW_RATE_FRACTION * rate:
+        expected = round(clock.span_s * rate) + clock.segments
+        logger.warning(
+            "the source delivered %.1f frames per second, fewer than its nominal %g: %d frames "
+            "over the %.1f s its timestamps span, where %d were due (a source too slow for real "
+            "time, or frames lost upstream)",
+            clock.rate_hz,
+            rate,
+            clock.frames,
+            clock.span_s,
+            expected,
+        )
     return summary

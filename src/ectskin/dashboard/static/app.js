@@ -1,11 +1,19 @@
 // ectskin live dashboard. Plain JS, no dependencies (the page must work offline).
-// Messages on /ws: one "meta", one "history", then "frame"s (see ectskin/dashboard/app.py).
+// Messages on /ws: one "meta", one "history", then "status" (the engine running, ended, failed:
+// again whenever it changes) and "frame"s (see ectskin/dashboard/app.py).
 (function () {
   "use strict";
 
   const WINDOW_S = 10;            // strip chart: seconds shown
   const CHART_COLS = 7;           // strip chart: small multiples per row
   const GAP_MS = 500;             // strip chart: a longer pause in the stream breaks the line
+  const TICK_S = 5;               // strip chart: a time label every 5 s (seconds before now)
+  const GRID_S = 2.5;             // strip chart: a grid line every 2.5 s
+  // Each pair's vertical scale spans at least this much, so that readout noise (~1 fF) is drawn
+  // as the flicker it is, not stretched to full height: 20 fF raw, 2 % calibrated.
+  const MIN_SPAN_RAW_PF = 0.02;
+  const MIN_SPAN_CALIBRATED = 0.02;
+  const STALE_MS = 2000;          // badge: no frame for this long while running = "stale"
   const SURFACE_ORDER = ["front", "back", "right", "left"];
   const SVG_NS = "http://www.w3.org/2000/svg";
 
@@ -22,7 +30,12 @@
     views: {},                    // marker views by svg id
     refKey: null,                 // identity of the reference pose the views were scaled for
     ws: null,
+    wsOpen: false,
     retryMs: 500,
+    engine: "waiting",            // the engine's state from "status" messages
+    chartSpans: [],               // per pair, the vertical span drawn last (tests read it)
+    chartBoundaries: [],          // trial names whose boundary is drawn in the window
+    trial: null,
   };
 
   const $ = (id) => document.getElementById(id);
@@ -42,19 +55,49 @@
     const ws = new WebSocket(proto + "://" + location.host + "/ws");
     state.ws = ws;
     setConnection("connecting", "connecting…");
-    ws.onopen = () => { state.retryMs = 500; setConnection("open", "live"); };
+    ws.onopen = () => { state.retryMs = 500; state.wsOpen = true; updateBadge(); };
     ws.onmessage = (ev) => {
       let msg;
       try { msg = JSON.parse(ev.data); } catch (e) { console.error("bad message", e); return; }
       if (msg.type === "meta") onMeta(msg);
       else if (msg.type === "history") onHistory(msg);
+      else if (msg.type === "status") onStatus(msg);
       else if (msg.type === "frame") onFrame(msg);
     };
     ws.onclose = () => {
-      setConnection("closed", "disconnected, retrying…");
+      state.wsOpen = false;
+      updateBadge();
       setTimeout(connect, state.retryMs);
       state.retryMs = Math.min(state.retryMs * 2, 5000);
     };
+  }
+  function onStatus(msg) {
+    state.engine = msg.engine || "waiting";
+    const errEl = $("engine-error");
+    errEl.hidden = !msg.error;
+    errEl.textContent = msg.error ? "engine: " + msg.error : "";
+    updateBadge();
+  }
+  // The badge says "live" only while the engine runs and frames keep coming: [data-state, text]
+  // from the websocket being open, the engine's state and the age of the last frame (ms, null
+  // before the first).
+  function badge(wsOpen, engine, ageMs) {
+    if (!wsOpen) {
+      return engine === "ended" ? ["ended", "ended (server gone)"]
+                                : ["closed", "disconnected, retrying…"];
+    }
+    if (engine === "ended") return ["ended", "ended: the source stopped; last frame shown"];
+    if (engine === "error") return ["error", "stopped by an error"];
+    if (ageMs !== null && ageMs > STALE_MS) {
+      return ["stale", "stale: no frame for " + (ageMs / 1000).toFixed(0) + " s"];
+    }
+    if (ageMs === null) return ["waiting", "waiting for frames"];
+    return ["open", "live"];
+  }
+  function updateBadge() {
+    const age = state.lastFrameWall ? performance.now() - state.lastFrameWall : null;
+    const [st, text] = badge(state.wsOpen, state.engine, age);
+    setConnection(st, text);
   }
   function setConnection(s, text) {
     const el = $("connection-status");
@@ -71,6 +114,7 @@
     buildFaces(meta);
     buildProbs(meta);
     for (const id of ["markers-yz", "markers-xz"]) buildView(id, meta);
+    buildMarkerBars(meta);
     resizeChart();
   }
 
@@ -170,6 +214,20 @@
     state.chartDirty = true;
   }
 
+  // The trial being played and its inflation (replay, sim); nothing when the source does not say.
+  function updateTrial(f) {
+    const parts = [];
+    if (typeof f.trial === "string") parts.push("trial " + f.trial);
+    if (Array.isArray(f.inflation)) {
+      const infl = f.inflation.map((v) => (isNum(v) ? +v.toFixed(1) : "?"));
+      const inflated = f.inflation.some((v) => isNum(v) && v !== 0);
+      parts.push((inflated ? "inflated " : "uninflated ") + infl.join("/") + " ml");
+    }
+    const el = $("trial-info");
+    el.dataset.trial = typeof f.trial === "string" ? f.trial : "";
+    setText("trial-info", parts.join(" · "));
+  }
+
   function onFrame(f) {
     state.lastFrame = f;
     state.lastFrameWall = performance.now();
@@ -179,14 +237,17 @@
     state.chartDirty = true;
     if (f.stats) updateStats(f.stats);
     setText("frame-seq", String(f.seq));
+    updateTrial(f);
     updateTouch(f.touch, f.label);
     updateMarkers(f.markers);
+    updateBadge();
   }
 
   function pushChart(f, wallMs) {
     if (!Array.isArray(f.raw)) return;
     const fr = state.frames;
-    fr.push({ w: wallMs, raw: f.raw, calibrated: f.calibrated });
+    fr.push({ w: wallMs, raw: f.raw, calibrated: f.calibrated,
+              trial: typeof f.trial === "string" ? f.trial : null });
     const cutoff = wallMs - 1000 * WINDOW_S;
     let drop = 0;
     while (drop < fr.length && fr[drop].w < cutoff) drop++;
@@ -205,12 +266,42 @@
     setText("latency-p99", fmt(s.latency_ms_p99, 2));
     setText("fps", fmt(s.fps_in, 1) + " / " + fmt(s.fps_out, 1));
     setText("policy", s.policy || "—");
-    if (typeof s.reference_ready === "boolean") {
+    if (s.reference && s.reference.touch) {
+      showReference(s.reference.touch);
+    } else if (typeof s.reference_ready === "boolean") {
       updateReference(s.reference_ready && !s.reference_capturing);
     }
   }
 
   // ------------------------------------------------------------------ reference
+  // The engine's account of the touch reference: state, frames it came from, when, warnings,
+  // and why the last window was refused (LiveEngine.reference_state()).
+  function showReference(r) {
+    const use = r.in_use;
+    if (r.state === "retrying") {
+      setReference("refused", r.last_refusal);
+    } else {
+      updateReference(r.state === "ready");
+    }
+    let detail = "";
+    if (use && Array.isArray(use.frames)) {
+      const when = typeof use.captured_utc === "string" ? use.captured_utc.replace("T", " ")
+        .replace("+00:00", " UTC") : "";
+      detail = "from frames " + use.frames[0] + ".." + use.frames[1] + (when ? ", " + when : "");
+      if (r.refusals) detail += ", after " + r.refusals + " refused window(s)";
+    }
+    const d = $("reference-detail");
+    d.dataset.frames = use && Array.isArray(use.frames) ? use.frames.join("..") : "";
+    setText("reference-detail", detail);
+    const warn = $("reference-warning");
+    const warnings = use && Array.isArray(use.warnings) ? use.warnings : [];
+    const text = r.state === "retrying" && r.last_refusal ? r.last_refusal
+      : warnings.length ? "reference taken while: " + warnings.join("; ") +
+        " (re-capture it with the skin untouched, uninflated and still)" : "";
+    warn.hidden = !text;
+    warn.dataset.kind = r.state === "retrying" ? "refused" : warnings.length ? "warning" : "";
+    if (warn.textContent !== text) warn.textContent = text;
+  }
   function updateReference(ready) {
     const ref = state.ref;
     let st;
@@ -231,6 +322,7 @@
       requested: "reference: re-capture requested…",
       capturing: "reference: capturing…",
       ready: "reference: ready" + (ref.requests ? " (re-captured ×" + ref.requests + ")" : ""),
+      refused: "reference: refused, capturing again…",
       error: "reference: " + (detail || "request failed"),
     }[st];
     if (el.textContent !== text) el.textContent = text;
@@ -460,6 +552,56 @@
     }
     err.textContent = n ? (sum / n).toFixed(2) : "—";
     err.dataset.value = n ? String(sum / n) : "";
+    updateMarkerBars(pred || truth, pred ? truth : null, ref);
+  }
+
+  // Per marker: how far it moved from the reference pose, and the error of the estimate, as bars
+  // on their own millimetre scale (a sub-millimetre error is invisible on the 140-mm views).
+  function buildMarkerBars(meta) {
+    const host = $("marker-errors");
+    host.querySelectorAll(".mk-row").forEach((el) => el.remove());
+    for (const name of meta.marker_names) {
+      const row = document.createElement("div");
+      row.className = "mk-row";
+      row.dataset.marker = name;
+      row.innerHTML = '<span class="name"></span><span class="bars">' +
+        '<span class="track"><span class="bar moved"></span></span>' +
+        '<span class="track"><span class="bar err"></span></span></span>' +
+        '<span class="v">—</span>';
+      row.querySelector(".name").textContent = name;
+      host.appendChild(row);
+    }
+  }
+  function niceCeil(v) {  // 1, 2, 5 × 10^k at or above v
+    const p = Math.pow(10, Math.floor(Math.log10(v)));
+    for (const m of [1, 2, 5, 10]) if (m * p >= v) return m * p;
+    return 10 * p;
+  }
+  function updateMarkerBars(shown, truth, ref) {
+    const rows = $("marker-errors").querySelectorAll(".mk-row");
+    const moved = [], errs = [];
+    for (let j = 0; j < rows.length; j++) {
+      const p = shown && shown[j];
+      moved.push(validPoint(p) && ref && validPoint(ref[j]) ? dist(p, ref[j]) : null);
+      errs.push(validPoint(p) && truth && validPoint(truth[j]) ? dist(p, truth[j]) : null);
+    }
+    // Two scales: the error of a good estimate is far smaller than the motion it tracks, and
+    // would vanish on the motion's scale. Each is at least 0.5 mm at full width.
+    const scaleMoved = niceCeil(Math.max(0.5, ...moved.filter(isNum)));
+    const scale = niceCeil(Math.max(0.5, ...errs.filter(isNum)));
+    setText("marker-scale", "full bar: moved " + scaleMoved + " mm, error " + scale + " mm");
+    $("marker-scale").dataset.scaleMoved = String(scaleMoved);
+    $("marker-scale").dataset.scaleError = String(scale);
+    rows.forEach((row, j) => {
+      const m = moved[j], e = errs[j];
+      row.dataset.moved = isNum(m) ? String(m) : "";
+      row.dataset.error = isNum(e) ? String(e) : "";
+      row.querySelector(".bar.moved").style.width =
+        (isNum(m) ? 100 * m / scaleMoved : 0).toFixed(1) + "%";
+      row.querySelector(".bar.err").style.width = (isNum(e) ? 100 * e / scale : 0).toFixed(1) + "%";
+      row.querySelector(".v").textContent = (isNum(m) ? m.toFixed(2) : "—") + " / " +
+        (isNum(e) ? e.toFixed(2) : "—") + " mm";
+    });
   }
 
   // ------------------------------------------------------------------ strip chart
@@ -492,6 +634,18 @@
     return varCache[name];
   }
 
+  // The vertical range drawn for values between lo and hi: at least the minimum span (so noise
+  // stays small), plus a margin of 8 % on each side.
+  function chartRange(lo, hi, calibrated) {
+    const minSpan = calibrated ? MIN_SPAN_CALIBRATED : MIN_SPAN_RAW_PF;
+    let span = hi - lo;
+    if (!(span >= minSpan)) {
+      const c = (hi + lo) / 2;
+      lo = c - minSpan / 2; hi = c + minSpan / 2; span = minSpan;
+    }
+    return { lo: lo - 0.08 * span, hi: hi + 0.08 * span, span };
+  }
+
   function drawChart() {
     const meta = state.meta, ctx = chart.ctx;
     if (!meta || !ctx) return;
@@ -501,47 +655,89 @@
     const n = meta.n_pairs, cols = CHART_COLS, rows = Math.ceil(n / cols);
     const cw = W / cols, ch = H / rows;
     const fr = state.frames, mode = state.mode;
-    // Time axis: the page clock (s); the window scrolls even when frames stop coming.
+    // Time axis: seconds before now on the page clock; the data scroll to the left, even when
+    // frames stop coming (then the traces end before "now").
     const tEnd = performance.now() / 1000, tStart = tEnd - WINDOW_S;
     const calibrated = mode === "calibrated";
     const series = fr.filter((f) => Array.isArray(f[mode]) && f.w / 1000 >= tStart);
+    // Trial boundaries in the window (replay, sim): where the trial name changes.
+    const bounds = [];
+    for (let k = 1; k < series.length; k++) {
+      const a = series[k - 1].trial, b = series[k].trial;
+      if (a !== null && b !== null && a !== b) bounds.push({ s: series[k].w / 1000, trial: b });
+    }
+    state.chartBoundaries = bounds.map((b) => b.trial);
+    const ticks = [];
+    for (let s = -WINDOW_S; s <= 0; s += TICK_S) ticks.push(s === 0 ? "now" : s + " s");
+    chart.canvas.dataset.ticks = ticks.join(",");
+    const spans = [];
     ctx.font = "11px system-ui, sans-serif";
     ctx.textBaseline = "top";
     for (let i = 0; i < n; i++) {
       const x0 = (i % cols) * cw, y0 = Math.floor(i / cols) * ch;
       const px0 = x0 + 4, px1 = x0 + cw - 6, py0 = y0 + 16, py1 = y0 + ch - 14;
+      const xOf = (sec) => px0 + (px1 - px0) * (sec - tStart) / WINDOW_S;
       ctx.strokeStyle = "#e6e9ed"; ctx.lineWidth = 1;
       ctx.strokeRect(px0 + 0.5, py0 + 0.5, px1 - px0, py1 - py0);
-      // Second grid lines every 2 s.
       ctx.strokeStyle = "#f1f3f5";
-      for (let s = Math.ceil(tStart / 2) * 2; s < tEnd; s += 2) {  // grid fixed to the clock
-        const gx = px0 + (px1 - px0) * (s - tStart) / WINDOW_S;
+      for (let s = -WINDOW_S + GRID_S; s < 0; s += GRID_S) {
+        const gx = xOf(tEnd + s);
         ctx.beginPath(); ctx.moveTo(gx + 0.5, py0); ctx.lineTo(gx + 0.5, py1); ctx.stroke();
       }
+      ctx.setLineDash([3, 3]);
+      ctx.strokeStyle = "#9aa5b1";
+      for (const b of bounds) {
+        const bx = xOf(b.s);
+        ctx.beginPath(); ctx.moveTo(bx + 0.5, py0); ctx.lineTo(bx + 0.5, py1); ctx.stroke();
+      }
+      ctx.setLineDash([]);
       ctx.fillStyle = "#4b545e";
+      ctx.textAlign = "left";
       ctx.fillText(meta.pair_names[i], px0, y0 + 2);
+      if (i % cols === 0) {  // trial names once per row, at their boundary, where there is room
+        ctx.fillStyle = "#6b7480";
+        let free = -Infinity;
+        for (const b of bounds) {
+          const bx = xOf(b.s) + 3;
+          if (bx < free) continue;
+          ctx.fillText(b.trial, bx, py0 + 2);
+          free = bx + ctx.measureText(b.trial).width + 6;
+        }
+      }
+      if (Math.floor(i / cols) === rows - 1 || i + cols >= n) {  // time labels under the last row
+        ctx.fillStyle = "#8a939e";
+        ctx.font = "10px system-ui, sans-serif";
+        for (let k = 0; k < ticks.length; k++) {
+          const s = -WINDOW_S + k * TICK_S;
+          ctx.textAlign = k === 0 ? "left" : k === ticks.length - 1 ? "right" : "center";
+          ctx.fillText(ticks[k], xOf(tEnd + s), py1 + 2);
+        }
+        ctx.font = "11px system-ui, sans-serif";
+        ctx.textAlign = "left";
+      }
       let lo = Infinity, hi = -Infinity, last = null;
       for (const f of series) {
         const v = f[mode][i];
         if (isNum(v)) { lo = Math.min(lo, v); hi = Math.max(hi, v); last = v; }
       }
       if (!isFinite(lo)) {
+        spans.push(null);
         ctx.fillStyle = "#a0a8b2";
-        ctx.fillText(calibrated && fr.length ? "no reference yet" : "no data", px0 + 4, py0 + 4);
+        ctx.fillText(calibrated && fr.length ? "no reference yet" : "no data", px0 + 4, py0 + 14);
         continue;
       }
-      // Autoscale per pair with a floor on the span (1 fF raw, 0.1 % calibrated).
-      const minSpan = calibrated ? 1e-3 : 1e-3;
-      let span = hi - lo;
-      if (span < minSpan) { const c = (hi + lo) / 2; lo = c - minSpan / 2; hi = c + minSpan / 2; span = minSpan; }
-      lo -= 0.08 * span; hi += 0.08 * span;
-      const val = calibrated ? (last >= 0 ? "+" : "") + (100 * last).toFixed(1) + " %"
+      const range = chartRange(lo, hi, calibrated);
+      spans.push(range.span);
+      // The newest value, and the span of the vertical scale (↕) next to it.
+      const val = calibrated ? (last >= 0 ? "+" : "") + (100 * last).toFixed(2) + " %"
                              : last.toFixed(3);
+      const spanText = " ↕" + (calibrated ? (100 * range.span).toFixed(1) + " %"
+                                          : (1000 * range.span).toFixed(0) + " fF");
       ctx.textAlign = "right";
-      ctx.fillText(val, px1, y0 + 2);
       ctx.fillStyle = "#a0a8b2";
-      ctx.fillText("Δ " + (calibrated ? (100 * span).toFixed(2) + " %" : (1000 * span).toFixed(1) + " fF"),
-                   px1, py1 + 2);
+      ctx.fillText(spanText, px1, y0 + 2);
+      ctx.fillStyle = "#4b545e";
+      ctx.fillText(val, px1 - ctx.measureText(spanText).width, y0 + 2);
       ctx.textAlign = "left";
       ctx.strokeStyle = pairColor(meta, i);
       ctx.lineWidth = 1.4;
@@ -552,13 +748,14 @@
         if (!isNum(v)) { pen = false; continue; }
         if (f.w - prevW > GAP_MS) pen = false;  // no line across a gap in the stream
         prevW = f.w;
-        const x = px0 + (px1 - px0) * (f.w / 1000 - tStart) / WINDOW_S;
-        const y = py1 - (py1 - py0) * (v - lo) / (hi - lo);
+        const x = xOf(f.w / 1000);
+        const y = py1 - (py1 - py0) * (v - range.lo) / (range.hi - range.lo);
         if (pen) ctx.lineTo(x, y); else ctx.moveTo(x, y);
         pen = true;
       }
       ctx.stroke();
     }
+    state.chartSpans = spans;
   }
 
   let lastDraw = 0;
@@ -580,16 +777,23 @@
       const errEl = $("engine-error");
       errEl.hidden = !d.engine_error;
       errEl.textContent = d.engine_error ? "engine: " + d.engine_error : "";
+      if (typeof d.engine_state === "string" && d.engine_state !== state.engine) {
+        state.engine = d.engine_state;
+        updateBadge();
+      }
       if (performance.now() - state.lastFrameWall > 1500) updateStats(s);
     } catch (e) { /* server gone: the websocket reports it */ }
   }
   function updateAge() {
+    updateBadge();
     if (!state.lastFrameWall) return;
     const age = (performance.now() - state.lastFrameWall) / 1000;
     setText("frame-age", age < 1 ? "" : age.toFixed(0) + " s ago");
   }
 
   // ------------------------------------------------------------------ start
+  // For the browser test: the page's state and its pure helpers.
+  window.ectskinDashboard = { state, badge, chartRange, MIN_SPAN_RAW_PF, MIN_SPAN_CALIBRATED };
   document.querySelectorAll('input[name="chart-mode"]').forEach((el) => {
     el.addEventListener("change", () => { state.mode = el.value; state.chartDirty = true; });
   });

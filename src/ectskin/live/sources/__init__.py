@@ -28,6 +28,7 @@ spec string: ``replay:FILE``, ``sim``, ``lsl:NAME``, ``serial:PORT[@BAUD]`` or `
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 from typing import Any
@@ -37,7 +38,13 @@ from ectskin.layout import SensorLayout
 from ectskin.live.sources.base import COUNTERS, Frame, FrameSource
 from ectskin.live.sources.lines import LineSource
 from ectskin.live.sources.lsl import LslSource
-from ectskin.live.sources.protocol import MAX_LINE_BYTES, LineError, ParsedLine, parse_line
+from ectskin.live.sources.protocol import (
+    MAX_LINE_BYTES,
+    MAX_SEQ,
+    LineError,
+    ParsedLine,
+    parse_line,
+)
 from ectskin.live.sources.replay import ReplaySource
 from ectskin.live.sources.serial import SerialSource
 from ectskin.live.sources.sim import TwinSource, TwinStep, demo_scenario
@@ -57,16 +64,22 @@ def open_source(
     loop: bool = False,
     paced: bool = True,
     seed: int = 0,
+    allow_partial: bool = False,
     **kwargs: Any,
 ) -> FrameSource:
     """Open a source from a spec string.
 
-    ``replay:FILE`` (``speed``, ``loop``), ``sim`` (the digital twin; ``paced``, ``seed``),
+    ``replay:FILE`` (``speed``, ``loop``, ``allow_partial``: also a recording left incomplete by
+    a crash), ``sim`` (the digital twin; ``paced``, ``seed``),
     ``lsl:NAME``, ``serial:PORT[@BAUD]`` (default 115200 baud), ``tcp:HOST:PORT``. ``layout``
     gives the channel count for lsl/serial/tcp (default: the paper's layout); a replay uses the
     recording's own layout. Extra keyword arguments go to the source class.
     """
     if not isinstance(spec, str) or not (m := _SPEC.match(spec.strip())):
+        if isinstance(spec, str) and _looks_like_a_file(spec):
+            raise EctskinError(
+                f"Invalid source {spec!r}: to replay a recording, write replay:{spec}"
+            )
         raise EctskinError(f"Invalid source {spec!r}: expected one of {SOURCE_SPECS}")
     kind, rest = m.group("kind"), m.group("rest")
     check_option("source kind", kind, SOURCE_KINDS)
@@ -80,7 +93,7 @@ def open_source(
         path = Path(rest)
         if not path.is_file():
             raise EctskinError(f"source {spec!r}: no such recording file {str(path)!r}")
-        return ReplaySource(path, speed=speed, loop=loop, **kwargs)
+        return ReplaySource(path, speed=speed, loop=loop, allow_partial=allow_partial, **kwargs)
     if kind == "lsl":
         return LslSource(rest, layout=layout, **kwargs)
     if kind == "serial":
@@ -88,6 +101,36 @@ def open_source(
         return SerialSource(port, baud, layout=layout, **kwargs)
     host, port = _tcp_spec(spec, rest)
     return TcpSource(host, port, layout=layout, **kwargs)
+
+
+def _looks_like_a_file(spec: str) -> bool:
+    """A spec that is a recording's path rather than a source (``--source s.h5``)."""
+    return spec.lower().endswith((".h5", ".hdf5", ".hdf")) or Path(spec).is_file()
+
+
+def source_files(spec: str) -> list[Path]:
+    """The files that the source ``spec`` reads (``replay:FILE``; none for the others)."""
+    m = _SPEC.match(spec.strip()) if isinstance(spec, str) else None
+    if m and m.group("kind") == "replay" and m.group("rest"):
+        return [Path(m.group("rest"))]
+    return []
+
+
+def check_not_input(out: str | os.PathLike, spec: str, option: str) -> None:
+    """Refuse to write ``out`` (given as ``option``, e.g. ``--record``) when it is a file that
+    source ``spec`` reads: no command writes onto its own input, even when told to overwrite."""
+    out_path = Path(out)
+    for f in source_files(spec):
+        same = (
+            os.path.samefile(out_path, f)
+            if out_path.exists() and f.exists()
+            else out_path.resolve() == f.resolve()
+        )
+        if same:
+            raise EctskinError(
+                f"{option} {str(out)!r} is the file the source {spec!r} reads; refusing to write "
+                "onto the command's own input (choose another output file)"
+            )
 
 
 def _serial_spec(spec: str, rest: str) -> tuple[str, int]:
@@ -116,6 +159,7 @@ def _tcp_spec(spec: str, rest: str) -> tuple[str, int]:
 __all__ = [
     "COUNTERS",
     "MAX_LINE_BYTES",
+    "MAX_SEQ",
     "SOURCE_KINDS",
     "SOURCE_SPECS",
     "Frame",
@@ -129,7 +173,9 @@ __all__ = [
     "TcpSource",
     "TwinSource",
     "TwinStep",
+    "check_not_input",
     "demo_scenario",
     "open_source",
     "parse_line",
+    "source_files",
 ]

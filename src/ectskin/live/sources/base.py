@@ -32,9 +32,10 @@ class Frame:
     seconds on the source clock (the device timestamp if given, else arrival time since the source
     opened); ``capacitance`` is (n_pairs,) float64 pF with NaN for masked channels; ``markers`` is
     (n_markers, 3) mm or None; ``label`` the ground-truth class when the source knows it.
-    ``trial`` names the trial the frame belongs to when the source knows it (replay), and
-    ``arrival`` is the ``time.perf_counter()`` at which the frame entered the program (the start of
-    the engine's latency measurement).
+    ``trial`` names the trial the frame belongs to when the source knows it (replay, sim), and
+    ``inflation`` the chambers' inflation (ml) when the source knows it (replay, sim; None when
+    unknown). ``arrival`` is the ``time.perf_counter()`` at which the frame entered the program
+    (the start of the engine's latency measurement).
     """
 
     seq: int
@@ -44,6 +45,7 @@ class Frame:
     label: int | None = None
     trial: str | None = None
     arrival: float = field(default_factory=time.perf_counter)
+    inflation: tuple[float, ...] | None = None
 
 
 class FrameSource:

@@ -32,39 +32,45 @@ class LineSource(FrameSource):
         self._t0 = time.perf_counter()
 
     def _feed(self, data: bytes) -> Iterator[Frame]:
-        """Split ``data`` into lines and parse the complete ones."""
+        """Split ``data`` into lines and parse the complete ones.
+
+        An over-long line is one problem whatever its length: it is counted (and numbered) once,
+        when the buffer first exceeds :data:`MAX_LINE_BYTES`; the rest of it, up to its newline,
+        is discarded without being buffered.
+        """
+        if self._skip_to_newline:  # inside the rest of an over-long line
+            nl = data.find(b"\n")
+            if nl < 0:
+                return
+            data = data[nl + 1 :]
+            self._skip_to_newline = False
         self._buf += data
         while True:
             nl = self._buf.find(b"\n")
             if nl < 0:
                 if len(self._buf) > MAX_LINE_BYTES:
-                    self._line_no += 1
-                    self._data_no += 1
-                    self._problem(
-                        "malformed",
-                        f"{self.name} line {self._line_no}: longer than {MAX_LINE_BYTES} bytes; "
-                        "discarded",
-                    )
+                    self._overlong()
                     self._buf.clear()
                     self._skip_to_newline = True
                 return
+            if nl > MAX_LINE_BYTES:
+                self._overlong()
+                del self._buf[: nl + 1]
+                continue
             raw = bytes(self._buf[:nl])
             del self._buf[: nl + 1]
-            if self._skip_to_newline:
-                self._skip_to_newline = False
-                continue
-            if nl > MAX_LINE_BYTES:
-                self._line_no += 1
-                self._data_no += 1
-                self._problem(
-                    "malformed",
-                    f"{self.name} line {self._line_no}: longer than "
-                    f"{MAX_LINE_BYTES} bytes; discarded",
-                )
-                continue
             frame = self._parse(raw)
             if frame is not None:
                 yield frame
+
+    def _overlong(self) -> None:
+        """Count one over-long line (a data line: it takes a frame number)."""
+        self._line_no += 1
+        self._data_no += 1
+        self._problem(
+            "malformed",
+            f"{self.name} line {self._line_no}: longer than {MAX_LINE_BYTES} bytes; discarded",
+        )
 
     def _drop_partial(self, why: str) -> None:
         """A connection ended in the middle of a line: that line is lost (counted malformed)."""

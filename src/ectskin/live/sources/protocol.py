@@ -17,6 +17,10 @@ from ectskin._check import EctskinError
 
 #: The longest line the protocol allows, in bytes (a longer one is discarded as malformed).
 MAX_LINE_BYTES = 65536
+#: The largest ``seq`` the protocol allows: 2**53 - 1, the largest integer every JSON reader (the
+#: dashboard's JavaScript included) keeps exact. A larger one is a malformed line, so one garbled
+#: counter cannot add 1e23 frames to ``seq_gaps``.
+MAX_SEQ = 2**53 - 1
 
 _KEYS = ("t", "seq", "label", "markers")
 
@@ -87,24 +91,35 @@ def _parse_field(key: str, value: str, n_markers: int, where: str) -> Any:
             t = float(value)
         except ValueError:
             raise LineError(
-                f"{where}: field 't' must be a number of seconds, got {value!r}"
+                f"{where}: field 't' must be a number of seconds, got {_quote(value)}"
             ) from None
         if not math.isfinite(t):
-            raise LineError(f"{where}: field 't' must be finite, got {value!r}")
+            raise LineError(f"{where}: field 't' must be finite, got {_quote(value)}")
         return t
     if key in ("seq", "label"):
         try:
             n = int(value)
         except ValueError:
-            raise LineError(f"{where}: field {key!r} must be an integer, got {value!r}") from None
+            raise LineError(
+                f"{where}: field {key!r} must be an integer, got {_quote(value)}"
+            ) from None
         if n < 0:
-            raise LineError(f"{where}: field {key!r} must be >= 0, got {value!r}")
+            raise LineError(f"{where}: field {key!r} must be >= 0, got {_quote(value)}")
+        if key == "seq" and n > MAX_SEQ:
+            raise LineError(
+                f"{where}: field 'seq' must be at most {MAX_SEQ} (2**53 - 1), got {_quote(value)}"
+            )
         return n
     # markers
     m = _parse_values(
         value, 3 * n_markers, f"{where}: field 'markers'", "coordinate", allow_nan=True
     )
     return m.reshape(n_markers, 3)
+
+
+def _quote(text: str, limit: int = 40) -> str:
+    """``repr`` of a field value for a message, cut to ``limit`` characters (a line may hold 64 kB)."""
+    return repr(text) if len(text) <= limit else repr(text[:limit]) + f"… ({len(text)} characters)"
 
 
 def _parse_values(text: str, n: int, where: str, what: str, *, allow_nan: bool) -> np.ndarray:

@@ -19,7 +19,8 @@ class ReplaySource(FrameSource):
     ``speed=1.0`` paces frames by their timestamps (real time), ``speed=k`` k times faster,
     ``speed=math.inf`` as fast as possible. Trials play in file order (``trials`` selects names);
     between trials one frame period passes. ``loop=True`` starts again after the last trial
-    (``seq`` keeps counting). ``Frame.t`` is the trial's own timestamp, ``Frame.trial`` its name.
+    (``seq`` keeps counting). ``Frame.t`` is the trial's own timestamp, ``Frame.trial`` its name,
+    ``Frame.inflation`` its inflation (None when the recording does not say).
     """
 
     def __init__(
@@ -71,6 +72,7 @@ class ReplaySource(FrameSource):
                 cap = trial.capacitance
                 labels = trial.labels
                 markers = trial.markers
+                inflation = tuple(float(v) for v in trial.inflation) or None
                 for i in range(trial.n_frames):
                     if self._closed.is_set():
                         return
@@ -87,6 +89,7 @@ class ReplaySource(FrameSource):
                         markers=None if markers is None else markers[i],
                         label=int(labels[i]),
                         trial=trial.name,
+                        inflation=inflation,
                     )
                     seq += 1
                 virtual += period

@@ -1,17 +1,32 @@
 """The digital twin as a live source (``sim``): a scripted or random scenario of touches and
-inflations played through an object with the ``LiveTwin`` protocol (:mod:`ectskin.twin.live`)."""
+inflations played through an object with the ``LiveTwin`` protocol (:mod:`ectskin.twin.live`).
+
+Every step of the scenario is a trial of its own (``Frame.trial`` = ``sim_0000``, ``sim_0001``…),
+and :meth:`TwinSource.trial_info` tells the recorder its inflation and region, so a recorded
+trial's metadata matches its frames' labels. The default scenario starts at rest (no touch, no
+inflation) for :data:`REST_S` seconds: the state the live engine's touch reference must be
+captured in (paper Eq. 2).
+"""
 
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ectskin._check import EctskinError
 from ectskin.layout import SensorLayout
 from ectskin.live.sources.base import Frame, FrameSource
+
+#: Seconds the default scenario rests (untouched, uninflated) before its first touch: enough for
+#: the live engine's default reference capture (30 frames = 1 s) with room to spare.
+REST_S = 2.0
+#: Steps whose trial info the source remembers (the recorder asks shortly after a step starts).
+_KEEP_STEPS = 1024
 
 
 @dataclass(frozen=True)
@@ -30,11 +45,15 @@ def demo_scenario(
     seed: int = 0,
     step_s: float = 3.0,
     levels_ml: Sequence[float] = (0.0, 10.0, 20.0),
+    rest_s: float = REST_S,
 ) -> Iterator[TwinStep]:
-    """An endless random scenario: a new touch (or a lift) every ``step_s`` s, a new inflation
-    state every third step; forces 0.5–2 N. Seeded, so a run is reproducible."""
+    """An endless random scenario: first ``rest_s`` s at rest (no touch, no inflation: the state
+    the live reference is captured in), then a new touch (or a lift) every ``step_s`` s and a new
+    inflation state every third step; forces 0.5–2 N. Seeded, so a run is reproducible."""
     rng = np.random.default_rng(seed)
     infl = (0.0, 0.0, 0.0)
+    if rest_s > 0:
+        yield TwinStep(rest_s, infl, None)
     k = 0
     while True:
         if k % 3 == 0 and k:
@@ -50,9 +69,12 @@ class TwinSource(FrameSource):
 
     ``scenario`` is an iterable of :class:`TwinStep` (default :func:`demo_scenario`); when it ends,
     the source ends. ``paced=True`` delivers frames at the twin's frame rate, else as fast as the
-    twin computes them. ``Frame.t = seq / frame_rate_hz`` (the twin's clock). A new
-    (inflation, touch) state costs the twin some method-of-moments solves (then cached); a paced
-    twin then resumes at its frame rate instead of bursting to catch up.
+    twin computes them. A new (inflation, touch) state costs the twin some method-of-moments
+    solves (then cached); a paced twin then resumes at its frame rate instead of bursting to catch
+    up, and ``Frame.t`` (seconds since the source started) shows the pause as a gap, as a
+    device's clock would, so the timestamps say how many frames per second were really
+    delivered. Unpaced, ``Frame.t = seq / frame_rate_hz``. Each step is a trial
+    (``Frame.trial``, described by :meth:`trial_info`) and frames carry its inflation.
     """
 
     name = "sim"
@@ -83,13 +105,35 @@ class TwinSource(FrameSource):
         self.scenario = (
             iter(scenario) if scenario is not None else demo_scenario(self.layout, seed=seed)
         )
+        self._steps: OrderedDict[str, TwinStep] = OrderedDict()
+
+    def trial_info(self, name: str) -> dict[str, Any]:
+        """Inflation (ml), region and meta of the step that trial ``name`` plays (for the
+        recorder): region 0 and ``kind`` "no_contact" for a step without touch."""
+        step = self._steps.get(name)
+        if step is None:
+            raise EctskinError(f"{self.name}: no step named {name!r} (only the last ones are kept)")
+        touch = step.region is not None and step.region != 0
+        meta: dict[str, Any] = {"kind": "touch" if touch else "no_contact", "source": "sim"}
+        if touch:
+            meta["force_n"] = float(step.force_n)
+        return {
+            "inflation": tuple(step.inflation_ml),
+            "region": int(step.region or 0),
+            "meta": meta,
+        }
 
     def _frames(self) -> Iterator[Frame]:
         period = 1.0 / self.frame_rate_hz
-        start = time.perf_counter()
+        start = start0 = time.perf_counter()
         seq = 0
-        for step in self.scenario:
-            self.twin.set_inflation(tuple(step.inflation_ml))
+        for k, step in enumerate(self.scenario):
+            trial = f"sim_{k:04d}"
+            self._steps[trial] = step
+            if len(self._steps) > _KEEP_STEPS:
+                self._steps.popitem(last=False)
+            inflation = tuple(float(v) for v in step.inflation_ml)
+            self.twin.set_inflation(inflation)
             self.twin.set_touch(step.region, step.force_n)
             for _ in range(max(1, int(round(step.duration_s * self.frame_rate_hz)))):
                 if self._closed.is_set():
@@ -105,9 +149,11 @@ class TwinSource(FrameSource):
                 cap, markers, label = self.twin.next_frame()
                 yield Frame(
                     seq=seq,
-                    t=seq * period,
+                    t=(start - start0) + seq * period,
                     capacitance=np.asarray(cap, dtype=np.float64),
                     markers=None if markers is None else np.asarray(markers, dtype=np.float64),
                     label=None if label is None else int(label),
+                    trial=trial,
+                    inflation=inflation,
                 )
                 seq += 1
