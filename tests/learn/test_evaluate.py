@@ -204,3 +204,25 @@ def test_figures_draw_and_return_figures(tmp_path):
     assert len(fig.axes) == 3
     with pytest.raises(EctskinError, match="shape"):
         plot_marker_trajectory(t, np.zeros((29, 3)), np.zeros((30, 3)))
+
+
+def test_a_trial_region_outside_the_layout_is_refused_naming_the_trial(
+    tmp_path, touch_run, make_recording
+):
+    """Defect 17: a trial with region 500 on an 18-region layout was accepted by train and
+    evaluate (and stratified the split by it). Catches removing ``check_regions`` from the data
+    sets."""
+    from dataclasses import replace
+
+    rec = make_recording(n_frames=40, regions=(1, 5, 10, 14), occluded=(), no_markers=())
+    bad = replace(rec.trials[3], region=500)
+    rec = replace(rec, trials=[*rec.trials[:3], bad, *rec.trials[4:]])
+    path = tmp_path / "bad.h5"
+    write_recording(rec, path)
+    msg = rf"trial '{bad.name}': region 500 is not a region of layout .*1\.\.18, or 0"
+    for task in ("touch", "track"):
+        with pytest.raises(EctskinError, match=msg):
+            train_from_recording(task, path, tmp_path / f"new_{task}", TrainConfig(progress=False))
+        assert not (tmp_path / f"new_{task}").exists()
+    with pytest.raises(EctskinError, match=msg):
+        evaluate_run(touch_run, path, write=False)
