@@ -428,3 +428,24 @@ def test_progress_bars_on_a_tty_and_epoch_logs_otherwise(tmp_path, monkeypatch, 
     with caplog.at_level(logging.INFO, logger="ectskin.learn.engine"):
         train("touch", tr, va, tmp_path / "c", profile="quick", epochs=2, progress=False)
     assert not [r for r in caplog.records if r.getMessage().startswith("epoch")]
+
+
+def test_training_says_its_profile_and_warns_of_the_paper_profile_on_a_cpu(tmp_path, caplog, blobs):
+    """``ectskin train`` defaults to the paper's profile, meant for a GPU: on a CPU it now says
+    which profile runs, warns, and estimates the time left after the first epoch. Catches
+    removing the warning or the estimate."""
+    import logging
+
+    tr, va = blobs(6, 20, seed=0), blobs(2, 20, seed=1)
+    with caplog.at_level(logging.INFO, logger="ectskin.learn.train"):
+        train("touch", tr, va, tmp_path / "a", profile="paper", epochs=3, progress=False)
+    text = "\n".join(r.getMessage() for r in caplog.records)
+    assert "training touch with profile 'paper' (3 epochs, batch 256) on cpu" in text
+    warning = [r for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warning) == 1 and "--profile quick is the setting for a CPU" in text
+    assert "epoch 1 took" in text and "left for the other 2 epoch(s)" in text
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="ectskin.learn.train"):
+        train("touch", tr, va, tmp_path / "b", profile="quick", epochs=1, progress=False)
+    assert "with profile 'quick'" in caplog.text
+    assert not [r for r in caplog.records if r.levelno == logging.WARNING]
