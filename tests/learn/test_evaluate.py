@@ -274,20 +274,19 @@ def test_figures_in_the_format_and_resolution_asked_for(tmp_path, touch_run, cli
     assert (tmp_path / "pdf" / "fig7_confusion.pdf").read_bytes()[:5] == b"%PDF-"
     m = json.loads((tmp_path / "pdf" / "metrics.json").read_text())
     assert set(m["touch"]["figures"]) == {"fig7_confusion.pdf", "learning_curves.pdf"}
-    evaluate_run(touch_run, baselines=False, out=tmp_path / "svg", figure_format="svg")
-    assert (tmp_path / "svg" / "fig7_confusion.svg").read_text().lstrip().startswith("<?xml")
-    from PIL import Image
-
-    sizes = {}
-    for dpi in (60, 120):
-        evaluate_run(touch_run, baselines=False, out=tmp_path / f"d{dpi}", write=False, dpi=dpi)
-        with Image.open(tmp_path / f"d{dpi}" / "fig7_confusion.png") as im:
-            sizes[dpi] = im.size
-    assert sizes[120][0] == pytest.approx(2 * sizes[60][0], abs=2)
-    # the command refuses to replace, naming the flag, and replaces with it
+    # the command refuses to replace them, naming the flag, before any work
     assert cli(argv + [str(tmp_path / "pdf")]) == 2
     err = capsys.readouterr().err
     assert "metrics.json and 2 more: written by an earlier evaluation; pass --overwrite" in err
-    assert cli(argv + [str(tmp_path / "pdf"), "--overwrite"]) == 0
     assert cli(["evaluate", str(touch_run), "--dpi", "5"]) == 2
     assert "dpi must be an integer from 30 to 1200, got 5" in capsys.readouterr().err
+    evaluate_run(touch_run, baselines=False, out=tmp_path / "svg", figure_format="svg", write=False)
+    assert (tmp_path / "svg" / "fig7_confusion.svg").read_text().lstrip().startswith("<?xml")
+    from PIL import Image
+
+    from ectskin.viz import plot_confusion
+
+    evaluate_run(touch_run, baselines=False, out=tmp_path / "png", write=False, dpi=60)
+    width_in = plot_confusion(np.eye(19, dtype=int)).get_size_inches()[0]
+    with Image.open(tmp_path / "png" / "fig7_confusion.png") as im:
+        assert im.size[0] == pytest.approx(width_in * 60, abs=2)
