@@ -260,6 +260,10 @@ def test_evaluating_other_data_never_replaces_earlier_results(tmp_path, touch_ru
         "learning_curves.png",
         "metrics.json",
     ]
+    # out=RUN (what reproduce passes, whose folder may have moved): plain names in the run folder
+    m = evaluate_run(touch_run, other, baselines=False, out=touch_run, overwrite=True)
+    assert set(m["touch"]["figures"]) == {"fig7_confusion.png", "learning_curves.png"}
+    assert json.loads((touch_run / "metrics.json").read_text())["data"] == str(other)
     # a run folder holding evaluations and figures of any format is still resumed by train
     (touch_run / "fig7_confusion.svg").write_text("<svg/>")
     config = TrainConfig(profile="quick", epochs=3, counts=(6, 2, 2), progress=False)

@@ -56,7 +56,7 @@ __all__ = [
 ]
 
 #: The stem of the learning-curves figure ``evaluate_run`` writes beside the task's figures
-#: (with the run's own evaluation only: the curves belong to the run, not to the data).
+#: (not with an evaluation on other data in the run folder: the curves belong to the run).
 CURVES_FIGURE = "learning_curves"
 #: checkpoint ``extra`` fields copied into the metrics' ``training``
 EXTRA_TRAINING_FIELDS = ("device", "profile", "seed", "world_size")
@@ -139,7 +139,9 @@ def evaluation_files(
     own = _is_own_data(data, run)
     suffix = "" if own or out is not None else f"_{_data_stem(data)}"
     folder = run.path if out is None else Path(out)
-    stems = list(run.task.figure_captions) + ([CURVES_FIGURE] if own and run.metrics_rows else [])
+    # the learning curves belong to the run: drawn unless this is a side evaluation in its folder
+    curves = [CURVES_FIGURE] if not suffix and run.metrics_rows else []
+    stems = list(run.task.figure_captions) + curves
     figs = (
         {stem: folder / figure_file(f"{stem}{suffix}", figure_format) for stem in stems}
         if figures

@@ -169,7 +169,8 @@ def evaluate_runs(
     """Steps "evaluate_<run>": each run's ``metrics.json`` on its test split (baselines on the
     same split for the two main runs), with its figures in ``config.figure_format``. Returns
     {run: its metrics.json}. The runner decides what may be replaced (an interrupted step, or
-    ``force``), so the evaluation itself overwrites."""
+    ``force``), so the evaluation itself overwrites; it writes into the run folder under the
+    plain names even when the folder was moved (``split.json`` then names the old data path)."""
     results: dict[str, dict[str, Any]] = {}
     for name in config.run_names:
         run_dir = runner.out / "runs" / name
@@ -186,6 +187,7 @@ def evaluate_runs(
             baselines=with_baselines,
             figures=True,
             seed=config.seed,
+            out=run_dir,
             overwrite=True,
             figure_format=config.figure_format,
             dpi=config.dpi,
