@@ -353,9 +353,9 @@ def _write_header(
     )
     if d.device.type == "cpu" and job.profile in GPU_PROFILES:
         logger.warning(
-            "profile %r holds the paper's settings, meant for a GPU: on this CPU it can take "
-            "hours (the time left is logged after the first epoch); --profile quick is the "
-            "setting for a CPU",
+            "profile %r holds the paper's settings, meant for a GPU: on a CPU they take hours "
+            "on the paper's data set (the time left is logged after the first epoch); "
+            "--profile quick is the setting for a CPU",
             job.profile,
         )
 
