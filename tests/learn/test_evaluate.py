@@ -204,3 +204,93 @@ def test_figures_draw_and_return_figures(tmp_path):
     assert len(fig.axes) == 3
     with pytest.raises(EctskinError, match="shape"):
         plot_marker_trajectory(t, np.zeros((29, 3)), np.zeros((30, 3)))
+
+
+def test_a_trial_region_outside_the_layout_is_refused_naming_the_trial(
+    tmp_path, touch_run, make_recording
+):
+    """Defect 17: a trial with region 500 on an 18-region layout was accepted by train and
+    evaluate (and stratified the split by it). Catches removing ``check_regions`` from the data
+    sets."""
+    from dataclasses import replace
+
+    rec = make_recording(n_frames=40, regions=(1, 5, 10, 14), occluded=(), no_markers=())
+    bad = replace(rec.trials[3], region=500)
+    rec = replace(rec, trials=[*rec.trials[:3], bad, *rec.trials[4:]])
+    path = tmp_path / "bad.h5"
+    write_recording(rec, path)
+    msg = rf"trial '{bad.name}': region 500 is not a region of layout .*1\.\.18, or 0"
+    for task in ("touch", "track"):
+        with pytest.raises(EctskinError, match=msg):
+            train_from_recording(task, path, tmp_path / f"new_{task}", TrainConfig(progress=False))
+        assert not (tmp_path / f"new_{task}").exists()
+    with pytest.raises(EctskinError, match=msg):
+        evaluate_run(touch_run, path, write=False)
+
+
+def test_evaluating_other_data_never_replaces_earlier_results(tmp_path, touch_run, data_file):
+    """Defect 16: ``evaluate RUN --data other.h5`` replaced RUN/metrics.json (the run's own test
+    results) and its figures. Now other data goes to metrics_<stem>.json and suffixed figures,
+    and no evaluation replaces an earlier one without ``overwrite``. Catches writing every
+    evaluation to metrics.json, and a missing existence check."""
+    own = evaluate_run(touch_run, baselines=False)
+    before = {p.name: p.read_bytes() for p in touch_run.iterdir() if p.suffix in (".json", ".png")}
+    assert {"metrics.json", "fig7_confusion.png", "learning_curves.png"} <= set(before)
+    other = tmp_path / "day2.h5"
+    shutil.copyfile(data_file, other)
+    m = evaluate_run(touch_run, other, baselines=False)
+    assert m["data"] == str(other) and set(m["touch"]["figures"]) == {"fig7_confusion_day2.png"}
+    assert json.loads((touch_run / "metrics_day2.json").read_text())["data"] == str(other)
+    assert (touch_run / "fig7_confusion_day2.png").is_file()
+    for name, content in before.items():  # the run's own evaluation is untouched
+        assert (touch_run / name).read_bytes() == content, name
+    # again: refused before any work, naming the file and the flag
+    for data in (other, None):
+        with pytest.raises(
+            EctskinError, match=r"written by an earlier evaluation; pass --overwrite"
+        ):
+            evaluate_run(touch_run, data, baselines=False)
+    again = evaluate_run(touch_run, other, baselines=False, overwrite=True)
+    assert again["touch"]["accuracy"] == m["touch"]["accuracy"] == own["touch"]["accuracy"]
+    # -o/--out: another folder, plain names; the data file named in split.json is "own" data
+    out = tmp_path / "elsewhere"
+    evaluate_run(touch_run, data_file, baselines=False, out=out)
+    assert sorted(p.name for p in out.iterdir()) == [
+        "fig7_confusion.png",
+        "learning_curves.png",
+        "metrics.json",
+    ]
+    # out=RUN (what reproduce passes, whose folder may have moved): plain names in the run folder
+    m = evaluate_run(touch_run, other, baselines=False, out=touch_run, overwrite=True)
+    assert set(m["touch"]["figures"]) == {"fig7_confusion.png", "learning_curves.png"}
+    assert json.loads((touch_run / "metrics.json").read_text())["data"] == str(other)
+    # a run folder holding evaluations and figures of any format is still resumed by train
+    (touch_run / "fig7_confusion.svg").write_text("<svg/>")
+    config = TrainConfig(profile="quick", epochs=3, counts=(6, 2, 2), progress=False)
+    train_from_recording("touch", data_file, touch_run, config)
+
+
+def test_figures_in_the_format_and_resolution_asked_for(tmp_path, touch_run, cli, capsys):
+    argv = ["evaluate", str(touch_run), "--no-baselines", "--format", "pdf", "-o"]
+    assert cli(argv + [str(tmp_path / "pdf")]) == 0
+    names = sorted(p.name for p in (tmp_path / "pdf").iterdir())
+    assert names == ["fig7_confusion.pdf", "learning_curves.pdf", "metrics.json"]
+    assert (tmp_path / "pdf" / "fig7_confusion.pdf").read_bytes()[:5] == b"%PDF-"
+    m = json.loads((tmp_path / "pdf" / "metrics.json").read_text())
+    assert set(m["touch"]["figures"]) == {"fig7_confusion.pdf", "learning_curves.pdf"}
+    # the command refuses to replace them, naming the flag, before any work
+    assert cli(argv + [str(tmp_path / "pdf")]) == 2
+    err = capsys.readouterr().err
+    assert "metrics.json and 2 more: written by an earlier evaluation; pass --overwrite" in err
+    assert cli(["evaluate", str(touch_run), "--dpi", "5"]) == 2
+    assert "dpi must be an integer from 30 to 1200, got 5" in capsys.readouterr().err
+    evaluate_run(touch_run, baselines=False, out=tmp_path / "svg", figure_format="svg", write=False)
+    assert (tmp_path / "svg" / "fig7_confusion.svg").read_text().lstrip().startswith("<?xml")
+    from PIL import Image
+
+    from ectskin.viz import plot_confusion
+
+    evaluate_run(touch_run, baselines=False, out=tmp_path / "png", write=False, dpi=60)
+    width_in = plot_confusion(np.eye(19, dtype=int)).get_size_inches()[0]
+    with Image.open(tmp_path / "png" / "fig7_confusion.png") as im:
+        assert im.size[0] == pytest.approx(width_in * 60, abs=2)

@@ -69,3 +69,12 @@ def test_forward_batches_equals_one_call_and_passes_none(make_c2dt, randomise_he
     norms = forward_batches(model, [x, None], batch_size=2, output=lambda z: z.norm(dim=-1))
     np.testing.assert_allclose(norms, np.linalg.norm(want, axis=-1), rtol=1e-5)
     assert forward_batches(model, [x[:0], None], batch_size=4).shape == (0, 5, 3)
+
+
+def test_predictors_refuse_a_model_for_another_skin(tmp_path, make_touch_mlp, layout):
+    from dataclasses import replace
+
+    save_checkpoint(tmp_path / "model.pt", make_touch_mlp())
+    assert TouchPredictor.from_run(tmp_path, layout=layout).n_classes == 19
+    with pytest.raises(EctskinError, match=r"model\.pt: config field 'n_classes' is 19"):
+        TouchPredictor.from_run(tmp_path, layout=replace(layout, regions=layout.regions[:4]))

@@ -91,3 +91,57 @@ def test_split_names_round_trip():
         split_from_names(stored, names)
     with pytest.raises(EctskinError, match="missing split 'val'"):
         split_from_names({"train": [], "test": []}, names)
+
+
+def _label_patterns(n: int, rng: np.random.Generator) -> dict[str, np.ndarray | None]:
+    """Label patterns a recording can have: none, the paper's (a block of no-contact trials,
+    regions touched equally often), one label, all distinct, one rare label, random labels with
+    more labels than some splits have trials."""
+    paper = np.resize(np.arange(19), n)
+    rare = np.zeros(n, dtype=int)
+    rare[-1] = 7
+    return {
+        "none": None,
+        "paper": np.sort(paper),
+        "one label": np.zeros(n, dtype=int),
+        "all distinct": rng.permutation(n),
+        "one rare": rare,
+        "random": rng.integers(0, max(2, n // 2), n),
+    }
+
+
+@pytest.mark.parametrize(
+    "n, counts",
+    [
+        (189, TOUCH_SPLIT),
+        (146, TRACK_SPLIT),
+        (24, TOUCH_SPLIT),
+        (7, (0.6, 0.2, 0.2)),
+        (3, (1, 1, 1)),
+    ],
+)
+def test_splits_are_trial_exclusive_and_cover_every_trial(n, counts):
+    """Over many seeds and label patterns, stratified or not: train, val and test are pairwise
+    disjoint, together hold every trial exactly once, have the scaled sizes, and survive the
+    round trip through the names split.json stores.
+
+    Catches the audit's mutant: one trial put in two splits with the sizes unchanged (e.g.
+    ``order[-1] = order[0]`` before the order is cut into splits, in the stratified path)."""
+    rng = np.random.default_rng(n)
+    names = [f"trial_{i:03d}" for i in range(n)]
+    want = None
+    for label_name, labels in _label_patterns(n, rng).items():
+        for seed in range(25):
+            s = split_groups(names, counts, seed=seed, stratify=labels)
+            sets = {k: set(s[k].tolist()) for k in ("train", "val", "test")}
+            where = (label_name, seed)
+            assert not sets["train"] & sets["val"], where
+            assert not sets["train"] & sets["test"], where
+            assert not sets["val"] & sets["test"], where
+            assert sets["train"] | sets["val"] | sets["test"] == set(range(n)), where
+            sizes = [len(s[k]) for k in ("train", "val", "test")]
+            assert sum(sizes) == n and all(len(v) == len(s[k]) for k, v in sets.items()), where
+            want = want or sizes
+            assert sizes == want, where  # the sizes depend on the counts only, not the labels
+            back = split_from_names(split_names(s, names), names)
+            assert all(np.array_equal(back[k], s[k]) for k in s), where

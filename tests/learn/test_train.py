@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from ectskin._check import EctskinError
-from ectskin.io import write_recording
+from ectskin.io import read_recording, write_recording
 from ectskin.layout import default_layout
 from ectskin.learn.checkpoint import load_checkpoint, read_checkpoint
 from ectskin.learn.engine import epoch_indices
@@ -263,7 +263,29 @@ def test_track_training_beats_no_motion(tmp_path, displacements, small_c2dt):
     assert best["val_loss"] == pytest.approx(np.mean((pred - va.y) ** 2), rel=1e-4)
 
 
-def test_track_without_prior_and_with_subsampled_epochs(tmp_path, displacements, small_c2dt):
+def test_track_without_prior_and_with_subsampled_epochs(
+    tmp_path, monkeypatch, displacements, small_c2dt
+):
+    """The quick profile's epoch subsampling: each epoch trains on ``samples_per_epoch`` windows,
+    a fresh random subset every epoch, and validates on the same ``val_samples`` windows. The
+    criterion is spied on, so the test fails when training ignores either setting (e.g.
+    ``samples=None`` passed to ``epoch_indices``, or ``val_indices`` given ``None``), whatever
+    the loop does with them."""
+    from ectskin.learn.tasks import TrackCriterion
+
+    seen: list[tuple[str, list[float]]] = []  # ("train" | "val", first value of each window)
+    loss, eval_sums = TrackCriterion.loss, TrackCriterion.eval_sums
+
+    def spy_loss(self, model, batch, rng):
+        seen.append(("train", batch[0][:, 0, 0].tolist()))
+        return loss(self, model, batch, rng)
+
+    def spy_eval(self, model, batch):
+        seen.append(("val", batch[0][:, 0, 0].tolist()))
+        return eval_sums(self, model, batch)
+
+    monkeypatch.setattr(TrackCriterion, "loss", spy_loss)
+    monkeypatch.setattr(TrackCriterion, "eval_sums", spy_eval)
     tr, va = displacements(4, 50, seed=0), displacements(2, 50, seed=1)
     tr.prior = va.prior = False
     s = train(
@@ -272,17 +294,30 @@ def test_track_without_prior_and_with_subsampled_epochs(tmp_path, displacements,
         va,
         tmp_path,
         profile="quick",
-        epochs=2,
+        epochs=3,
         settings={"samples_per_epoch": 64, "val_samples": 30},
         batch_size=32,
         model_options=small_c2dt,
         progress=False,
     )
+    # group the spied batches into epochs: a run of train batches, then a run of val batches
+    epochs: list[dict[str, list[float]]] = []
+    for split, values in seen:
+        if split == "train" and (not epochs or epochs[-1]["val"]):
+            epochs.append({"train": [], "val": []})
+        epochs[-1][split] += values
+    assert len(epochs) == 3
+    assert [len(e["train"]) for e in epochs] == [64, 64, 64]  # not the 200 training windows
+    assert [len(set(e["train"])) for e in epochs] == [64, 64, 64]  # each window once
+    assert len({frozenset(e["train"]) for e in epochs}) == 3  # a fresh subset every epoch
+    assert [len(e["val"]) for e in epochs] == [30, 30, 30]  # not the 100 validation windows
+    assert len({frozenset(e["val"]) for e in epochs}) == 1  # the same subset every epoch
+    assert set(epochs[0]["train"]) <= set(tr.x[:, 0, 0].tolist())
     assert math.isfinite(s["best_val_metric"])
     _, config, _ = load_checkpoint(tmp_path / "model.pt")
     assert config.prior is False
     cfg = json.loads((tmp_path / "config.json").read_text())
-    assert cfg["settings"]["samples_per_epoch"] == 64
+    assert cfg["settings"]["samples_per_epoch"] == 64 and cfg["settings"]["val_samples"] == 30
 
 
 # ============================================================================ sharding
@@ -323,7 +358,11 @@ def test_train_from_recording(tmp_path, recording_file, small_c2dt):
     split = json.loads((tmp_path / "touch" / "split.json").read_text())
     assert s["n_train"] == 6 * 40 and (s["n_val"], s["n_test"]) == (80, 80)
     assert [len(split[k]) for k in ("train", "val", "test")] == [6, 2, 2]
-    assert not set(split["train"]) & set(split["test"]) and split["task"] == "touch"
+    # trial-exclusive: pairwise disjoint, together every trial of the recording
+    parts = [set(split[k]) for k in ("train", "val", "test")]
+    assert all(not a & b for i, a in enumerate(parts) for b in parts[i + 1 :]), split
+    assert set().union(*parts) == {t.name for t in read_recording(data).trials}
+    assert split["task"] == "touch"
     assert split["data"] == str(data.resolve()) and split["split_seed"] == 0
     config = TrainConfig(
         profile="quick",
@@ -389,3 +428,24 @@ def test_progress_bars_on_a_tty_and_epoch_logs_otherwise(tmp_path, monkeypatch, 
     with caplog.at_level(logging.INFO, logger="ectskin.learn.engine"):
         train("touch", tr, va, tmp_path / "c", profile="quick", epochs=2, progress=False)
     assert not [r for r in caplog.records if r.getMessage().startswith("epoch")]
+
+
+def test_training_says_its_profile_and_warns_of_the_paper_profile_on_a_cpu(tmp_path, caplog, blobs):
+    """``ectskin train`` defaults to the paper's profile, meant for a GPU: on a CPU it now says
+    which profile runs, warns, and estimates the time left after the first epoch. Catches
+    removing the warning or the estimate."""
+    import logging
+
+    tr, va = blobs(6, 20, seed=0), blobs(2, 20, seed=1)
+    with caplog.at_level(logging.INFO, logger="ectskin.learn.train"):
+        train("touch", tr, va, tmp_path / "a", profile="paper", epochs=3, progress=False)
+    text = "\n".join(r.getMessage() for r in caplog.records)
+    assert "training touch with profile 'paper' (3 epochs, batch 256) on cpu" in text
+    warning = [r for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warning) == 1 and "--profile quick is the setting for a CPU" in text
+    assert "epoch 1 took" in text and "left for the other 2 epoch(s)" in text
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="ectskin.learn.train"):
+        train("touch", tr, va, tmp_path / "b", profile="quick", epochs=1, progress=False)
+    assert "with profile 'quick'" in caplog.text
+    assert not [r for r in caplog.records if r.levelno == logging.WARNING]

@@ -107,7 +107,9 @@ def test_step_runner_reuses_refuses_and_forces(tmp_path):
     again = StepRunner(tmp_path, force=False)  # a later run reads reproduce.json
     assert again.step("a", {"x": 1}, [target], write("two")) is None
     assert again.reused == ["a"] and target.read_text() == "one"
-    with pytest.raises(EctskinError, match=r"step 'a' would overwrite a.txt.*x: 1 -> 2.*--force"):
+    with pytest.raises(
+        EctskinError, match=r"step 'a' would overwrite a.txt.*x: 1 -> 2.*--overwrite"
+    ):
         again.step("a", {"x": 2}, [target], write("two"))
     assert StepRunner(tmp_path, force=True).step("a", {"x": 2}, [target], write("two")) == "two"
     (tmp_path / "b.txt").write_text("mine")
@@ -189,11 +191,25 @@ def test_reproduce_command_builds_the_config(tmp_path, monkeypatch, capsys):
     argv = ["reproduce", str(tmp_path / "o"), "--threads", "2", "--epochs", "3", "--seed", "4"]
     assert cli(argv + ["--no-robust", "--no-progress", "--force"], monkeypatch) == 0
     assert cli(["demo", "--out", str(tmp_path / "d"), "--threads", "torch"], monkeypatch) == 0
-    c, d = seen
+    argv = ["reproduce", "-o", str(tmp_path / "p"), "--overwrite", "--format", "svg"]
+    assert cli(argv + ["--dpi", "200"], monkeypatch) == 0
+    assert cli(["demo", "-o", str(tmp_path / "e"), "--format", "pdf"], monkeypatch) == 0
+    c, d, r, e = seen
     assert (c.out_dir, c.profile, c.threads, c.epochs, c.seed) == (tmp_path / "o", "paper", 2, 3, 4)
     assert not c.robust and not c.progress and c.force and c.ablations and c.baselines
-    assert (d.out_dir, d.profile, d.threads) == (tmp_path / "d", "quick", None)
+    assert (c.figure_format, c.dpi) == ("png", 150)
+    assert (d.out_dir, d.profile, d.threads, d.force) == (tmp_path / "d", "quick", None, False)
+    assert (r.out_dir, r.force, r.figure_format, r.dpi) == (tmp_path / "p", True, "svg", 200)
+    assert (e.out_dir, e.figure_format) == (tmp_path / "e", "pdf")
     assert "report: " in capsys.readouterr().out
+    # one output, named once; a bad figure option is one clear error before any work
+    assert cli(["reproduce", str(tmp_path / "a"), "-o", str(tmp_path / "b")], monkeypatch) == 2
+    assert "two outputs given" in capsys.readouterr().err
+    assert cli(["reproduce"], monkeypatch) == 2
+    assert "needs an output folder: give -o/--out PATH" in capsys.readouterr().err
+    assert cli(["reproduce", "-o", str(tmp_path / "q"), "--dpi", "0"], monkeypatch) == 2
+    assert "dpi must be an integer from 30 to 1200, got 0" in capsys.readouterr().err
+    assert len(seen) == 4
 
 
 def test_reproduce_end_to_end_reuse_and_force(tmp_path):
@@ -261,7 +277,7 @@ def test_reproduce_end_to_end_reuse_and_force(tmp_path):
     assert json.loads((out / "reproduce.json").read_text())["steps"]["train_track"]["done"]
 
     # other settings: refused without force, redone with it
-    with pytest.raises(EctskinError, match=r"train_touch.*--force"):
+    with pytest.raises(EctskinError, match=r"train_touch.*--overwrite"):
         reproduce(replace(config, epochs=1, ablations=False))
     m3 = reproduce(replace(config, epochs=1, ablations=False, baselines=False, force=True))
     assert "train_touch" not in m3["reused"] and "simulate" in m3["reused"]
@@ -304,7 +320,7 @@ def test_reproduce_trains_evaluates_and_reports_the_robust_model(tmp_path):
     again = reproduce(config)
     assert {"train_touch_robust", "evaluate_touch_robust"} <= set(again["reused"])
     assert again["touch"]["robust"]["accuracy"] == r["accuracy"]
-    with pytest.raises(EctskinError, match=r"train_touch_robust.*--force"):
+    with pytest.raises(EctskinError, match=r"train_touch_robust.*--overwrite"):
         reproduce(replace(config, epochs={"touch": 8, "touch_robust": 2, "track": 1}))
     skipped = reproduce(replace(config, robust=False))
     assert "robust" not in skipped["touch"]
@@ -314,7 +330,7 @@ def test_reproduce_refuses_a_foreign_data_file(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / "data.h5").write_bytes(b"not mine")
-    with pytest.raises(EctskinError, match="data.h5.*--force"):
+    with pytest.raises(EctskinError, match="data.h5.*--overwrite"):
         reproduce(
             ReproduceConfig(out, recording=synthetic_recording(levels=(0.0,)), progress=False)
         )
@@ -329,16 +345,17 @@ def test_demo_and_reproduce_defaults():
     p = argparse.ArgumentParser()
     demo.add_arguments(p)
     args = p.parse_args([])
-    assert (args.out, args.profile, args.force, args.threads) == (
+    assert (args.out, args.profile, args.overwrite, args.threads, args.figure_format) == (
         "demo-output",
         "quick",
         False,
         "auto",
+        "png",
     )
     p = argparse.ArgumentParser()
     reproduce.add_arguments(p)
     args = p.parse_args(["out", "--profile", "quick", "--workers", "2"])
-    assert (args.out_dir, args.profile, args.workers) == ("out", "quick", 2)
+    assert (args.out_positional, args.profile, args.workers) == ("out", "quick", 2)
     with pytest.raises(SystemExit):
         p.parse_args(["out", "--profile", "fast"])
 

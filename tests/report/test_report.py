@@ -82,8 +82,15 @@ def test_write_report_markdown_and_html(tmp_path):
     assert "| metric | paper | this run | baselines |" in md
     assert "| Touch: test accuracy | 99.88 % | 99.51 % |" in md
     assert "| Tracking: average distance AD (Eq. 3) | 2.905 ± 2.207 mm | 1.234 ± 0.987 mm |" in md
-    # margin over the no-motion baseline: 5.678 - 1.234 = 4.444 mm
-    assert "4.444 mm below the 'markers do not move' baseline" in md
+    # margin over the strongest (here the only) tracking baseline: 5.678 - 1.234 = 4.444 mm
+    assert (
+        "C2DT's AD is 4.444 mm below the strongest baseline on the same test split, "
+        "'markers do not move' (1.234 vs 5.678 mm, 78.3 % lower)." in md
+    )
+    assert (
+        "TouchMLP reaches 99.51 %, 8.28 points above the strongest baseline on the same test "
+        "split, 'k-NN' (91.23 %); always predicting the majority class gives 17.19 %." in md
+    )
     assert "without prior knowledge" in md and "+6.266 mm" in md  # 7.5 - 1.234
     assert "1 frame instead of 10" in md
     assert "![Fig. 7: confusion map](fig7.png)" in md
@@ -108,8 +115,77 @@ def test_report_says_when_the_model_loses_to_the_baseline(tmp_path):
         }
     }
     md = write_report(tmp_path, m)[0].read_text()
-    assert "does NOT beat the 'markers do not move' baseline" in md
+    assert (
+        "C2DT does NOT beat the strongest baseline on the same test split, 'markers do not "
+        "move': it loses by 1.000 mm (AD 6.000 vs 5.000 mm, 20.0 % higher)." in md
+    )
     assert "Touch:" not in md  # no touch section without touch metrics
+
+
+def test_every_margin_names_the_strongest_baseline_of_the_same_split(tmp_path):
+    """The report compared C2DT only with "markers do not move" although ridge regression
+    (0.522 mm) beat it (0.524 mm). Catches a margin that picks a fixed baseline (the old
+    ``margin_text``: no_motion for tracking) instead of the strongest one."""
+    track = {
+        "ad_mm_mean": 0.524,
+        "ad_mm_std": 0.3,
+        "baselines": {
+            "no_motion": {"ad_mm_mean": 1.871, "ad_mm_std": 1.0},
+            "mean_pose": {"ad_mm_mean": 2.5, "ad_mm_std": 1.0},
+            "ridge": {"ad_mm_mean": 0.522, "ad_mm_std": 0.3},
+        },
+        "ablations": {"window_1": {"ad_mm_mean": 0.6}, "no_prior": {"ad_mm_mean": 0.51}},
+    }
+    touch = {
+        "accuracy": 0.90,
+        "baselines": {
+            "majority": {"accuracy": 0.17},
+            "knn": {"accuracy": 0.93},
+            "logreg": {"accuracy": 0.88},
+        },
+        "robust": {"accuracy": 0.95},
+    }
+    md = write_report(tmp_path, {"track": track, "touch": touch})[0].read_text()
+    margins = md.split("## Margin over the strongest baseline")[1].split("##")[0]
+    assert (
+        "C2DT does NOT beat the strongest baseline on the same test split, 'ridge regression': "
+        "it loses by 0.002 mm (AD 0.524 vs 0.522 mm, 0.4 % higher); 'markers do not move' "
+        "(the initial coordinates as the answer) gives 1.871 mm." in margins
+    )
+    assert (
+        "TouchMLP does NOT beat the strongest baseline on the same test split, 'k-NN': "
+        "90.00 % against 93.00 % (3.00 points lower); always predicting the majority class "
+        "gives 17.00 %." in margins
+    )
+    assert "+5.00 points versus the paper's recipe, +2.00 points versus 'k-NN'" in margins
+    # every sentence of the section names the strongest baseline of its task
+    sentences = [line for line in margins.splitlines() if line.startswith("- ")]
+    assert len(sentences) == 3
+    assert all("ridge regression" in t or "k-NN" in t for t in sentences)
+    # the ablations are set beside it too; the one that loses to it says so
+    assert (
+        "For scale: the strongest baseline on the same test split, 'ridge regression', reaches "
+        "0.522 mm. Variants that do NOT beat it: 1 frame instead of 10." in md
+    )
+
+
+def test_report_has_contents_and_a_readable_machine_table(tmp_path):
+    """A table of contents links every section; the machine table has a header and writes an
+    empty GPU list as "none (CPU only)" (it showed an empty header and "gpu []")."""
+    metrics = {**METRICS, "machine": {"cpu_count": 2, "gpu": [], "torch": "2.13.0"}}
+    md_path, html_path = write_report(tmp_path, metrics)
+    md, page = md_path.read_text(), html_path.read_text()
+    headings = [line[3:] for line in md.splitlines() if line.startswith("## ")]
+    assert "Results" in headings and "Machine" in headings
+    contents = md.split("**Contents**")[1].split("## ")[0]
+    for title in headings:
+        anchor = title.lower().replace(" ", "-")
+        assert f"- [{title}](#{anchor})" in contents, title
+        assert f'<a href="#{anchor}">' in page and f'<h2 id="{anchor}">' in page, title
+    assert md.index("**Contents**") < md.index("## Results")
+    assert "| component | value |" in md and "|  |  |" not in md
+    assert "| GPU | none (CPU only) |" in md and "| CPU cores | 2 |" in md
+    assert "[]" not in md and "<th></th>" not in page
 
 
 def test_report_errors(tmp_path):

@@ -1,21 +1,34 @@
-"""``ectskin characterize OUT_DIR``: the paper's §2.2 in the twin (Fig. 3, Fig. 4, JSON)."""
+"""``ectskin characterize -o OUT_DIR``: the paper's §2.2 in the twin (Fig. 3, Fig. 4, JSON).
+
+OUT_DIR may also be given as the first argument. Files of an earlier characterisation there are
+replaced only with ``--overwrite`` (this command has no ``--force`` alias: ``--force`` has always
+been short for ``--force-n``).
+"""
 
 from __future__ import annotations
 
 import argparse
 import logging
+from pathlib import Path
 
-from ectskin._check import parse_floats
+from ectskin._check import EctskinError, parse_floats
+from ectskin.commands._options import OVERWRITE_HELP, add_out, resolve_out
 from ectskin.layout import default_layout, load_layout
 
 HELP = "characterise the e-skin on the twin: inflation and touch responses (paper Fig. 3, 4)"
+EXAMPLES = """\
+  ectskin characterize -o char                       # fig3_inflation.png, fig4_touch.png, JSON
+  ectskin characterize -o char --region 5 --overwrite   # touch region 5 in Fig. 4, same folder
+  ectskin characterize -o char10 --inflation 10,10,10 --force-n 0.5
+"""
+#: the files a characterisation writes into its folder
+OUTPUTS = ("fig3_inflation.png", "fig4_touch.png", "characterize.json")
 log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "out_dir", help="folder for fig3_inflation.png, fig4_touch.png, characterize.json"
-    )
+    add_out(p, help=f"folder for {', '.join(OUTPUTS)}", positional=True)
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.add_argument("--inflation", default="20,20,20", help="inflation state, ml (default 20,20,20)")
     p.add_argument(
         "--touch-inflation",
@@ -34,11 +47,19 @@ def run(args: argparse.Namespace) -> int:
     # to import, which `ectskin --help` and the other commands should not wait for
     from ectskin.twin.characterize import characterize
 
+    out = Path(resolve_out(args, "an output folder"))
     layout = load_layout(args.layout) if args.layout else default_layout()
     if args.region is not None:
         layout.region(args.region)  # clear error for an unknown region
+    existing = [out / name for name in OUTPUTS if (out / name).exists()]
+    if existing and not args.overwrite:
+        more = f" and {len(existing) - 1} more" if len(existing) > 1 else ""
+        raise EctskinError(
+            f"{existing[0]}{more}: written by an earlier characterisation; pass --overwrite to "
+            "replace them, or choose another folder with -o/--out"
+        )
     res = characterize(
-        args.out_dir,
+        out,
         inflation=parse_floats("--inflation", args.inflation),
         touch_inflation=parse_floats("--touch-inflation", args.touch_inflation),
         force_n=args.force_n,
@@ -49,6 +70,6 @@ def run(args: argparse.Namespace) -> int:
         "max |change| at %s ml: %.1f %%; written to %s",
         res["inflation_ml"],
         100 * res["inflation_change_max_abs"],
-        args.out_dir,
+        out,
     )
     return 0

@@ -1,7 +1,11 @@
-"""``ectskin evaluate RUN_DIR [--data DATA.h5]``: test-set metrics, baselines and figures of a run.
+"""``ectskin evaluate RUN_DIR [--data DATA.h5] [-o DIR]``: test-set metrics, baselines and
+figures of a run.
 
 Thin wrapper over :func:`ectskin.learn.evaluate.evaluate_run`; writes ``RUN_DIR/metrics.json``
-and the figures (Fig. 7 for touch, Fig. 9 / Fig. 10 for tracking) and prints a summary.
+and the figures (Fig. 7 for touch, Fig. 9 / Fig. 10 for tracking) and prints a summary. On
+another recording (``--data``) it writes ``RUN_DIR/metrics_<data stem>.json`` and suffixed
+figures, so the run's own evaluation is never replaced; ``-o/--out DIR`` writes into DIR.
+Results of an earlier evaluation are replaced only with ``--overwrite``.
 """
 
 from __future__ import annotations
@@ -9,10 +13,36 @@ from __future__ import annotations
 import argparse
 import logging
 
+from ectskin.commands._options import add_overwrite
 from ectskin.learn.profiles import describe_recipe
+from ectskin.viz import DEFAULT_DPI, FIGURE_FORMATS
 
 HELP = "evaluate a trained run on its test split (metrics.json, baselines, figures)"
+EXAMPLES = """\
+  ectskin evaluate runs/touch                          # metrics.json + Fig. 7 in runs/touch
+  ectskin evaluate runs/track --format pdf --overwrite # again, with vector figures
+  ectskin evaluate runs/touch --data day2.h5           # -> runs/touch/metrics_day2.json
+  ectskin evaluate runs/touch --data day2.h5 -o eval/day2 --no-baselines
+"""
 log = logging.getLogger(__name__)
+
+
+def add_figure_options(p: argparse.ArgumentParser) -> None:
+    """``--format png|pdf|svg`` and ``--dpi N`` → ``args.figure_format``, ``args.dpi``."""
+    p.add_argument(
+        "--format",
+        dest="figure_format",
+        choices=FIGURE_FORMATS,
+        default="png",
+        help="file format of the figures (default png; pdf and svg are vector graphics)",
+    )
+    p.add_argument(
+        "--dpi",
+        type=int,
+        default=DEFAULT_DPI,
+        help=f"resolution of the figures in dots per inch (default {DEFAULT_DPI}; in pdf and "
+        "svg only raster parts use it)",
+    )
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -20,10 +50,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--data",
         default=None,
-        help="recording to evaluate on (default: the file named in RUN_DIR/split.json)",
+        help="recording to evaluate on (default: the file named in RUN_DIR/split.json); "
+        "results on another recording go to RUN_DIR/metrics_<its stem>.json",
     )
+    p.add_argument(
+        "-o",
+        "--out",
+        default=None,
+        help="folder for the metrics JSON and the figures (default: RUN_DIR)",
+    )
+    add_overwrite(p, help="replace the results of an earlier evaluation (default: refuse)")
     p.add_argument("--no-baselines", action="store_true", help="skip the baselines")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    add_figure_options(p)
     p.add_argument("--seed", type=int, default=0, help="seed of the baselines' subsampling")
 
 
@@ -75,8 +114,11 @@ def run(args: argparse.Namespace) -> int:
         baselines=not args.no_baselines,
         figures=not args.no_figures,
         seed=args.seed,
+        out=args.out,
+        overwrite=args.overwrite,
+        figure_format=args.figure_format,
+        dpi=args.dpi,
     )
     for line in summary_lines(metrics):
-        print(line)
-    print(f"written: {args.run_dir}/metrics.json")
+        print(line)  # the files written are logged by evaluate_run
     return 0

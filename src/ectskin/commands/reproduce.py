@@ -1,8 +1,9 @@
-"""``ectskin reproduce OUT_DIR``: the paper end to end (simulate, characterise, train, evaluate,
-report). Thin wrapper over :func:`ectskin.pipeline.reproduce`.
+"""``ectskin reproduce -o OUT_DIR``: the paper end to end (simulate, characterise, train,
+evaluate, report). Thin wrapper over :func:`ectskin.pipeline.reproduce`.
 
 Finished steps in OUT_DIR are reused (and reported as such), interrupted trainings resume;
-results made with other settings are never overwritten without ``--force``.
+results made with other settings are never overwritten without ``--overwrite`` (alias
+``--force``), which redoes those steps. OUT_DIR may also be given as the first argument.
 """
 
 from __future__ import annotations
@@ -12,17 +13,25 @@ import shlex
 import sys
 
 from ectskin._check import EctskinError
+from ectskin.commands._options import add_out, add_overwrite, resolve_out
+from ectskin.commands.evaluate import add_figure_options
 from ectskin.report import results_table
 
 HELP = (
     "reproduce the paper: simulate, characterise, train both models + ablations, evaluate, report"
 )
+EXAMPLES = """\
+  ectskin reproduce -o paper-run                  # the paper's settings (hours; GPU advised)
+  ectskin reproduce -o quick-run --profile quick --workers 2
+  ectskin reproduce -o paper-run                  # again: finished steps are reused
+  ectskin reproduce -o paper-run --epochs 5 --overwrite   # redo the steps whose settings changed
+  ectskin reproduce -o paper-run --format svg --overwrite # figures as SVG
+"""
+OUT_HELP = "output folder (data.h5, runs/, figures/, metrics.json, report.md/.html)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "out_dir", help="output folder (data.h5, runs/, figures/, metrics.json, report.md/.html)"
-    )
+    add_out(p, help=OUT_HELP, positional=True)
     add_common_arguments(p, default_profile="paper")
 
 
@@ -54,11 +63,12 @@ def add_common_arguments(p: argparse.ArgumentParser, *, default_profile: str) ->
         "machines with <= 4 cores, where more gain nothing for these small models) or 'torch' "
         "(one per core)",
     )
-    p.add_argument(
-        "--force",
-        action="store_true",
-        help="redo steps whose earlier results in the folder used other settings",
+    add_overwrite(
+        p,
+        help="redo the steps whose earlier results in the folder were made with other settings, "
+        "replacing them (default: refuse; finished steps with the same settings are reused)",
     )
+    add_figure_options(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -85,7 +95,7 @@ def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
         profile=args.profile,
         seed=args.seed,
         workers=args.workers,
-        force=args.force,
+        force=args.overwrite,
         epochs=args.epochs,
         ablations=not args.no_ablations,
         robust=not args.no_robust,
@@ -94,6 +104,8 @@ def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
         threads=threads_option(args.threads),
         progress=not args.no_progress,
         command=" ".join(["ectskin", *map(shlex.quote, sys.argv[1:])]) if sys.argv[1:] else None,
+        figure_format=args.figure_format,
+        dpi=args.dpi,
     )
     m = reproduce(config)
     for metric, paper, this, base in results_table(m):
@@ -105,4 +117,4 @@ def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    return run_reproduce(args, args.out_dir)
+    return run_reproduce(args, resolve_out(args, "an output folder"))

@@ -1,7 +1,10 @@
-"""``ectskin train touch|track DATA --out RUN_DIR``: train TouchMLP or C2DT on a recording.
+"""``ectskin train touch|track DATA -o RUN_DIR``: train TouchMLP or C2DT on a recording.
 
-Thin wrapper over :func:`ectskin.learn.train.train_from_recording`. Runs unchanged on several
-processes (distributed data parallel)::
+Thin wrapper over :func:`ectskin.learn.train.train_from_recording`. An existing run in RUN_DIR
+is resumed (same settings and data); ``--overwrite`` (alias ``--force``) starts it over. The
+default profile is the paper's, meant for a GPU: on a CPU the training says so at the start and
+estimates its remaining time after the first epoch; ``--profile quick`` is the CPU setting. Runs
+unchanged on several processes (distributed data parallel)::
 
     torchrun --nproc_per_node 3 -m ectskin.cli train track data.h5 --out runs/track
 
@@ -16,25 +19,31 @@ import logging
 import os
 from pathlib import Path
 
+from ectskin.commands._options import add_out, add_overwrite, resolve_out
 from ectskin.learn.profiles import PROFILE_TASKS, PROFILES
 
 HELP = "train the touch classifier (TouchMLP) or the tracking transformer (C2DT) on a recording"
+EXAMPLES = """\
+  ectskin train touch data.h5 -o runs/touch --profile quick   # minutes on a laptop CPU
+  ectskin train track data.h5 -o runs/track                   # the paper's settings (GPU)
+  ectskin train track data.h5 -o runs/track --epochs 200      # resume, extended to 200 epochs
+  ectskin train touch data.h5 -o runs/touch --overwrite       # start the run over
+  torchrun --nproc_per_node 3 -m ectskin.cli train track data.h5 -o runs/track
+"""
 log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("task", choices=PROFILE_TASKS, help="touch: TouchMLP; track: C2DT")
     p.add_argument("data", help="recording: HDF5 (.h5) or a generic .npz / .csv import")
-    p.add_argument(
-        "--out", required=True, help="run directory (model.pt, metrics.csv, split.json, ...)"
-    )
+    add_out(p, help="run directory (model.pt, metrics.csv, split.json, ...); required")
     p.add_argument(
         "--profile",
         choices=tuple(PROFILES),
         default="paper",
-        help="training settings: the paper's (default), quick for a CPU, or robust (touch only: "
-        "the paper's TouchMLP with a recipe that generalises to unseen inflation/touch "
-        "combinations, see docs/architecture.md)",
+        help="training settings: the paper's (default; meant for a GPU, slow on a CPU), quick "
+        "for a CPU, or robust (touch only: the paper's TouchMLP with a recipe that generalises "
+        "to unseen inflation/touch combinations, see docs/architecture.md)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the split and training (default 0)")
     p.add_argument("--epochs", type=int, default=None, help="override the profile's epochs")
@@ -52,10 +61,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="torch CPU threads (default 1: results depend on the thread count)",
     )
-    p.add_argument(
-        "--force",
-        action="store_true",
-        help="start over, replacing an existing run in --out (default: resume it)",
+    add_overwrite(
+        p,
+        help="start the run over, replacing the run in -o/--out (default: resume it; a run made "
+        "with other settings or data is refused)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
@@ -65,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     # all subcommand modules to build its parser
     from ectskin.learn.train import TrainConfig, train_from_recording
 
-    out = Path(args.out)
+    out = Path(resolve_out(args, "a run directory"))
     config = TrainConfig(
         profile=args.profile,
         seed=args.seed,
@@ -73,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         batch_size=args.batch_size,
         window=args.window,
         prior=not args.no_prior,
-        resume=not args.force,
+        resume=not args.overwrite,
         device=args.device,
         progress=not args.no_progress,
         threads=args.threads,

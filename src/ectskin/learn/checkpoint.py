@@ -15,12 +15,28 @@ Files are written atomically (:func:`ectskin._files.atomic_write`) and read with
 executed. ``normalizer`` and ``extra`` hold plain values under the JSON policy of
 :func:`ectskin._files.to_jsonable` (a non-finite number is stored as None). Every problem with a
 file is an :class:`EctskinError` that names it.
+
+What a file must hold before anything is built from it (:func:`read_checkpoint`,
+:func:`load_checkpoint`):
+
+* only tensors and plain values (anything else is refused by the loader, and the error never
+  suggests loading it another way);
+* finite numbers in every tensor of ``state_dict`` and in ``normalizer`` (a model with NaN weights
+  or statistics would answer with garbage, not fail);
+* a ``config`` whose sizes agree with the shapes of the ``state_dict`` tensors (and with the
+  layout, where one is given), checked *before* the model is built, so a crafted size such as
+  ``n_pairs = 10**9`` is one error naming the field instead of an allocation of the size it
+  asks for.
 """
 
 from __future__ import annotations
 
 import logging
+import math
+import pickle
+import re
 import warnings
+from collections.abc import Mapping
 from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
@@ -95,10 +111,7 @@ def read_checkpoint(path: str | Path, *, map_location: str | torch.device = "cpu
             warnings.simplefilter("ignore", UserWarning)
             payload = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as exc:  # noqa: BLE001 - corrupt zip, truncated file, refused pickle...
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-        raise EctskinError(
-            f"{path}: not a readable ectskin checkpoint ({type(exc).__name__}: {msg[:200]})"
-        ) from None
+        raise EctskinError(f"{path}: not a readable ectskin checkpoint ({_why(exc)})") from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         found = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
         raise EctskinError(
@@ -119,7 +132,78 @@ def read_checkpoint(path: str | Path, *, map_location: str | torch.device = "cpu
         )
     payload.setdefault("normalizer", {})
     payload.setdefault("extra", {})
+    check_finite(path, payload["state_dict"], payload["normalizer"])
     return payload
+
+
+def _why(exc: BaseException) -> str:
+    """Why ``torch.load(weights_only=True)`` refused a file, in our words: torch's own message
+    suggests loading the file with ``weights_only=False`` (running whatever it holds), which a
+    model file from elsewhere must never be, so it is not passed on."""
+    text = str(exc)
+    if isinstance(exc, pickle.UnpicklingError):
+        found = re.search(r"GLOBAL ([\w.]+)", text)
+        if found:
+            return (
+                f"it holds a Python object ({found.group(1)}) besides tensors and plain values; "
+                "ectskin loads nothing else from a model file, and nothing in it was run"
+            )
+        return "not a torch checkpoint, or damaged: its content is not tensors and plain values"
+    if isinstance(exc, EOFError) or "zip archive" in text or "central directory" in text:
+        return "damaged or cut short: its zip archive is incomplete"
+    first = text.strip().splitlines()[0] if text.strip() else ""
+    if re.search(r"weights_only|pickle", first, re.IGNORECASE):
+        first = ""
+    return type(exc).__name__ + (f": {first[:200]}" if first else "")
+
+
+def check_finite(path: str | Path, state_dict: Mapping[str, Any], normalizer: Any) -> None:
+    """Refuse a checkpoint whose weights, buffers or normalisation statistics are not finite
+    numbers (NaN, inf; a non-finite statistic is stored as None), naming the file and the
+    tensor or field."""
+    for name, value in state_dict.items():
+        if not isinstance(value, torch.Tensor):
+            raise EctskinError(
+                f"{path}: state_dict entry {name!r} is a {type(value).__name__}, not a tensor"
+            )
+        if value.is_floating_point() or value.is_complex():
+            bad = ~torch.isfinite(value)
+            if bool(bad.any()):
+                raise EctskinError(
+                    f"{path}: tensor {name!r} of the state dict holds non-finite values "
+                    f"({int(bad.sum())} of {value.numel()} NaN or inf); the file is damaged or "
+                    "comes from a training that diverged, and is not used"
+                )
+    bad_field = _nonfinite_field(normalizer)
+    if bad_field is not None:
+        raise EctskinError(
+            f"{path}: normaliser field {bad_field} is not a finite number (NaN, inf or null); "
+            "the file is damaged or comes from a training that diverged, and is not used"
+        )
+
+
+def _nonfinite_field(value: Any, where: str = "") -> str | None:
+    """The path (``['x']['mean'][3]``) of the first non-finite number or None in ``value`` (a
+    normaliser's plain values), or None when all are finite."""
+    if isinstance(value, Mapping):
+        items = ((f"{where}[{k!r}]", v) for k, v in value.items())
+    elif isinstance(value, list | tuple):
+        items = ((f"{where}[{i}]", v) for i, v in enumerate(value))
+    elif isinstance(value, torch.Tensor):
+        return None if bool(torch.isfinite(value).all()) else where or "(the tensor)"
+    elif value is None:
+        return where or "(the value)"
+    elif isinstance(value, bool | str):
+        return None
+    elif isinstance(value, int | float):
+        return None if math.isfinite(value) else where or "(the value)"
+    else:
+        return None
+    for sub, v in items:
+        found = _nonfinite_field(v, sub)
+        if found is not None:
+            return found
+    return None
 
 
 def config_from_dict(kind: str, d: dict[str, Any], source: str | Path | None = None) -> Any:
@@ -127,12 +211,77 @@ def config_from_dict(kind: str, d: dict[str, Any], source: str | Path | None = N
     cls = MODELS[kind][1]
     names = {f.name for f in fields(cls)}
     unknown = sorted(set(d) - names)
+    where = f"{source}: config" if source else "config"
     if unknown:
         raise EctskinError(
-            f"{source or 'config'}: unknown {cls.__name__} field(s) {', '.join(unknown)} "
+            f"{where}: unknown {cls.__name__} field(s) {', '.join(unknown)} "
             f"(written by a newer ectskin?)"
         )
-    return cls(**d)
+    try:
+        return cls(**d)
+    except EctskinError as exc:  # "C2DTConfig.window must be an integer >= 1, got 0"
+        raise EctskinError(f"{where}: {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise EctskinError(f"{where}: invalid {cls.__name__} ({exc})") from None
+
+
+def check_state_dict(path: str | Path, kind: str, config: Any, state_dict: Mapping) -> None:
+    """Refuse a ``config`` whose sizes disagree with the shapes of the ``state_dict`` tensors,
+    before a model is built from it: the model class names, per tensor, the config field of each
+    dimension (``state_shapes``) and the key prefix of each stack of layers (``layer_stacks``).
+    A model built from a config that passes is no larger than the tensors the file holds."""
+    model_cls = MODELS[kind][0]
+    for field, prefix in model_cls.layer_stacks.items():
+        layers = {k[len(prefix) :].split(".")[0] for k in state_dict if k.startswith(prefix)}
+        found = len(layers)
+        if int(getattr(config, field)) != found:
+            raise EctskinError(
+                f"{path}: config field {field!r} is {getattr(config, field)!r} but the state dict "
+                f"holds {found} such layer(s) ({prefix}*); the file is damaged or was edited"
+            )
+    for name, dims in model_cls.state_shapes(config).items():
+        tensor = state_dict.get(name)
+        if not isinstance(tensor, torch.Tensor):
+            raise EctskinError(
+                f"{path}: the state dict has no tensor {name!r}, which a {type(config).__name__} "
+                "of the stored config needs; the file is damaged or was edited"
+            )
+        shape = tuple(tensor.shape)
+        want = tuple(int(getattr(config, d)) if isinstance(d, str) else d for d in dims)
+        if shape == want:
+            continue
+        if len(shape) != len(want):
+            raise EctskinError(
+                f"{path}: tensor {name!r} of the state dict has shape {shape}, the stored config "
+                f"gives {want}; the file is damaged or was edited"
+            )
+        i = next(i for i, (a, b) in enumerate(zip(shape, want)) if a != b)
+        what = f"config field {dims[i]!r} is {want[i]!r}" if isinstance(dims[i], str) else ""
+        raise EctskinError(
+            f"{path}: {what or 'the stored config'} but tensor {name!r} of the state dict has "
+            f"shape {shape} (size {shape[i]} there); the file is damaged or was edited"
+        )
+
+
+def check_layout(path: str | Path, config: Any, layout: Any) -> None:
+    """Refuse a model whose sizes do not fit ``layout`` (a :class:`~ectskin.layout.SensorLayout`):
+    more channels than its pairs, other touch classes (TouchMLP), other markers or electrodes
+    (C2DT); the error names the file and the field."""
+    # (config field, the layout's number, what it counts, whether fewer is fine)
+    checks = [("n_pairs", layout.n_pairs, "electrode pairs", True)]
+    if hasattr(config, "n_classes"):
+        checks.append(("n_classes", layout.n_classes, "touch classes", False))
+    if hasattr(config, "n_markers"):
+        checks.append(("n_markers", layout.n_markers, "markers", False))
+    if getattr(config, "desc_dim", 0):
+        checks.append(("n_electrodes", layout.n_electrodes, "electrodes", False))
+    for field, n, what, fewer_ok in checks:
+        value = int(getattr(config, field))
+        if value > n or (value < n and not fewer_ok):
+            raise EctskinError(
+                f"{path}: config field {field!r} is {value}, but layout {layout.name!r} has {n} "
+                f"{what}; the model was trained for another skin"
+            )
 
 
 def load_checkpoint(
@@ -140,20 +289,26 @@ def load_checkpoint(
     *,
     kind: str | None = None,
     n_pairs: int | None = None,
+    layout: Any = None,
     map_location: str | torch.device = "cpu",
 ) -> tuple[nn.Module, Any, dict]:
     """Rebuild a model from ``path`` alone: returns ``(model, config, payload)``.
 
     The model is in eval mode on ``map_location``. ``kind`` ("touch_mlp" or "c2dt") refuses a
-    file of the other kind; ``n_pairs`` refuses a model trained on another channel count.
+    file of the other kind; ``n_pairs`` refuses a model trained on another channel count;
+    ``layout`` (a SensorLayout) one trained for another skin (:func:`check_layout`). Before the
+    model is built, its config is checked against the state dict (:func:`check_state_dict`).
     """
     path = Path(path)
     payload = read_checkpoint(path, map_location=map_location)
     if kind is not None and payload["kind"] != kind:
         raise EctskinError(f"{path}: holds a {payload['kind']!r} model, expected a {kind!r} model")
     config = config_from_dict(payload["kind"], payload["config"], path)
+    check_state_dict(path, payload["kind"], config, payload["state_dict"])
     if n_pairs is not None:
         check_channels(path, config, n_pairs)
+    if layout is not None:
+        check_layout(path, config, layout)
     model_cls = MODELS[payload["kind"]][0]
     model = model_cls(config)
     try:

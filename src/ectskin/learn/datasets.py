@@ -53,6 +53,7 @@ __all__ = [
     "TouchData",
     "TrackData",
     "channel_names",
+    "check_regions",
     "measured_channels",
     "split_from_names",
     "split_groups",
@@ -244,6 +245,19 @@ def _select_trials(rec: Recording, trials: Any) -> list[Trial]:
     return out
 
 
+def check_regions(rec: Recording, trials: Sequence[Trial]) -> None:
+    """Refuse a trial whose ``region`` is not a region of the recording's layout (0 = no touch,
+    1..n_regions): it would stratify the split and label the data with a class the model does
+    not have. The error names the trial."""
+    n = rec.layout.n_regions
+    for t in trials:
+        if not 0 <= t.region <= n:
+            raise EctskinError(
+                f"trial {t.name!r}: region {t.region} is not a region of layout "
+                f"{rec.layout.name!r} (1..{n}, or 0 for no touch)"
+            )
+
+
 def _finite_rows(c: np.ndarray) -> np.ndarray:
     return np.all(np.isfinite(c), axis=1)
 
@@ -285,6 +299,7 @@ def touch_dataset(
     chosen = _select_trials(rec, trials)
     if not chosen:
         raise EctskinError("touch_dataset: no trials selected")
+    check_regions(rec, chosen)
     xs, ys, gs = [], [], []
     dropped = 0
     for g, t in enumerate(chosen):
@@ -323,6 +338,7 @@ def tracking_trials(rec: Recording, trials: Any = None) -> list[Trial]:
     trials, and trials whose markers have any NaN (occlusion).
     """
     chosen = _select_trials(rec, trials)
+    check_regions(rec, chosen)
     out, empty, no_markers, no_contact, occluded = [], [], [], [], []
     for t in chosen:
         if t.n_frames == 0:

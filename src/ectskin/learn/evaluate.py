@@ -10,6 +10,13 @@ The stages, each a short function:
    :mod:`ectskin.learn.metrics`), its baselines on the same split, its figures and the learning
    curves;
 4. ``metrics.json``, written atomically.
+
+Where the results go (:func:`evaluation_files`): on the run's own data (the file named in
+``split.json``) ``metrics.json`` and the figures in the run folder; on other data
+``metrics_<data file stem>.json`` and figures ``<figure>_<data file stem>.<format>`` beside
+them, so an evaluation on another recording never replaces the run's own. ``out`` writes into
+another folder instead (names without the suffix). An earlier evaluation is never replaced
+unless ``overwrite`` (``--overwrite``): the call stops before any work, naming the file.
 """
 
 from __future__ import annotations
@@ -25,7 +32,7 @@ from torch import nn
 from ectskin._check import EctskinError
 from ectskin._files import save_figure_atomic, write_json_atomic
 from ectskin.io import Recording, read_recording
-from ectskin.learn.checkpoint import check_channels, load_checkpoint
+from ectskin.learn.checkpoint import check_channels, check_layout, load_checkpoint
 from ectskin.learn.runfiles import (
     read_metrics,
     read_run_config,
@@ -34,14 +41,23 @@ from ectskin.learn.runfiles import (
 )
 from ectskin.learn.splits import split_from_names
 from ectskin.learn.tasks import EvalCase, Task, task_for_model
+from ectskin.viz import DEFAULT_DPI, check_figure_options, figure_file
 from ectskin.viz.learning import plot_learning_curves
 
 log = logging.getLogger(__name__)
 
-__all__ = ["CURVES_FIGURE", "Run", "evaluate_run", "read_run"]
+__all__ = [
+    "CURVES_FIGURE",
+    "EvaluationFiles",
+    "Run",
+    "evaluate_run",
+    "evaluation_files",
+    "read_run",
+]
 
-#: The learning-curves figure ``evaluate_run`` writes beside the task's figures.
-CURVES_FIGURE = "learning_curves.png"
+#: The stem of the learning-curves figure ``evaluate_run`` writes beside the task's figures
+#: (not with an evaluation on other data in the run folder: the curves belong to the run).
+CURVES_FIGURE = "learning_curves"
 #: checkpoint ``extra`` fields copied into the metrics' ``training``
 EXTRA_TRAINING_FIELDS = ("device", "profile", "seed", "world_size")
 
@@ -94,6 +110,67 @@ def read_run(run_dir: str | Path) -> Run:
     )
 
 
+@dataclass(frozen=True)
+class EvaluationFiles:
+    """Where one evaluation writes: ``metrics`` (the JSON file) and ``figures`` {figure stem:
+    file}, in ``folder``; ``own_data`` when it evaluates the run's own recording."""
+
+    folder: Path
+    metrics: Path
+    figures: dict[str, Path]
+    own_data: bool
+
+    def outputs(self, metrics: bool = True) -> list[Path]:
+        """The files written: the figures, and the metrics JSON with ``metrics``."""
+        return ([self.metrics] if metrics else []) + list(self.figures.values())
+
+
+def evaluation_files(
+    run: Run,
+    data: Any = None,
+    *,
+    out: str | Path | None = None,
+    figures: bool = True,
+    figure_format: str = "png",
+) -> EvaluationFiles:
+    """The files an evaluation of ``run`` on ``data`` writes (see the module docstring): in the
+    run folder, with the suffix ``_<data file stem>`` when ``data`` is not the file named in
+    ``split.json``; in ``out`` (no suffix) when given."""
+    own = _is_own_data(data, run)
+    suffix = "" if own or out is not None else f"_{_data_stem(data)}"
+    folder = run.path if out is None else Path(out)
+    # the learning curves belong to the run: drawn unless this is a side evaluation in its folder
+    curves = [CURVES_FIGURE] if not suffix and run.metrics_rows else []
+    stems = list(run.task.figure_captions) + curves
+    figs = (
+        {stem: folder / figure_file(f"{stem}{suffix}", figure_format) for stem in stems}
+        if figures
+        else {}
+    )
+    return EvaluationFiles(folder, folder / f"metrics{suffix}.json", figs, own)
+
+
+def _is_own_data(data: Any, run: Run) -> bool:
+    """Whether ``data`` (None, a path or a Recording) is the recording named in split.json."""
+    if data is None:
+        return True
+    stored = run.split.get("data")
+    source = data.source if isinstance(data, Recording) else data
+    if not stored or source is None:
+        return False
+    stored_path = Path(stored)
+    if not stored_path.is_absolute():
+        stored_path = run.path / stored_path
+    return Path(source).resolve() == stored_path.resolve()
+
+
+def _data_stem(data: Any) -> str:
+    """The name other data is known by in file names: its file's stem ("recording" for a
+    Recording without a source file)."""
+    source = data.source if isinstance(data, Recording) else data
+    return Path(source).stem if source else "recording"
+
+
 def evaluate_run(
     run_dir: str | Path,
     data: Any = None,
@@ -102,8 +179,12 @@ def evaluate_run(
     figures: bool = True,
     write: bool = True,
     seed: int = 0,
+    out: str | Path | None = None,
+    overwrite: bool = False,
+    figure_format: str = "png",
+    dpi: int = DEFAULT_DPI,
 ) -> dict[str, Any]:
-    """Evaluate a trained run on its test split; write ``metrics.json`` and figures into it.
+    """Evaluate a trained run on its test split; write the metrics JSON and the figures.
 
     Parameters
     ----------
@@ -118,12 +199,22 @@ def evaluate_run(
         split (touch: majority, logistic regression, random forest, k-NN; tracking: markers do
         not move, mean pose, ridge regression).
     figures : bool
-        Write the task's figures (Fig. 7 for touch, Fig. 9 and Fig. 10 for tracking) and the
-        learning curves.
+        Write the task's figures (Fig. 7 for touch, Fig. 9 and Fig. 10 for tracking) and, on the
+        run's own data, the learning curves.
     write : bool
-        Write ``metrics.json`` (atomically).
+        Write the metrics JSON (atomically).
     seed : int
         Seed of the baselines' subsampling.
+    out : path, optional
+        The folder to write into (default: the run folder). Where the files go and what they
+        are called: :func:`evaluation_files` (on data other than the run's own, the run folder
+        gets ``metrics_<data file stem>.json`` and suffixed figures).
+    overwrite : bool
+        Replace the files of an earlier evaluation; without it an existing one stops the call
+        before any work, naming the file.
+    figure_format, dpi : str, int
+        The figures' file format (``png``, ``pdf``, ``svg``) and resolution
+        (:func:`ectskin.viz.check_figure_options`).
 
     Returns
     -------
@@ -137,28 +228,47 @@ def evaluate_run(
         worst of them, and the trajectory of Fig. 10).
     """
     t0 = time.perf_counter()
+    figure_format, dpi = check_figure_options(figure_format, dpi)
     run = read_run(run_dir)
+    files = evaluation_files(run, data, out=out, figures=figures, figure_format=figure_format)
+    existing = [p for p in files.outputs(write) if p.exists()]
+    if existing and not overwrite:
+        more = f" and {len(existing) - 1} more" if len(existing) > 1 else ""
+        raise EctskinError(
+            f"{existing[0]}{more}: written by an earlier evaluation; pass --overwrite to "
+            "replace it, or -o/--out DIR to write elsewhere"
+        )
     rec, data_desc = _recording(data, run)
+    check_layout(run.model_file, run.config, rec.layout)
     case, split = _test_case(run, rec)
     m = run.task.test_metrics(case)
     if baselines:
         train = case.data.select(split["train"])
         m["baselines"] = run.task.baseline_metrics(train, case.test, seed=seed)
-    figs = _write_task_figures(run, case, m) if figures else {}
     m["training"] = _training(run)
     history = m["training"].pop("history", None)
-    if figures and history:
-        fig = plot_learning_curves(history, title=f"{run.task.name}: {run.path.name}")
-        save_figure_atomic(fig, run.path / CURVES_FIGURE, dpi=110)
-        figs[CURVES_FIGURE] = "training and validation loss per epoch"
+    figs: dict[str, str] = {}
+    if figures:
+        drawn = run.task.figures(case, m)
+        captions = dict(run.task.figure_captions)
+        if CURVES_FIGURE in files.figures and history:
+            drawn[CURVES_FIGURE] = plot_learning_curves(
+                history, title=f"{run.task.name}: {run.path.name}"
+            )
+            captions[CURVES_FIGURE] = "training and validation loss per epoch"
+        for stem, fig in drawn.items():
+            save_figure_atomic(fig, files.figures[stem], dpi=dpi)
+            figs[files.figures[stem].name] = captions[stem]
     m["split"] = {k: len(run.split[k]) for k in ("train", "val", "test")}
     m["figures"] = figs
     m["evaluate_seconds"] = time.perf_counter() - t0
-    out = {"data": data_desc, run.task.name: m}
+    result = {"data": data_desc, run.task.name: m}
     if write:
-        write_json_atomic(run.path / "metrics.json", out)
-        log.info("wrote %s", run.path / "metrics.json")
-    return out
+        write_json_atomic(files.metrics, result)
+    written = ([files.metrics] if write else []) + [files.folder / name for name in figs]
+    if written:
+        log.info("wrote %s", ", ".join(str(p) for p in written))
+    return result
 
 
 def _recording(data: Any, run: Run) -> tuple[Recording, str]:
@@ -196,13 +306,6 @@ def _test_case(run: Run, rec: Recording) -> tuple[EvalCase, dict[str, Any]]:
     test = ds.select(split["test"])
     pred = task.predict(run.model, test)
     return EvalCase(data=ds, test=test, pred=pred, recording=rec, config=run.config), split
-
-
-def _write_task_figures(run: Run, case: EvalCase, metrics: dict[str, Any]) -> dict[str, str]:
-    """Draw and save the task's figures into the run folder; {file name: caption}."""
-    for name, fig in run.task.figures(case, metrics).items():
-        save_figure_atomic(fig, run.path / name, dpi=110)
-    return dict(run.task.figure_captions)
 
 
 def _training(run: Run) -> dict[str, Any]:

@@ -112,10 +112,16 @@ class _Predictor:
         )
 
     @classmethod
-    def from_run(cls, run_dir: str | Path, *, device: str | torch.device = "cpu"):
-        """Load ``run_dir/model.pt`` (or the checkpoint file itself) on ``device``."""
+    def from_run(
+        cls, run_dir: str | Path, *, device: str | torch.device = "cpu", layout: Any = None
+    ):
+        """Load ``run_dir/model.pt`` (or the checkpoint file itself) on ``device``; with
+        ``layout`` (the skin it will read) a model trained for another skin is refused before it
+        is built (:func:`ectskin.learn.checkpoint.check_layout`)."""
         path = _model_file(run_dir)
-        model, config, payload = load_checkpoint(path, kind=cls.kind, map_location=device)
+        model, config, payload = load_checkpoint(
+            path, kind=cls.kind, layout=layout, map_location=device
+        )
         return cls(model, config, payload, str(path))
 
     @property

@@ -5,7 +5,8 @@
     out_dir/metrics.csv   epoch, train_loss, val_loss, val_metric, lr, seconds
     out_dir/config.json   task, profile, training settings, recipe, model config, data sizes
     out_dir/split.json    trial (group) names per split (+ task, data file, counts, split seed)
-    out_dir/metrics.json  test-set metrics (written by ``ectskin evaluate``)
+    out_dir/metrics.json  test-set metrics (written by ``ectskin evaluate``; on other data
+                          metrics_<data stem>.json), with the figures (.png, .pdf or .svg)
 
 Each file has one writer and one reader here: :func:`write_metrics` / :func:`read_metrics`,
 :func:`write_run_config` / :func:`read_run_config`, :func:`read_split`. Every problem with a file
@@ -35,10 +36,13 @@ from ectskin.learn.profiles import TrainSettings
 log = logging.getLogger(__name__)
 
 METRICS_COLUMNS = ("epoch", "train_loss", "val_loss", "val_metric", "lr", "seconds")
-#: Files of a run directory; an existing folder holding anything else is not silently reused.
+#: Files of a run directory; an existing folder holding anything else is not silently reused
+#: (besides these: evaluations on other data, ``metrics_<data stem>.json``, and figures).
 RUN_FILES = frozenset(
     {"model.pt", "last.pt", "metrics.csv", "config.json", "split.json", "metrics.json"}
 )
+#: suffixes of the figures an evaluation writes into a run directory
+FIGURE_SUFFIXES = frozenset({".png", ".pdf", ".svg"})
 
 
 # --------------------------------------------------------------------------- metrics.csv
@@ -132,21 +136,28 @@ def check_run_folder(out: str | Path, *, resume: bool) -> None:
         raise EctskinError(f"output folder {out} exists and is not a folder")
     if not out.is_dir() or not resume:
         return
-    others = sorted(
-        p.name
-        for p in out.iterdir()
-        if p.name not in RUN_FILES and not p.name.startswith(".") and p.suffix != ".png"
-    )
+    others = sorted(p.name for p in out.iterdir() if not _belongs_to_a_run(p.name))
     if others:
         raise EctskinError(
             f"output folder {out} is a non-empty folder that is not a run directory (holds "
-            f"{', '.join(others[:5])}); choose another folder or start over (--force)"
+            f"{', '.join(others[:5])}); choose another folder, or start over with --overwrite"
         )
     if (out / "model.pt").exists() and not (out / "last.pt").exists():
         raise EctskinError(
             f"output folder {out} holds a model.pt without last.pt (cannot resume); start over "
-            "(--force) to train again"
+            "with --overwrite to train again"
         )
+
+
+def _belongs_to_a_run(name: str) -> bool:
+    """A file a run directory holds: its files, evaluations, figures, hidden files."""
+    path = Path(name)
+    return (
+        name in RUN_FILES
+        or name.startswith(".")
+        or path.suffix in FIGURE_SUFFIXES
+        or (name.startswith("metrics_") and path.suffix == ".json")
+    )
 
 
 def fingerprint(*arrays: np.ndarray) -> str:
@@ -172,7 +183,7 @@ def check_resumable(
     data_fingerprint: str,
 ) -> None:
     """Refuse to resume a run trained with other settings, another model or other data."""
-    hint = "use another output folder, or resume=False (--force) to start over"
+    hint = "use another output folder, or start over with --overwrite"
     if state.get("task") != task or payload["kind"] != model_kind:
         raise EctskinError(
             f"{path}: holds a {state.get('task')!r} run ({payload['kind']!r} model), not a "
@@ -233,7 +244,7 @@ def resume_run(
     path = out_dir / "last.pt"
     if not (resume and path.exists()):
         if path.exists() and d.main:
-            log.warning("%s exists; starting over (resume=False)", path)
+            log.warning("%s exists; starting over (--overwrite)", path)
         return RunState()
     payload = read_checkpoint(path, map_location=d.device)
     saved = payload.get("resume")

@@ -70,13 +70,17 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["TrainConfig", "train", "train_from_recording"]
 
+#: profiles meant for a GPU: training with one on a CPU warns at the start
+GPU_PROFILES = ("paper",)
+
 
 @dataclass(frozen=True)
 class TrainConfig:
     """How :func:`train_from_recording` trains.
 
     profile : "paper", "quick" or (touch only) "robust" (:data:`~ectskin.learn.profiles.PROFILES`);
-        ``epochs`` and ``batch_size`` override it.
+        ``epochs`` and ``batch_size`` override it. The default, "paper", is meant for a GPU: on
+        a CPU training warns so at the start and logs the time left after its first epoch.
     seed : seeds the trial split (unless ``split_seed``), model initialisation, epoch
         permutations, dropout and augmentation.
     window, prior : the tracking data set (frames per window; prior knowledge); track only.
@@ -333,13 +337,26 @@ def _write_header(
     if split is None:
         split = {"train": split_names_of(train_data), "val": split_names_of(val_data)}
     write_run_config(job.out_dir / "split.json", split)
-    if d.world_size > 1 or d.device.type != "cpu":
-        logger.info(
-            "training %s on %s x %d (batch %d per rank)",
-            job.task.name,
-            d.device,
-            d.world_size,
-            rank_batch,
+    s = job.settings
+    logger.info(
+        "training %s with profile %r (%d epochs, batch %d%s) on %s x %d (batch %d per rank), "
+        "%d training samples",
+        job.task.name,
+        job.profile,
+        s.epochs,
+        s.batch_size,
+        f", {s.samples_per_epoch} samples per epoch" if s.samples_per_epoch else "",
+        d.device,
+        d.world_size,
+        rank_batch,
+        int(train_data.x.shape[0]),
+    )
+    if d.device.type == "cpu" and job.profile in GPU_PROFILES:
+        logger.warning(
+            "profile %r holds the paper's settings, meant for a GPU: on a CPU they take hours "
+            "on the paper's data set (the time left is logged after the first epoch); "
+            "--profile quick is the setting for a CPU",
+            job.profile,
         )
 
 
@@ -408,6 +425,15 @@ def _epochs(
             }
             _end_epoch(job, m, state, row, state.seconds_before + time.perf_counter() - t_run)
             bars.end_epoch(row, task.metric_name)
+            left = s.epochs - epoch - 1
+            if epoch == state.resumed_from and left > 0 and d.main:
+                logger.info(
+                    "epoch %d took %.1f s: about %s left for the other %d epoch(s)",
+                    epoch + 1,
+                    seconds,
+                    _duration(seconds * left),
+                    left,
+                )
     finally:
         bars.close()
 
@@ -464,6 +490,15 @@ def _end_epoch(job: _Job, m: _Model, state: RunState, row: dict, elapsed: float)
             "data_fingerprint": m.fingerprint,
         },
     )
+
+
+def _duration(seconds: float) -> str:
+    """ "42 s", "7 min", "2.5 h": a rough time for a log line."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 def _summary(job: _Job, state: RunState, recipe: dict, this_run: float) -> dict[str, Any]:

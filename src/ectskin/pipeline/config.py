@@ -27,6 +27,7 @@ from ectskin._check import EctskinError, check_option, check_type
 from ectskin.io import Recording
 from ectskin.learn.threads import resolve_threads
 from ectskin.twin import Protocol
+from ectskin.viz import DEFAULT_DPI, check_figure_options
 
 #: Training profiles of a reproduction (:data:`ectskin.learn.train.PROFILES` apply per run).
 PROFILES = ("quick", "paper")
@@ -69,7 +70,8 @@ class ReproduceConfig:
     workers : int, optional
         Simulation processes (default: all cores).
     force : bool
-        Redo steps whose earlier results in ``out_dir`` were made with other settings.
+        Redo steps whose earlier results in ``out_dir`` were made with other settings (the
+        command line's ``--overwrite``).
     protocol : ectskin.twin.Protocol, optional
         The experiment to simulate (default: the paper's, ``Protocol(seed=seed)``).
     recording : Recording, optional
@@ -92,6 +94,9 @@ class ReproduceConfig:
     command : str, optional
         The command line that made the run, written into metrics.json and the report so that
         every figure there says how to get it again (the CLI passes its own).
+    figure_format, dpi : str, int
+        File format (``png``, ``pdf``, ``svg``) and resolution of the evaluations' figures
+        (:func:`ectskin.viz.check_figure_options`).
     """
 
     out_dir: Path
@@ -110,6 +115,8 @@ class ReproduceConfig:
     progress: bool = True
     threads: int | str | None = "auto"
     command: str | None = field(default=None, compare=False)
+    figure_format: str = "png"
+    dpi: int = DEFAULT_DPI
 
     def __post_init__(self) -> None:
         check_type("out_dir", self.out_dir, (str, os.PathLike))
@@ -137,6 +144,7 @@ class ReproduceConfig:
         elif self.epochs is not None:
             _check_positive_int("epochs", self.epochs)
         resolve_threads(self.threads)  # an invalid value fails here, before any work
+        check_figure_options(self.figure_format, self.dpi)
 
     @property
     def run_names(self) -> tuple[str, ...]:
@@ -154,6 +162,14 @@ class ReproduceConfig:
         if self.recording is not None:
             return None
         return self.protocol if self.protocol is not None else Protocol(seed=self.seed)
+
+    @property
+    def figure_settings(self) -> dict[str, Any]:
+        """The figure options as the evaluation steps record them: empty for the defaults, so
+        that folders made before the options existed are reused as they are."""
+        if (self.figure_format, self.dpi) == ("png", DEFAULT_DPI):
+            return {}
+        return {"figures": {"format": self.figure_format, "dpi": self.dpi}}
 
     def run_profile(self, name: str) -> str:
         """The ``ectskin.learn.train`` profile run ``name`` trains with."""

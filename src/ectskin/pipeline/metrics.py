@@ -22,6 +22,7 @@ from ectskin.pipeline.config import ABLATIONS
 from ectskin.pipeline.runner import StepRunner
 from ectskin.report import machine_info
 from ectskin.twin import Protocol
+from ectskin.viz import figure_file
 
 METRICS_FORMAT = "ectskin.metrics"
 
@@ -54,50 +55,41 @@ ABLATION_KEYS = (
     "examples",
 )
 
-#: figures copied into OUT_DIR/figures and shown in the report: (run, file, caption, copy's name)
+#: figures copied into OUT_DIR/figures and shown in the report: (run, figure stem, caption, stem
+#: of the copy); the files are ``<stem>.<format>`` in the reproduction's figure format
 REPORT_FIGURES = (
     (
         "touch",
-        "fig7_confusion.png",
+        "fig7_confusion",
         "Fig. 7: touch confusion map of the test set (TouchMLP)",
-        "fig7_confusion.png",
+        "fig7_confusion",
     ),
     (
         "touch_robust",
-        "fig7_confusion.png",
+        "fig7_confusion",
         "Fig. 7, robust recipe (ours): touch confusion map of the same test set (TouchMLP)",
-        "fig7_confusion_robust.png",
+        "fig7_confusion_robust",
     ),
     (
         "track",
-        "fig9_tracking.png",
+        "fig9_tracking",
         "Fig. 9: tracking examples, estimated (red) vs true (blue) markers (C2DT)",
-        "fig9_tracking.png",
+        "fig9_tracking",
     ),
     (
         "track",
-        "fig10_trajectory.png",
+        "fig10_trajectory",
         "Fig. 10: one marker's trajectory over a test trial (C2DT)",
-        "fig10_trajectory.png",
+        "fig10_trajectory",
     ),
-    (
-        "touch",
-        "learning_curves.png",
-        "TouchMLP training and validation loss",
-        "touch_learning_curves.png",
-    ),
+    ("touch", "learning_curves", "TouchMLP training and validation loss", "touch_learning_curves"),
     (
         "touch_robust",
-        "learning_curves.png",
+        "learning_curves",
         "TouchMLP, robust recipe: training (augmented) and validation loss",
-        "touch_robust_learning_curves.png",
+        "touch_robust_learning_curves",
     ),
-    (
-        "track",
-        "learning_curves.png",
-        "C2DT training and validation loss",
-        "track_learning_curves.png",
-    ),
+    ("track", "learning_curves", "C2DT training and validation loss", "track_learning_curves"),
 )
 
 
@@ -149,16 +141,16 @@ def combine_metrics(
     return m
 
 
-def copy_figures(out: Path, runs: tuple[str, ...]) -> dict[str, str]:
-    """Copy the report's figures of ``runs`` into OUT_DIR/figures; {caption: path relative to
-    OUT_DIR}."""
+def copy_figures(out: Path, runs: tuple[str, ...], figure_format: str = "png") -> dict[str, str]:
+    """Copy the report's figures of ``runs`` (files in ``figure_format``) into OUT_DIR/figures;
+    {caption: path relative to OUT_DIR}."""
     fig_dir = out / "figures"
     fig_dir.mkdir(exist_ok=True)
     figures: dict[str, str] = {}
-    for run, name, caption, copy_name in REPORT_FIGURES:
-        src = out / "runs" / run / name
+    for run, stem, caption, copy_stem in REPORT_FIGURES:
+        src = out / "runs" / run / figure_file(stem, figure_format)
         if run in runs and src.is_file():
-            dst = fig_dir / copy_name
+            dst = fig_dir / figure_file(copy_stem, figure_format)
             shutil.copyfile(src, dst)
             figures[caption] = dst.relative_to(out).as_posix()
     return figures

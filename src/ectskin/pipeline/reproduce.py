@@ -11,7 +11,9 @@
     reproduce.json                what each step was run with, whether it finished, its time
 
 Nothing is overwritten silently: finished steps are reused, interrupted ones resumed, and results
-made with other settings are refused unless ``force`` (:mod:`ectskin.pipeline.runner`).
+made with other settings are refused unless ``force`` (``--overwrite``;
+:mod:`ectskin.pipeline.runner`). The evaluations' figures are PNG unless ``figure_format`` says
+PDF or SVG; the twin's Fig. 3/4 are PNG.
 
 Profiles: ``quick`` trains with the ``quick`` settings of :mod:`ectskin.learn.train` (the
 ablations for :data:`~ectskin.pipeline.config.QUICK_ABLATION_EPOCHS` epochs), ``paper`` with the
@@ -76,7 +78,7 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
     )
     if config.command:
         metrics["command"] = config.command
-    figures = copy_figures(out, config.run_names)
+    figures = copy_figures(out, config.run_names, config.figure_format)
     metrics["figures"] = dict(figures)
     metrics["timings_s"]["total"] = time.perf_counter() - t_start
     write_json_atomic(out / "metrics.json", metrics)

@@ -13,7 +13,8 @@ records per step the settings it ran with, whether it finished and how long it t
 * outputs present, step started with the same settings but not finished → run again in place
   (an interrupted training resumes from its ``last.pt``);
 * outputs present but made with other settings, or of unknown origin → :class:`EctskinError`
-  naming the differing settings, unless ``force``, which removes them and runs the step again.
+  naming the differing settings, unless ``force`` (``--overwrite``), which removes them and runs
+  the step again.
 """
 
 from __future__ import annotations
@@ -151,10 +152,10 @@ class StepRunner:
                     else f"their origin is unknown (no record in {STATE_FILE})"
                 )
                 raise EctskinError(
-                    f"{self.out}: step {name!r} would overwrite {what}: {why}. Use --force "
-                    f"(force=True) to redo it, or another output folder"
+                    f"{self.out}: step {name!r} would overwrite {what}: {why}. Pass --overwrite "
+                    f"to redo it, or use another output folder"
                 )
-            log.warning("%s: --force: removing %s", name, what)
+            log.warning("%s: --overwrite: removing %s", name, what)
             for p in existing:
                 shutil.rmtree(p) if p.is_dir() else p.unlink()
         elif existing:

@@ -53,14 +53,14 @@ def _check_adoptable(path: Path, protocol_settings: dict[str, Any]) -> None:
     except EctskinError as exc:
         raise EctskinError(
             f"{path} exists but is not a readable recording of this protocol ({exc}); "
-            f"use --force to simulate again, or another output folder"
+            f"pass --overwrite to simulate again, or use another output folder"
         ) from None
     want = plain(protocol_settings)
     if found != want:
         detail = settings_diff(found, want) if isinstance(found, dict) else "no protocol stored"
         raise EctskinError(
-            f"{path} holds a recording of another protocol ({detail}); use --force to "
-            f"simulate again, or another output folder"
+            f"{path} holds a recording of another protocol ({detail}); pass --overwrite to "
+            f"simulate again, or use another output folder"
         )
 
 
@@ -167,12 +167,19 @@ def evaluate_runs(
     data_settings: dict[str, Any],
 ) -> dict[str, dict[str, Any]]:
     """Steps "evaluate_<run>": each run's ``metrics.json`` on its test split (baselines on the
-    same split for the two main runs). Returns {run: its metrics.json}."""
+    same split for the two main runs), with its figures in ``config.figure_format``. Returns
+    {run: its metrics.json}. The runner decides what may be replaced (an interrupted step, or
+    ``force``), so the evaluation itself overwrites; it writes into the run folder under the
+    plain names even when the folder was moved (``split.json`` then names the old data path)."""
     results: dict[str, dict[str, Any]] = {}
     for name in config.run_names:
         run_dir = runner.out / "runs" / name
         with_baselines = config.baselines and name in MAIN_RUNS
-        settings = {**run_settings(config, name, data_settings), "baselines": with_baselines}
+        settings = {
+            **run_settings(config, name, data_settings),
+            "baselines": with_baselines,
+            **config.figure_settings,
+        }
         evaluate = partial(
             evaluate_run,
             run_dir,
@@ -180,6 +187,10 @@ def evaluate_runs(
             baselines=with_baselines,
             figures=True,
             seed=config.seed,
+            out=run_dir,
+            overwrite=True,
+            figure_format=config.figure_format,
+            dpi=config.dpi,
         )
         runner.step(f"evaluate_{name}", settings, [run_dir / "metrics.json"], evaluate)
         results[name] = read_json(run_dir / "metrics.json", "run metrics")

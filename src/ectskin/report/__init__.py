@@ -1,8 +1,10 @@
 """The reproduction report: ``report.md`` and ``report.html`` rendered from a metrics dict.
 
 The heart of the report is one table, "metric · paper · this run · baselines", that sets each
-number of this run beside the paper's (§4) and beside the trivial baselines, followed by the margin
-over the "markers do not move" baseline, the ablations, the timings, the machine and the figures.
+number of this run beside the paper's (§4) and beside the baselines scored on the same test split,
+followed by each model's margin over the *strongest* of those baselines (a model that loses to one
+says so, and by how much), the ablations, the timings, the machine and the figures, after a table
+of contents.
 
 wording (how values are written) ─► tables (rows and sentences) ─► render (Markdown, HTML);
 machine (what a run ran on). The package renders only: it reads no data and runs nothing.
@@ -28,7 +30,13 @@ The metrics dict is the one ``ectskin reproduce`` writes to ``metrics.json``
 
 from ectskin.report.machine import machine_info
 from ectskin.report.render import render_html, render_markdown, write_report
-from ectskin.report.tables import PAPER, ablation_rows, margin_text, results_table
+from ectskin.report.tables import (
+    PAPER,
+    ablation_rows,
+    margin_text,
+    results_table,
+    strongest_baseline,
+)
 
 __all__ = [
     "PAPER",
@@ -38,5 +46,6 @@ __all__ = [
     "render_html",
     "render_markdown",
     "results_table",
+    "strongest_baseline",
     "write_report",
 ]

@@ -1,9 +1,10 @@
 """Render a metrics dict as ``report.md`` and a self-contained ``report.html``.
 
 The report is one list of sections (headings, paragraphs, tables, lists, figures), rendered to
-Markdown and to HTML alike. Markdown references images by relative path; the HTML embeds them as
-base64 so it can be mailed around as one file. Both files are written atomically
-(:mod:`ectskin._files`).
+Markdown and to HTML alike, with a table of contents linking its headings. Markdown references
+images by relative path; the HTML embeds PNG and SVG figures as base64 so it can be mailed
+around as one file (a PDF figure cannot be shown inline: both link it). Both files are written
+atomically (:mod:`ectskin._files`).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import base64
 import html
 import logging
+import re
 from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
@@ -19,16 +21,36 @@ from typing import Any
 from ectskin import __version__
 from ectskin._check import EctskinError
 from ectskin._files import write_text_atomic
-from ectskin.report.tables import ROBUST_LABEL, ablation_rows, margin_text, results_table
+from ectskin.report.tables import (
+    ROBUST_LABEL,
+    ablation_note,
+    ablation_rows,
+    margin_text,
+    results_table,
+)
 from ectskin.report.wording import DASH, duration, lookup, mm
 
 log = logging.getLogger(__name__)
 
-#: Figures the twin's ``characterize`` step writes, included when present in the output folder.
+#: Figures the twin's ``characterize`` step writes (file stem, caption), included when present
+#: in the output folder in one of :data:`FIGURE_SUFFIXES`.
 CHARACTERIZE_FIGURES = (
-    ("characterize/fig3_inflation.png", "Fig. 3: response to inflation (digital twin)"),
-    ("characterize/fig4_touch.png", "Fig. 4: two-stage touch response (digital twin)"),
+    ("characterize/fig3_inflation", "Fig. 3: response to inflation (digital twin)"),
+    ("characterize/fig4_touch", "Fig. 4: two-stage touch response (digital twin)"),
 )
+#: figure files the report shows, and the MIME type of the inline ones (PDF is linked)
+FIGURE_SUFFIXES = {".png": "image/png", ".svg": "image/svg+xml", ".pdf": None}
+#: the report's names of the machine fields (:func:`ectskin.report.machine.machine_info`)
+MACHINE_LABELS = {
+    "platform": "operating system",
+    "python": "Python",
+    "processor": "processor",
+    "cpu_count": "CPU cores",
+    "ectskin": "ectskin",
+    "torch": "torch",
+    "torch_threads": "torch CPU threads",
+    "gpu": "GPU",
+}
 
 
 def _collect_figures(out_dir: Path, figures: Any) -> list[tuple[str, Path]]:
@@ -46,11 +68,29 @@ def _collect_figures(out_dir: Path, figures: Any) -> list[tuple[str, Path]]:
             raise EctskinError(f"report figure {caption!r}: file {path} does not exist")
         items.append((str(caption), path))
     have = {p.resolve() for _, p in items}
-    for rel, caption in CHARACTERIZE_FIGURES:
-        path = out_dir / rel
-        if path.is_file() and path.resolve() not in have:
-            items.append((caption, path))
+    for stem, caption in CHARACTERIZE_FIGURES:
+        for suffix in FIGURE_SUFFIXES:
+            path = out_dir / f"{stem}{suffix}"
+            if path.is_file() and path.resolve() not in have:
+                items.append((caption, path))
+                break
     return items
+
+
+def slug(title: str) -> str:
+    """The anchor of a heading, as GitHub renders Markdown: "Margin over the baselines" →
+    "margin-over-the-baselines"."""
+    text = re.sub(r"[^\w\- ]", "", title.strip().lower())
+    return text.replace(" ", "-")
+
+
+def machine_value(key: str, value: Any) -> str:
+    """A machine field as the report writes it: lists joined, an empty GPU list as "none"."""
+    if isinstance(value, list | tuple):
+        if not value:
+            return "none (CPU only)" if key == "gpu" else "none"
+        return ", ".join(str(v) for v in value)
+    return DASH if value is None else str(value)
 
 
 def _rel(path: Path, out_dir: Path) -> str:
@@ -83,7 +123,8 @@ def _sections(metrics: Mapping[str, Any], figures: list[tuple[str, Path]]) -> li
     s: list[tuple[str, Any]] = []
     intro = (
         "This report sets the results of this run beside those of the paper (Hu et al., §4) and "
-        "beside trivial baselines. A model is only as good as its margin over them."
+        "beside baselines trained on the same training trials and scored on the same test "
+        "trials. A model is only as good as its margin over the strongest of them."
     )
     prof = lookup(metrics, "profile")
     if prof:
@@ -109,7 +150,7 @@ def _sections(metrics: Mapping[str, Any], figures: list[tuple[str, Path]]) -> li
         s.append(("p", text))
     margins = margin_text(metrics)
     if margins:
-        s.append(("h2", "Margin over the baselines"))
+        s.append(("h2", "Margin over the strongest baseline"))
         s.append(("list", margins))
     confusions = lookup(metrics, "touch.confusions") or []
     if confusions:
@@ -128,6 +169,9 @@ def _sections(metrics: Mapping[str, Any], figures: list[tuple[str, Path]]) -> li
     if abl:
         s.append(("h2", "Tracking ablations"))
         s.append(("table", (("variant", "epochs", "AD (Eq. 3)", "change vs full model"), abl)))
+        note = ablation_note(metrics)
+        if note:
+            s.append(("p", note))
         if len({r[1] for r in abl}) > 1:
             s.append(
                 (
@@ -163,11 +207,15 @@ def _sections(metrics: Mapping[str, Any], figures: list[tuple[str, Path]]) -> li
     machine = lookup(metrics, "machine") or {}
     if machine:
         s.append(("h2", "Machine"))
-        s.append(("table", (("", ""), [(k, str(v)) for k, v in machine.items()])))
+        rows = [(MACHINE_LABELS.get(k, k), machine_value(k, v)) for k, v in machine.items()]
+        s.append(("table", (("component", "value"), rows)))
     if figures:
         s.append(("h2", "Figures"))
         for caption, path in figures:
             s.append(("figure", (caption, path)))
+    headings = [payload for kind, payload in s if kind == "h2"]
+    if len(headings) > 1:
+        s.insert(1, ("toc", headings))
     return s
 
 
@@ -188,11 +236,18 @@ def render_markdown(
             lines += [payload, ""]
         elif kind == "list":
             lines += [f"- {item}" for item in payload] + [""]
+        elif kind == "toc":
+            lines += ["**Contents**", ""]
+            lines += [f"- [{title}](#{slug(title)})" for title in payload] + [""]
         elif kind == "table":
             lines += _md_table(*payload) + [""]
         elif kind == "figure":
             caption, path = payload
-            lines += [f"![{caption}]({_rel(path, out_dir)})", "", f"*{caption}*", ""]
+            rel = _rel(path, out_dir)
+            if FIGURE_SUFFIXES.get(path.suffix.lower()) is None:  # PDF: a link, not an image
+                lines += [f"[{caption} ({path.suffix[1:].upper()})]({rel})", ""]
+            else:
+                lines += [f"![{caption}]({rel})", "", f"*{caption}*", ""]
     return "\n".join(lines)
 
 
@@ -227,7 +282,10 @@ def render_html(
         parts.append(f"<p>Made by <code>{html.escape(command)}</code>.</p>")
     for kind, payload in _sections(metrics, figures):
         if kind == "h2":
-            parts.append(f"<h2>{html.escape(payload)}</h2>")
+            parts.append(f'<h2 id="{slug(payload)}">{html.escape(payload)}</h2>')
+        elif kind == "toc":
+            items = "".join(f'<li><a href="#{slug(t)}">{html.escape(t)}</a></li>' for t in payload)
+            parts.append(f"<nav><p><strong>Contents</strong></p><ul>{items}</ul></nav>")
         elif kind == "p":
             text = html.escape(payload)
             # `code` spans of the Markdown version
@@ -240,11 +298,19 @@ def render_html(
             parts.append(_html_table(*payload))
         elif kind == "figure":
             caption, path = payload
+            mime = FIGURE_SUFFIXES.get(path.suffix.lower())
+            rel = html.escape(_rel(path, out_dir or path.parent))
+            if mime is None:  # PDF: browsers do not show it as an image; link the file
+                kind_name = path.suffix[1:].upper()
+                parts.append(
+                    f'<figure><a href="{rel}">{html.escape(caption)} ({kind_name})</a>'
+                    f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+                )
+                continue
             if embed:
-                mime = "image/svg+xml" if path.suffix.lower() == ".svg" else "image/png"
                 src = f"data:{mime};base64," + base64.b64encode(path.read_bytes()).decode("ascii")
             else:
-                src = html.escape(_rel(path, out_dir or path.parent))
+                src = rel
             parts.append(
                 f'<figure><img src="{src}" alt="{html.escape(caption)}">'
                 f"<figcaption>{html.escape(caption)}</figcaption></figure>"
@@ -269,8 +335,9 @@ def write_report(
     metrics : dict
         As written by ``ectskin reproduce`` to ``metrics.json`` (see the module docstring).
     figures : {caption: path} or [path], optional
-        PNG/SVG figures to show. The twin's Fig. 3/4 (``characterize/fig3_inflation.png``,
-        ``characterize/fig4_touch.png``) are added when present in ``out_dir``.
+        PNG, SVG or PDF figures to show (PDF ones are linked). The twin's Fig. 3/4
+        (``characterize/fig3_inflation.*``, ``characterize/fig4_touch.*``) are added when
+        present in ``out_dir``.
     embed_images : bool
         Embed the images into the HTML as base64 (self-contained file); otherwise link them.
 

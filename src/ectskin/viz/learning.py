@@ -59,7 +59,8 @@ def plot_confusion(
     class_names : list of str, optional
         Tick labels; default ``"none"`` for class 0 and the region number for the others.
     annotate : bool
-        Write the count in each non-zero cell.
+        Write the count in each non-zero cell (empty cells stay blank), in a font sized to the
+        cell (:func:`cell_font_size`).
     axes : matplotlib Axes, optional
         Where to draw; a new figure otherwise.
 
@@ -76,7 +77,7 @@ def plot_confusion(
     if len(names) != n:
         raise EctskinError(f"class_names has {len(names)} names for {n} classes")
     if axes is None:
-        size = max(4.0, 0.36 * n + 1.5)
+        size = max(4.0, 0.42 * n + 1.6)
         fig = _new_figure(show, figsize=(size + 1.0, size), layout="constrained")
         ax = fig.add_subplot()
     else:
@@ -85,8 +86,9 @@ def plot_confusion(
     vmax = max(int(conf.max()), 2)
     im = ax.imshow(masked, cmap="Blues", norm=LogNorm(vmin=1, vmax=vmax), interpolation="nearest")
     fig.colorbar(im, ax=ax, shrink=0.8, label="frames")
-    ax.set_xticks(range(n), names, rotation=90 if n > 12 else 0, fontsize=8)
-    ax.set_yticks(range(n), names, fontsize=8)
+    tick_fs = 9 if n <= 12 else 8
+    ax.set_xticks(range(n), names, rotation=90 if n > 12 else 0, fontsize=tick_fs)
+    ax.set_yticks(range(n), names, fontsize=tick_fs)
     ax.set_xlabel("predicted class")
     ax.set_ylabel("true class")
     # light grid between cells
@@ -94,9 +96,9 @@ def plot_confusion(
     ax.set_yticks(np.arange(-0.5, n, 1), minor=True)
     ax.grid(which="minor", color="0.9", linewidth=0.5)
     ax.tick_params(which="minor", length=0)
-    if annotate:
-        fs = 7 if n <= 12 else 5.5
-        for i, j in zip(*np.nonzero(conf)):
+    if annotate and conf.any():
+        fs = cell_font_size(ax, n, len(str(int(conf.max()))))
+        for i, j in zip(*np.nonzero(conf)):  # empty cells stay empty: no "0" to read past
             dark = np.log(conf[i, j]) > 0.6 * np.log(vmax)
             ax.text(
                 j,
@@ -114,6 +116,18 @@ def plot_confusion(
         title = f"Touch: {acc:.2f} % correct, {count} frames misclassified"
     ax.set_title(title, fontsize=9)
     return _finish(fig, show)
+
+
+def cell_font_size(ax: Any, n: int, digits: int) -> float:
+    """The font size (points) of numbers in the cells of an ``n`` × ``n`` grid drawn on ``ax``:
+    as large as the cell allows (a number of ``digits`` digits fits its width with a margin),
+    at most 10 pt and at least 4 pt. The cell size is measured after the figure's layout."""
+    fig = ax.figure
+    fig.draw_without_rendering()  # constrained layout places the axes
+    box = ax.get_window_extent()
+    cell_pt = min(box.width, box.height) / n * 72.0 / fig.dpi
+    # a digit is about 0.6 em wide; keep 15 % of the cell free around the number
+    return float(np.clip(min(0.45 * cell_pt, 0.85 * cell_pt / (0.6 * max(digits, 1))), 4.0, 10.0))
 
 
 def _equal_3d(ax: Any, pts: np.ndarray, margin: float = 5.0) -> None:

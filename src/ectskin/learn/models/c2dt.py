@@ -37,7 +37,7 @@ in units of the typical training displacement. See :func:`coordinate_stats`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -107,6 +107,34 @@ class C2DT(nn.Module):
     """
 
     kind = "c2dt"
+    #: stacks of layers in the state dict: config field → key prefix of its numbered layers
+    layer_stacks: ClassVar[dict[str, str]] = {
+        "n_enc_layers": "encoder.layers.",
+        "n_dec_layers": "decoder.layers.",
+    }
+
+    @staticmethod
+    def state_shapes(config: C2DTConfig) -> dict[str, tuple[str | int, ...]]:
+        """The state-dict tensors whose shapes hold every size of ``config`` (with
+        :attr:`layer_stacks`, the layer counts), each dimension named by its config field (or a
+        fixed int): a checkpoint is checked against them before the model is built
+        (:func:`ectskin.learn.checkpoint.load_checkpoint`)."""
+        shapes: dict[str, tuple[str | int, ...]] = {
+            "x_mean": ("n_pairs",),
+            "x_std": ("n_pairs",),
+            "out_mean": ("n_markers", 3),
+            "marker_emb": ("n_markers", "d_model"),
+            "value_proj.weight": ("d_model", "window"),
+            "decoder.layers.0.linear1.weight": ("ff", "d_model"),
+        }
+        if config.desc_dim:
+            shapes["desc"] = ("n_electrodes", "desc_dim")
+            shapes["pairs"] = ("n_pairs", 2)
+        else:
+            shapes["pair_table.weight"] = ("n_pairs", "d_model")
+        if config.n_enc_layers:
+            shapes["encoder.layers.0.linear1.weight"] = ("ff", "d_model")
+        return shapes
 
     def __init__(
         self,

@@ -11,6 +11,7 @@ buffers of the module, so a checkpoint restores it with the weights and the mode
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -49,6 +50,20 @@ class TouchMLP(nn.Module):
     """
 
     kind = "touch_mlp"
+    #: stacks of layers in the state dict: config field → key prefix (none here)
+    layer_stacks: ClassVar[dict[str, str]] = {}
+
+    @staticmethod
+    def state_shapes(config: TouchMLPConfig) -> dict[str, tuple[str | int, ...]]:
+        """The state-dict tensors whose shapes hold every size of ``config``, each dimension
+        named by its config field (or a fixed int): a checkpoint is checked against them before
+        the model is built (:func:`ectskin.learn.checkpoint.load_checkpoint`)."""
+        return {
+            "x_mean": ("n_pairs",),
+            "x_std": ("n_pairs",),
+            "net.0.weight": ("hidden", "n_pairs"),
+            "net.3.weight": ("n_classes", "hidden"),
+        }
 
     def __init__(self, config: TouchMLPConfig | None = None) -> None:
         super().__init__()

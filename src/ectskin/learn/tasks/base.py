@@ -98,7 +98,8 @@ class Task(ABC):
     lower_is_better_metric: ClassVar[bool]
     #: the paper's trial split (train, val, test), scaled to the data by split_groups
     split_counts: ClassVar[tuple[int, int, int]]
-    #: figure file → caption, of the figures :meth:`figures` draws
+    #: figure file stem → caption, of the figures :meth:`figures` draws (the caller saves them
+    #: as ``<stem>.<format>``)
     figure_captions: ClassVar[dict[str, str]]
 
     # ------------------------------------------------------------------ data
@@ -186,7 +187,7 @@ class Task(ABC):
 
     @abstractmethod
     def figures(self, case: EvalCase, metrics: dict[str, Any]) -> dict[str, Any]:
-        """The figures of :attr:`figure_captions`: {file name: matplotlib Figure}. May add what
+        """The figures of :attr:`figure_captions`: {file stem: matplotlib Figure}. May add what
         a figure shows to ``metrics`` (e.g. the trajectory of Fig. 10)."""
 
 

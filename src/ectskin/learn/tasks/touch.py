@@ -99,7 +99,7 @@ class TouchTask(Task):
     lower_is_better_metric = False
     split_counts = TOUCH_SPLIT
     figure_captions: ClassVar[dict[str, str]] = {
-        "fig7_confusion.png": "Fig. 7: confusion map of the test set"
+        "fig7_confusion": "Fig. 7: confusion map of the test set"
     }
 
     # ------------------------------------------------------------------ data
@@ -195,4 +195,4 @@ class TouchTask(Task):
         return {k: r.to_metrics() for k, r in touch_baselines(train, test, seed=seed).items()}
 
     def figures(self, case: EvalCase, metrics: dict[str, Any]) -> dict[str, Any]:
-        return {"fig7_confusion.png": plot_confusion(np.asarray(metrics["confusion"]))}
+        return {"fig7_confusion": plot_confusion(np.asarray(metrics["confusion"]))}

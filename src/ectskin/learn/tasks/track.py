@@ -79,8 +79,8 @@ class TrackTask(Task):
     lower_is_better_metric = True
     split_counts = TRACK_SPLIT
     figure_captions: ClassVar[dict[str, str]] = {
-        "fig9_tracking.png": "Fig. 9: tracking examples, estimated (red) vs true (blue) markers",
-        "fig10_trajectory.png": "Fig. 10: one marker over a test trajectory",
+        "fig9_tracking": "Fig. 9: tracking examples, estimated (red) vs true (blue) markers",
+        "fig10_trajectory": "Fig. 10: one marker over a test trajectory",
     }
 
     # ------------------------------------------------------------------ data
@@ -218,7 +218,7 @@ class TrackTask(Task):
             "marker": name,
             "ad_mm": ad_traj,
         }
-        return {"fig9_tracking.png": fig9, "fig10_trajectory.png": fig10}
+        return {"fig9_tracking": fig9, "fig10_trajectory": fig10}
 
 
 def pick_examples(test: TrackData, n: int = N_EXAMPLES) -> np.ndarray:
