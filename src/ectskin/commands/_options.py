@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 
 from ectskin._check import EctskinError
+from ectskin.viz import DEFAULT_DPI, FIGURE_FORMATS
 
 OVERWRITE_HELP = "replace what an earlier run wrote at the output (default: refuse)"
 
@@ -41,3 +42,21 @@ def resolve_out(args: argparse.Namespace, what: str = "an output path") -> str:
     if not out:
         raise EctskinError(f"needs {what}: give -o/--out PATH")
     return out
+
+
+def add_figure_options(p: argparse.ArgumentParser) -> None:
+    """``--format png|pdf|svg`` and ``--dpi N`` → ``args.figure_format``, ``args.dpi``."""
+    p.add_argument(
+        "--format",
+        dest="figure_format",
+        choices=FIGURE_FORMATS,
+        default="png",
+        help="file format of the figures (default png; pdf and svg are vector graphics)",
+    )
+    p.add_argument(
+        "--dpi",
+        type=int,
+        default=DEFAULT_DPI,
+        help=f"resolution of the figures in dots per inch (default {DEFAULT_DPI}; in pdf and "
+        "svg only raster parts use it)",
+    )

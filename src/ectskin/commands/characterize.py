@@ -12,7 +12,7 @@ import logging
 from pathlib import Path
 
 from ectskin._check import EctskinError, parse_floats
-from ectskin.commands._options import OVERWRITE_HELP, add_out, resolve_out
+from ectskin.commands._options import OVERWRITE_HELP, add_figure_options, add_out, resolve_out
 from ectskin.layout import default_layout, load_layout
 
 HELP = "characterise the e-skin on the twin: inflation and touch responses (paper Fig. 3, 4)"
@@ -20,9 +20,10 @@ EXAMPLES = """\
   ectskin characterize -o char                       # fig3_inflation.png, fig4_touch.png, JSON
   ectskin characterize -o char --region 5 --overwrite   # touch region 5 in Fig. 4, same folder
   ectskin characterize -o char10 --inflation 10,10,10 --force-n 0.5
+  ectskin characterize -o char-pdf --format pdf      # vector figures for a paper
 """
-#: the files a characterisation writes into its folder
-OUTPUTS = ("fig3_inflation.png", "fig4_touch.png", "characterize.json")
+#: the files a characterisation writes into its folder (figures in the chosen format)
+OUTPUTS = ("fig3_inflation", "fig4_touch", "characterize.json")
 log = logging.getLogger(__name__)
 
 
@@ -40,6 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--region", type=int, default=None, help="region touched in Fig. 4 (default: first front)"
     )
     p.add_argument("--layout", help="layout JSON file (default: the paper's layout)")
+    add_figure_options(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -51,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout) if args.layout else default_layout()
     if args.region is not None:
         layout.region(args.region)  # clear error for an unknown region
-    existing = [out / name for name in OUTPUTS if (out / name).exists()]
+    names = [n if n.endswith(".json") else f"{n}.{args.figure_format}" for n in OUTPUTS]
+    existing = [out / name for name in names if (out / name).exists()]
     if existing and not args.overwrite:
         more = f" and {len(existing) - 1} more" if len(existing) > 1 else ""
         raise EctskinError(
@@ -65,6 +68,8 @@ def run(args: argparse.Namespace) -> int:
         force_n=args.force_n,
         figure_region=args.region,
         layout=layout,
+        figure_format=args.figure_format,
+        dpi=args.dpi,
     )
     log.info(
         "max |change| at %s ml: %.1f %%; written to %s",

@@ -13,9 +13,8 @@ from __future__ import annotations
 import argparse
 import logging
 
-from ectskin.commands._options import add_overwrite
+from ectskin.commands._options import add_figure_options, add_overwrite
 from ectskin.learn.profiles import describe_recipe
-from ectskin.viz import DEFAULT_DPI, FIGURE_FORMATS
 
 HELP = "evaluate a trained run on its test split (metrics.json, baselines, figures)"
 EXAMPLES = """\
@@ -25,24 +24,6 @@ EXAMPLES = """\
   ectskin evaluate runs/touch --data day2.h5 -o eval/day2 --no-baselines
 """
 log = logging.getLogger(__name__)
-
-
-def add_figure_options(p: argparse.ArgumentParser) -> None:
-    """``--format png|pdf|svg`` and ``--dpi N`` → ``args.figure_format``, ``args.dpi``."""
-    p.add_argument(
-        "--format",
-        dest="figure_format",
-        choices=FIGURE_FORMATS,
-        default="png",
-        help="file format of the figures (default png; pdf and svg are vector graphics)",
-    )
-    p.add_argument(
-        "--dpi",
-        type=int,
-        default=DEFAULT_DPI,
-        help=f"resolution of the figures in dots per inch (default {DEFAULT_DPI}; in pdf and "
-        "svg only raster parts use it)",
-    )
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

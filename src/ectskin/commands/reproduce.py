@@ -13,8 +13,7 @@ import shlex
 import sys
 
 from ectskin._check import EctskinError
-from ectskin.commands._options import add_out, add_overwrite, resolve_out
-from ectskin.commands.evaluate import add_figure_options
+from ectskin.commands._options import add_figure_options, add_out, add_overwrite, resolve_out
 from ectskin.report import results_table
 
 HELP = (

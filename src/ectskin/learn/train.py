@@ -22,6 +22,9 @@ Distributed data parallel: the same :func:`train` runs unchanged under
 ``ceil(batch_size / N)``, so the global batch matches the single-process one (exactly when
 ``batch_size`` is divisible by N). Only rank 0 writes files and shows progress. Each rank
 augments its own shard (mixup pairs frames within the rank's batch).
+
+Size: the public entry points and the staged steps of one run (set-up, header, epochs,
+summary) share the run's ``_Job`` state; split across modules they would pass it around.
 """
 
 from __future__ import annotations

@@ -103,9 +103,11 @@ def characterise(runner: StepRunner, config: ReproduceConfig) -> None:
     char_dir = runner.out / "characterize"
     runner.step(
         "characterize",
-        {"seed": config.seed},
+        {"seed": config.seed, **config.figure_settings},
         [char_dir],
-        lambda: characterize_twin(char_dir, seed=config.seed),
+        lambda: characterize_twin(
+            char_dir, seed=config.seed, figure_format=config.figure_format, dpi=config.dpi
+        ),
     )
 
 

@@ -29,6 +29,7 @@ from ectskin.twin.protocol import Protocol, region_bounds
 from ectskin.twin.readout import ReadoutConfig, noise_pf, readout, snr_db
 from ectskin.twin.sensor import SensorModel
 from ectskin.twin.simulate import TouchResponse
+from ectskin.viz import DEFAULT_DPI, check_figure_options, figure_file
 from ectskin.viz.twin import plot_response
 
 log = logging.getLogger(__name__)
@@ -60,11 +61,14 @@ def characterize(
     sensor: SensorModel | None = None,
     readout_config: ReadoutConfig | None = None,
     seed: int = 0,
+    figure_format: str = "png",
+    dpi: int = DEFAULT_DPI,
 ) -> dict:
     """Compute the characterisation; with ``out_dir`` also write the figures and JSON.
 
     Returns the dict written to ``characterize.json``.
     """
+    figure_format, dpi = check_figure_options(figure_format, dpi)
     layout = layout or (sensor.layout if sensor else default_layout())
     sensor = sensor or SensorModel(layout)
     man = sensor.manipulator
@@ -130,13 +134,18 @@ def characterize(
         region = figure_region or next(
             (r.id for r in layout.regions if r.surface == "front"), layout.regions[0].id
         )
-        _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, same, cfg, seed)
+        _write_figures(
+            out, sensor, p_full, p_touch, region, force_n, change_full, same, cfg, seed,
+            figure_format, dpi,
+        )
         write_json_atomic(out / "characterize.json", result)
         log.info("characterisation written to %s", out)
     return result
 
 
-def _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, same, cfg, seed):
+def _write_figures(
+    out, sensor, p_full, p_touch, region, force_n, change_full, same, cfg, seed, fmt, dpi
+):
     layout = sensor.layout
     fps = 30.0
     rng = np.random.default_rng([seed, 4])
@@ -156,7 +165,7 @@ def _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, s
         title=f"inflation to p = {tuple(p_full.tolist())} ml",
         stages=[(3.0, "inflate"), (15.0, "hold")],
     )
-    save_figure_atomic(fig, out / "fig3_inflation.png", dpi=120)
+    save_figure_atomic(fig, out / figure_file("fig3_inflation", fmt), dpi=dpi)
 
     # Fig. 4: rest 3 s, inflate to p_touch over 9 s, hold; from 15 s a finger comes down onto
     # the region's centre (sensed before contact), presses for ~10 s with a human force (slow
@@ -184,5 +193,5 @@ def _write_figures(out, sensor, p_full, p_touch, region, force_n, change_full, s
         title=f"two-stage: inflate to {tuple(p_touch.tolist())} ml, then touch region {region}",
         stages=[(3.0, "inflate"), (15.0, "approach"), (t[on[0]], "touch"), (t[on[-1]], "lift")],
     )
-    save_figure_atomic(fig, out / "fig4_touch.png", dpi=120)
+    save_figure_atomic(fig, out / figure_file("fig4_touch", fmt), dpi=dpi)
 
