@@ -186,8 +186,13 @@ def run(args: argparse.Namespace) -> int:
             from ectskin.learn.threads import torch_threads
 
             stack.enter_context(torch_threads(args.threads))
-            touch = TouchPredictor.from_run(args.touch_model) if args.touch_model else None
-            track = TrackPredictor.from_run(args.track_model) if args.track_model else None
+            layout = _known_layout(args)  # a model for another skin is refused before it is built
+            touch = (
+                TouchPredictor.from_run(args.touch_model, layout=layout) if args.touch_model else None
+            )
+            track = (
+                TrackPredictor.from_run(args.track_model, layout=layout) if args.track_model else None
+            )
         with stop_on_signals("closing the recording" if args.record else "stopping"):
             return _run(args, touch, track, ref_markers)
 
