@@ -18,9 +18,26 @@ def test_simulate_writes_a_readable_recording(tmp_path, capsys):
     assert rec.n_trials == 8 * 3 and rec.trials[0].n_frames == 30
     assert {t.inflation for t in rec.trials} >= {(0.0, 0.0, 0.0), (15.0, 15.0, 15.0)}
     assert rec.meta["protocol"]["seed"] == 4
-    # nothing recorded is overwritten silently
+    # nothing recorded is overwritten silently; the message names the flag
     assert main(args) == 2
-    assert "exists; pass --force" in capsys.readouterr().err
+    assert "file exists; use --overwrite" in capsys.readouterr().err
+
+
+def test_simulate_output_and_overwrite_options(tmp_path, capsys):
+    """-o/--out (the positional OUT kept as an alias) and --overwrite (alias --force)."""
+    out = tmp_path / "d.h5"
+    small = ["--levels", "0", "--touch-trials", "1", "--duration", "0.2", "--workers", "1",
+             "--no-progress"]
+    assert main(["simulate", "-o", str(out), *small]) == 0
+    first = out.read_bytes()
+    assert main(["simulate", "--out", str(out), *small, "--seed", "1"]) == 2
+    assert "use --overwrite" in capsys.readouterr().err and out.read_bytes() == first
+    assert main(["simulate", str(out), "--force", *small, "--seed", "1"]) == 0  # old spellings
+    assert out.read_bytes() != first
+    assert main(["simulate", str(out), "-o", str(tmp_path / "x.h5"), *small]) == 2
+    assert "two outputs given" in capsys.readouterr().err
+    assert main(["simulate", *small]) == 2
+    assert "give -o/--out PATH" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(
