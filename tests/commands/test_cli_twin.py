@@ -1,6 +1,11 @@
 """`ectskin simulate` and `ectskin characterize`: files written, and one clear error for bad input."""
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
@@ -80,3 +85,59 @@ def test_characterize_writes_figures_and_json(tmp_path):
     assert res["readout"]["output_step_ff"] < min(p["noise_ff"] for p in res["pairs"])
     assert len(res["touches"][4]["change"]) == 28
     assert np.isfinite(res["inflation_change_max_abs"])
+
+
+# ------------------------------------------------------------------ workers die with the driver
+def _children(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = open(f"/proc/{entry}/stat").read()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(entry))
+    return out
+
+
+def _running(pid: int) -> bool:
+    """The process exists and is not a zombie (a zombie has ended; its parent did not reap it)."""
+    try:
+        stat = open(f"/proc/{pid}/stat").read()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_killed_simulate_leaves_no_worker_alive(tmp_path, sig):
+    """Issue 12, defect 9: before, the two workers of a killed `simulate --workers 2` ran on
+    for good (blocked on a task queue whose pipe they hold open themselves)."""
+    argv = [sys.executable, "-m", "ectskin", "simulate", "-o", str(tmp_path / "s.h5"),
+            "--workers", "2", "--duration", "30", "--no-progress"]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 120
+        while len(workers) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            workers = _children(proc.pid)
+        assert len(workers) >= 2, "the workers did not start"
+        time.sleep(1.0)  # let them get to work
+        os.kill(proc.pid, sig)
+        proc.wait(timeout=60)
+        deadline = time.monotonic() + 15
+        while any(_running(w) for w in workers) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        alive = [w for w in workers if _running(w)]
+        assert alive == [], f"workers {alive} outlived the killed driver"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for w in workers:  # never leave the workers this test started behind
+            if _running(w):
+                os.kill(w, signal.SIGKILL)
