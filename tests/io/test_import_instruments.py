@@ -617,8 +617,59 @@ def test_build_recording_given_delay_no_mocap_and_errors(tmp_path):
     with pytest.raises(EctskinError, match="delay must be 'auto' or a number"):
         build_recording(cap, mocap, LAYOUT, delay="soon")
     three = read_motive_csv(MOTIVE)
-    with pytest.raises(EctskinError, match=r"3 markers \(Skin:M1, Skin:M2, Skin:M3\), but layout"):
+    with pytest.raises(EctskinError, match=r"missing from the take: M4, M5\. Markers are matched"):
         build_recording(cap, three, LAYOUT)
+
+
+def _take_with(tmp_path, names, file_name="take.csv"):
+    """A Motive take of the session whose markers carry ``names``; a name ending in digit k holds
+    the trajectory of layout marker Mk (M6: a sixth trajectory)."""
+    _, _, mk_t, pos, _ = _synthetic_session(0.0, seed=3, duration_s=5.0)
+    pos = np.concatenate([pos, pos[:, :1] + 50.0], axis=1)  # a sixth marker for "M6"
+    cols = [int(n[-1]) - 1 for n in names]
+    path = tmp_path / file_name
+    _write_motive(path, mk_t, pos[:, cols], names)
+    return read_motive_csv(path)
+
+
+def test_build_recording_matches_markers_by_name_or_refuses(tmp_path):
+    """Issue 12, defect 6: a take of Skin:M1, M2, M4, M5, M6 gave layout M3 the data of M4 and
+    M5 that of M6 (matched by order, logged at INFO). Now by name, or one error naming them."""
+    cp, *_ = _session_files(tmp_path, 0.0)
+    cap = read_capmeter_csv(cp)
+    gap = _take_with(tmp_path, ["Skin:M1", "Skin:M2", "Skin:M4", "Skin:M5", "Skin:M6"])
+    with pytest.raises(EctskinError) as info:
+        build_recording(cap, gap, LAYOUT, delay=0.0)
+    msg = str(info.value)
+    assert "missing from the take: M3" in msg and "not in the layout: Skin:M6" in msg
+    assert "never by their order" in msg and "--markers" in msg
+    # names without any match (the old fallback took them in file order)
+    other = _take_with(tmp_path, ["Skin:X1", "Skin:X2", "Skin:X3", "Skin:X4", "Skin:X5"], "o.csv")
+    with pytest.raises(EctskinError, match="missing from the take: M1, M2, M3, M4, M5; not in "
+                                           "the layout: Skin:X1"):
+        build_recording(cap, other, LAYOUT, delay=0.0)
+    # an extra marker (say, on the finger) is refused too, until the take's markers are selected
+    six = ["Skin:M6", "Skin:M2", "Skin:M1", "Skin:M3", "Skin:M5", "Skin:M4"]
+    extra = _take_with(tmp_path, six, "six.csv")
+    with pytest.raises(EctskinError, match="not in the layout: Skin:M6"):
+        build_recording(cap, extra, LAYOUT, delay=0.0)
+    picked = read_motive_csv(tmp_path / "six.csv", ["M2", "M1", "M3", "M5", "M4"])
+    t = build_recording(cap, picked, LAYOUT, delay=0.0).trials[0]
+    assert t.meta["mocap_markers"] == [f"Skin:M{k}" for k in range(1, 6)]  # layout order
+    in_order = _take_with(tmp_path, [f"Skin:M{k}" for k in range(1, 6)], "ok.csv")
+    want = build_recording(cap, in_order, LAYOUT, delay=0.0).trials[0]
+    np.testing.assert_array_equal(t.markers, want.markers)
+
+
+def test_cli_build_refuses_markers_that_do_not_match(tmp_path, capsys):
+    cli = pytest.importorskip("ectskin.cli")
+    cp, *_ = _session_files(tmp_path, 0.0)
+    _take_with(tmp_path, ["Skin:M1", "Skin:M2", "Skin:M4", "Skin:M5", "Skin:M6"], "gap.csv")
+    code = cli.main(["import", "build", "--capacitance", str(cp), "--mocap",
+                     str(tmp_path / "gap.csv"), "-o", str(tmp_path / "r.h5"), "--region", "3"])
+    err = capsys.readouterr().err
+    assert code == 2 and "missing from the take: M3" in err and "Traceback" not in err
+    assert not (tmp_path / "r.h5").exists()
 
 
 def test_build_recording_from_manifest(tmp_path):
