@@ -49,6 +49,7 @@ from ectskin.io.hdf5.schema import (
     write_root,
 )
 from ectskin.io.hdf5.write import file_image, fsync_path
+from ectskin.io.recording import check_name
 from ectskin.layout import SensorLayout
 from ectskin.layout.layout import SURFACES
 
@@ -306,6 +307,7 @@ class RecordingWriter:
         check_type("trial name", name, str)
         if not name:
             raise EctskinError(f"{self.path}: trial name must not be empty")
+        check_name(f"{self.path}: trial name", name)
         if name in self._names:
             raise EctskinError(f"{self.path}: trial {name!r} already exists in this recording")
         try:
@@ -410,6 +412,8 @@ class RecordingWriter:
                     f"{self.path}: event time must be a finite number of seconds, got {t_s!r}"
                 )
             check_type("event text", text, str)
+            if "\x00" in text:
+                raise EctskinError(f"{self.path}: event text {text!r} contains a NUL byte")
             self._events.append((t, self._cur_index, text))
             self._maybe_flush()
 

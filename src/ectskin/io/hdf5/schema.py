@@ -240,6 +240,8 @@ def check_events(events: Any, trial_names: list[str]) -> list[tuple[float, int, 
         if trial is not None and trial not in index:
             raise EctskinError(f"{src}[{k}].trial names no trial of the recording: {trial!r}")
         check_type(f"{src}[{k}].text", ev["text"], str)
+        if "\x00" in ev["text"]:
+            raise EctskinError(f"{src}[{k}].text contains a NUL byte, which HDF5 cannot store")
         rows.append((float(t), -1 if trial is None else index[trial], ev["text"]))
     return rows
 
