@@ -776,3 +776,76 @@ def test_cli_generic_calls_load_generic_and_writer(tmp_path, capsys, monkeypatch
     assert written["overwrite"] is True and rec.n_trials == 2 and rec.n_pairs == 3
     assert rec.frame_rate_hz == 30.0
     assert "wrote" in capsys.readouterr().out
+
+
+# ============================================================ issue 12: cut, dead and huge values
+def _fixed_capmeter(path, last_value="983.4021", newline=False):
+    """Three channels in fF with 4 decimals in every row; the last row ends with ``last_value``."""
+    rows = ["Time [s],C12 [fF],C13 [fF],C23 [fF]"]
+    rows += [f"{k / 30:.4f},1525.{k:04d},983.{k:04d},1207.{k:04d}" for k in range(12)]
+    rows.append(f"{12 / 30:.4f},1525.0012,983.0012,{last_value}")
+    path.write_text("\n".join(rows) + ("\n" if newline else ""), encoding="utf-8")
+    return path
+
+
+def test_capmeter_last_line_cut_short_is_left_out_and_reported(tmp_path, caplog):
+    """Issue 12, defect 15 (capacitance CSV): '1207.0239' cut to '1207.0' in a file without a
+    final newline was stored as is. Now the line is skipped, reported, the rows before kept."""
+    p = _fixed_capmeter(tmp_path / "cut.csv", last_value="1207.0")
+    with caplog.at_level("WARNING"):
+        cap = read_capmeter_csv(p, strict=True)
+    assert cap.n_frames == 12
+    assert "line 14 is cut short (its last number '1207.0' has 1 decimal" in caplog.text
+    (line, why), = cap.mask_report.skipped_rows
+    assert line == 14 and "cut short" in why and "truncated" in why
+    assert "line 14 skipped: cut short" in cap.mask_report.summary()
+    # cut inside a cell separator: fewer cells
+    p = tmp_path / "cut2.csv"
+    p.write_text(_fixed_capmeter(tmp_path / "x.csv").read_text()[:-10], encoding="utf-8")
+    assert read_capmeter_csv(p).n_frames == 12
+    # complete last lines are kept, with or without the final newline
+    for newline in (False, True):
+        cap = read_capmeter_csv(_fixed_capmeter(tmp_path / "ok.csv", newline=newline))
+        assert cap.n_frames == 13 and cap.values[-1, 2] == pytest.approx(983.4021e-3)
+        assert cap.mask_report.skipped_rows == []
+
+
+def test_capmeter_huge_value_is_refused(tmp_path):
+    p = _fixed_capmeter(tmp_path / "huge.csv", last_value="1.7e308", newline=True)
+    with pytest.raises(EctskinError, match=r"line 14, column 4 \(channel 'C23'\): 1.7e\+305 pF "
+                                           r"is beyond ±1e\+30 pF"):
+        read_capmeter_csv(p)
+
+
+def test_build_recording_leaves_out_an_all_zero_channel(tmp_path, caplog):
+    """Before: a channel reading 0 pF in every frame imported silently and failed at training."""
+    rng = np.random.default_rng(0)
+    t = np.arange(20) / 30
+    vals = rng.uniform(0.5, 1.5, (20, 28))
+    vals[:, 5] = 0.0
+    p = tmp_path / "dead.csv"
+    _write_capmeter(p, t, vals, PAIR_NAMES)
+    with caplog.at_level("WARNING"):
+        rec = build_recording(read_capmeter_csv(p), None, LAYOUT)
+    assert rec.meta["unmeasured_pairs"] == [5]
+    assert np.isnan(rec.trials[0].capacitance[:, 5]).all()
+    assert rec.trials[0].meta["dropped_channels"] == [LAYOUT.pair_names[5]]
+    assert f"channel {LAYOUT.pair_names[5]} reads 0 pF" in caplog.text
+    manifest = {"trials": [{"name": "a", "capacitance": "dead.csv"},
+                           {"name": "b", "capacitance": "alive.csv"}]}
+    _write_capmeter(tmp_path / "alive.csv", t, rng.uniform(0.5, 1.5, (20, 28)), PAIR_NAMES)
+    (tmp_path / "m.json").write_text(json.dumps(manifest), encoding="utf-8")
+    both = build_recording_from_manifest(tmp_path / "m.json")
+    assert both.meta["unmeasured_pairs"] == [5]  # dead in one trial: left out of all
+    assert np.isfinite(both.trials[1].capacitance).all()
+
+
+def test_motive_huge_coordinate_is_a_bad_row(tmp_path):
+    t = np.arange(5) / 30
+    pos = np.ones((5, 1, 3))
+    p = tmp_path / "m.csv"
+    _write_motive(p, t, pos, ["Skin:M1"])
+    p.write_text(p.read_text().replace("1.000000,1.000000,1.000000\n", "1.000000,1.7e308,1.0\n",
+                                       1), encoding="utf-8")
+    with pytest.raises(EctskinError, match=r"'1.7e308' is beyond ±1e\+30 mm"):
+        read_motive_csv(p)

@@ -145,10 +145,15 @@ def build_recording(
         )
     elif delay != "auto":
         log.info("no motion capture: the delay %r is not used", delay)
+    dead = _dead_channels(values, layout, capmeter.path)
+    stored = values.copy()
+    stored[:, dead] = np.nan  # left out of training: listed in rec.meta["unmeasured_pairs"]
+    if dead:
+        trial_meta["dropped_channels"] = [layout.pair_names[j] for j in dead]
     trial_meta.update(meta or {})
     trial = Trial(
         name=name,
-        capacitance=values,
+        capacitance=stored,
         timestamps=cap_t - cap_t[0],
         labels=np.full(capmeter.n_frames, region, dtype=np.int16),
         inflation=tuple(float(v) for v in inflation),
@@ -159,9 +164,31 @@ def build_recording(
     rate = capmeter.frame_rate_hz
     if not np.isfinite(rate):
         raise EctskinError(f"{capmeter.path}: need at least 2 frames to know the frame rate")
-    return Recording(
-        layout=layout, trials=[trial], frame_rate_hz=rate, meta={"source": "ectskin import build"}
-    )
+    rec_meta: dict[str, Any] = {"source": "ectskin import build"}
+    if dead:
+        rec_meta["unmeasured_pairs"] = dead
+    return Recording(layout=layout, trials=[trial], frame_rate_hz=rate, meta=rec_meta)
+
+
+def _dead_channels(values: np.ndarray, layout: SensorLayout, src: str) -> list[int]:
+    """Pairs (layout order) that read 0 pF in every frame, or nothing at all, logged.
+
+    Such a channel (not connected) passes the import but would fail training, where Eq. 2
+    divides by its reference of 0: its readouts are stored as NaN and its pair is listed in
+    ``rec.meta["unmeasured_pairs"]``, which every data set leaves out.
+    """
+    finite = np.isfinite(values)
+    dead = np.flatnonzero(~finite.any(axis=0) | np.all(~finite | (values == 0), axis=0))
+    if dead.size == values.shape[1]:
+        raise EctskinError(f"{src}: no channel has a usable readout (each reads 0 pF or nothing)")
+    for j in dead:
+        log.warning(
+            "%s: channel %s reads 0 pF (or nothing) in every frame, not connected?: left out "
+            "(stored as NaN, listed in unmeasured_pairs)",
+            src,
+            layout.pair_names[j],
+        )
+    return [int(j) for j in dead]
 
 
 def _check_delay(delay: Any) -> str | float:
@@ -298,6 +325,7 @@ def build_recording_from_manifest(
     if not isinstance(entries, list) or not entries:
         raise EctskinError(f"{src}: 'trials' must be a non-empty list of trial objects")
     trials = []
+    unmeasured: set[int] = set()
     rate = None
     for k, e in enumerate(entries):
         where = f"{src}: trials[{k}]"
@@ -309,12 +337,11 @@ def build_recording_from_manifest(
             )
         rate = rate or rec.frame_rate_hz
         trials.extend(rec.trials)
-    return Recording(
-        layout=layout,
-        trials=trials,
-        frame_rate_hz=rate,
-        meta={"source": "ectskin import build", "manifest": src},
-    )
+        unmeasured.update(rec.meta.get("unmeasured_pairs", []))
+    meta: dict[str, Any] = {"source": "ectskin import build", "manifest": src}
+    if unmeasured:  # a pair dead in one trial is left out of every trial's training data
+        meta["unmeasured_pairs"] = sorted(unmeasured)
+    return Recording(layout=layout, trials=trials, frame_rate_hz=rate, meta=meta)
 
 
 def _read_manifest(path: str | Path) -> dict[str, Any]:
