@@ -279,7 +279,8 @@ def test_motive_length_units(tmp_path):
     )
     np.testing.assert_allclose(cm.positions, ref.positions / 100, equal_nan=True)
     p = _copy_with(tmp_path, MOTIVE, ",Length Units,Meters", "")
-    with pytest.raises(EctskinError, match="no 'Length Units' field; pass length_units"):
+    with pytest.raises(EctskinError, match=r"no 'Length Units' field; give the unit "
+                                           r"\(length_units='Meters'.*--length-units"):
         read_motive_csv(p)
     np.testing.assert_allclose(
         read_motive_csv(p, length_units="Meters").positions, ref.positions, equal_nan=True

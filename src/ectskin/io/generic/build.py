@@ -283,14 +283,16 @@ def _frame_rate(f: Fields, frame_rate_hz: float | None, groups: _Groups) -> floa
         if f.timestamps is None:
             raise EctskinError(
                 f"{src}: no timestamps and no frame rate: give timestamps ('timestamps' / column "
-                f"'time_s'), a frame_rate_hz field, or load_generic(..., frame_rate_hz=...)"
+                f"'time_s'), a frame_rate_hz field, or the rate (frame_rate_hz=...; --frame-rate on "
+                f"the command line)"
             )
         steps = np.concatenate([np.diff(f.timestamps[idx]) for idx in groups.members])
         steps = steps[np.isfinite(steps) & (steps > 0)]
         if steps.size == 0:
             raise EctskinError(
                 f"{src}: cannot infer the frame rate from the timestamps (no group has two "
-                f"increasing timestamps); pass frame_rate_hz"
+                f"increasing timestamps); give the rate (frame_rate_hz=...; --frame-rate on the "
+                "command line)"
             )
         frame_rate_hz = 1.0 / float(np.median(steps))
         log.info("%s: frame rate %.4g Hz from the median timestamp step", src, frame_rate_hz)
