@@ -79,3 +79,20 @@ def test_library_errors_name_the_flag(tmp_path, capsys):
     assert main(["import", "generic", str(p), "-o", str(tmp_path / "o.h5")]) == 2
     err = capsys.readouterr().err
     assert "--frame-rate on the command line" in err and "load_generic(" not in err
+
+
+def test_an_os_error_is_one_line_without_a_traceback(tmp_path, capsys, monkeypatch):
+    """A full disk met by a command that writes outside the atomic writers (e.g. a stream) is
+    one line naming the file and the reason, never a traceback."""
+    import errno
+
+    from ectskin.commands import import_
+
+    def full(rec, args):
+        raise OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "o.h5"))
+
+    monkeypatch.setattr(import_, "_write", full)
+    src = _generic_csv(tmp_path / "g.csv")
+    assert main(["import", "generic", str(src), "-o", str(tmp_path / "o.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err == f"ectskin import: error: {tmp_path / 'o.h5'}: No space left on device\n"
