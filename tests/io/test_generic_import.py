@@ -515,3 +515,40 @@ def test_huge_numbers_are_refused_at_import_npz(tmp_path):
              reference=np.full(3, 1.7e308))
     with pytest.raises(EctskinError, match="reference 1.7e\\+308 is beyond"):
         load_generic(p)
+
+
+def test_names_with_a_nul_byte_are_refused_before_hdf5(tmp_path):
+    """Found by the fuzz suite: a marker name with a NUL byte imported and then failed in h5py
+    (ValueError) when the recording was written."""
+    group, labels, readouts, markers, t = _data(n_channels=3, n_markers=2)
+    p = _npz(tmp_path, readouts=readouts, group=group, labels=labels, markers=markers,
+             timestamps=t, marker_names=np.array(["tip", "a\x00b"]))
+    with pytest.raises(EctskinError, match="field 'marker_names' entry 1 is 'a\\\\x00b'"):
+        load_generic(p)
+    p = _csv(tmp_path, "# frame_rate_hz: 30\ngroup,label,c:a,m:a\x00b.x,m:a\x00b.y,m:a\x00b.z\n"
+                       "1,0,1,2,3,4\n")
+    with pytest.raises(EctskinError, match="column name 'm:a\\\\x00b.x' contains a NUL byte"):
+        load_generic(p)
+    # the writer's own check, for recordings built in Python
+    from ectskin.io.hdf5 import write_recording
+    from ectskin.io.recording import Recording
+
+    rec = load_generic(_write_csv(tmp_path / "ok.csv", group, labels, readouts, markers, t))
+    bad = virtual_layout(3, 2, 2, ["tip", "a\x00b"])
+    rec = Recording(bad, rec.trials, rec.frame_rate_hz)
+    with pytest.raises(EctskinError, match="marker name 'a\\\\x00b' contains a NUL byte"):
+        write_recording(rec, tmp_path / "r.h5")
+    assert not (tmp_path / "r.h5").exists()
+
+
+def test_group_ids_that_do_not_fit_int64_are_refused(tmp_path):
+    """Found by the fuzz suite: float ids like 1e300 were cast to int64 (undefined, one value for
+    all), so different groups could merge into one trial."""
+    p = _npz(tmp_path, readouts=np.ones((2, 1)), group=np.array([1e300, 2e300]),
+             labels=np.zeros(2), frame_rate_hz=30.0)
+    with pytest.raises(EctskinError, match="row 0 is 1e\\+300, expected an integer id"):
+        load_generic(p)
+    p = _npz(tmp_path, readouts=np.ones((2, 1)), group=np.array([1, 2**64 - 1], dtype=np.uint64),
+             labels=np.zeros(2), frame_rate_hz=30.0)
+    with pytest.raises(EctskinError, match="row 1 is 18446744073709551615, beyond the int64"):
+        load_generic(p)

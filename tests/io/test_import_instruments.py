@@ -841,6 +841,14 @@ def test_build_recording_leaves_out_an_all_zero_channel(tmp_path, caplog):
     assert np.isfinite(both.trials[1].capacitance).all()
 
 
+def test_motive_empty_length_units_is_like_none(tmp_path):
+    """Found by the fuzz suite: 'Length Units,' with an empty value gave an AttributeError."""
+    p = _copy_with(tmp_path, MOTIVE, ",Length Units,Meters", ",Length Units,")
+    with pytest.raises(EctskinError, match="no 'Length Units' field"):
+        read_motive_csv(p)
+    assert read_motive_csv(p, length_units="Meters").units == "Meters"
+
+
 def test_motive_huge_coordinate_is_a_bad_row(tmp_path):
     t = np.arange(5) / 30
     pos = np.ones((5, 1, 3))

@@ -53,7 +53,7 @@ class _Scan:
             try:
                 return self.add(line, cells)
             except EctskinError as exc:
-                why = f"it does not read: {exc}"
+                why = f"it does not read: {str(exc).removeprefix(self.src + ': ')}"
         note = truncation_note(self.src, line, why, len(self.groups))
         log.warning("%s", note)
         self.notes.append(note)
@@ -269,6 +269,8 @@ def _csv_columns(header: list[str], src: str, line: int) -> dict[str, Any]:
     """Column indices by role: group, time_s, label, c (list), ref (list), m (name → [x, y, z])."""
     seen: dict[str, int] = {}
     for j, h in enumerate(header):
+        if "\x00" in h:
+            raise EctskinError(f"{src}: line {line}: column name {h!r} contains a NUL byte")
         if h in seen:
             raise EctskinError(f"{src}: line {line}: duplicate column {h!r}")
         seen[h] = j

@@ -176,6 +176,12 @@ def _names(a: np.ndarray | None, count: int, src: str, name: str) -> list[str] |
     if a.shape != (count,):
         raise EctskinError(f"{src}: field {name!r} must hold {count} names, got shape {a.shape}")
     names = [str(v) for v in a.tolist()]
+    for k, v in enumerate(names):
+        if not v.strip() or "\x00" in v:
+            raise EctskinError(
+                f"{src}: field {name!r} entry {k} is {v!r}; a name must be non-empty text "
+                "without NUL bytes"
+            )
     if len(set(names)) != len(names):
         raise EctskinError(f"{src}: field {name!r} has duplicate names")
     return names
@@ -187,9 +193,13 @@ def _group_ids(g: np.ndarray, n: int, src: str) -> np.ndarray:
             f"{src}: field 'group' must have shape ({n},) (one group id per frame), got {g.shape}"
         )
     if g.dtype.kind in "iu":
+        if g.dtype.kind == "u" and g.size and g.max() > np.iinfo(np.int64).max:
+            i = int(np.argmax(g > np.iinfo(np.int64).max))
+            raise EctskinError(f"{src}: field 'group' row {i} is {g[i]}, beyond the int64 ids")
         return g.astype(np.int64)
     if g.dtype.kind == "f":
-        bad = ~np.isfinite(g) | (g != np.round(g))
+        # beyond 2**53 a float no longer holds every integer: two ids could become one
+        bad = ~np.isfinite(g) | (g != np.round(g)) | (np.abs(g) > 2.0**53)
         if bad.any():
             i = int(np.argmax(bad))
             raise EctskinError(f"{src}: field 'group' row {i} is {g[i]}, expected an integer id")

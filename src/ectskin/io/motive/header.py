@@ -48,7 +48,7 @@ def metadata(rows: Rows, src: str) -> dict[str, str]:
 
 def length_unit(meta: dict[str, str], length_units: str | None, src: str) -> tuple[str, float]:
     """The file's ``Length Units`` (or ``length_units``; both must agree) and its factor to mm."""
-    unit = meta.get("Length Units")
+    unit = meta.get("Length Units") or None  # an empty value states nothing
     if unit is None and length_units is None:
         raise EctskinError(
             f"{src}: line 1 has no 'Length Units' field; give the unit (length_units='Meters', "
