@@ -64,11 +64,13 @@ class _NoSpace(OSError):
 
 
 def _free_bytes(folder: Path) -> int | None:
-    """Bytes an unprivileged process may still write in ``folder``, or None if unknown."""
+    """Bytes an unprivileged process may still write in ``folder``, or None if unknown (some
+    network and FUSE file systems report a size of 0: no check there)."""
     try:
-        return shutil.disk_usage(folder).free
+        usage = shutil.disk_usage(folder)
     except OSError:
         return None
+    return usage.free if usage.total > 0 else None
 
 
 def _failure_text(exc: BaseException) -> str:
