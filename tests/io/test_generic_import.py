@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from ectskin import EctskinError
+from ectskin.io import hdf5
 from ectskin.io.generic import load_generic, virtual_layout
 from ectskin.layout import default_layout
 from ectskin.learn.datasets import touch_dataset, track_dataset
@@ -180,7 +181,6 @@ def test_virtual_layout_sizes():
 
 
 def test_hdf5_round_trip_of_an_import(tmp_path):
-    hdf5 = pytest.importorskip("ectskin.io.hdf5")
     group, labels, readouts, markers, t = _data(n_channels=5)
     p = tmp_path / "rec.npz"
     np.savez(

@@ -13,7 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ectskin import cli
 from ectskin._check import EctskinError
+from ectskin.io import hdf5
 from ectskin.io.align import (
     build_recording,
     build_recording_from_manifest,
@@ -663,7 +665,6 @@ def test_build_recording_matches_markers_by_name_or_refuses(tmp_path):
 
 
 def test_cli_build_refuses_markers_that_do_not_match(tmp_path, capsys):
-    cli = pytest.importorskip("ectskin.cli")
     cp, *_ = _session_files(tmp_path, 0.0)
     _take_with(tmp_path, ["Skin:M1", "Skin:M2", "Skin:M4", "Skin:M5", "Skin:M6"], "gap.csv")
     code = cli.main(["import", "build", "--capacitance", str(cp), "--mocap",
@@ -711,7 +712,6 @@ def _cli(argv):
 
 
 def test_cli_reports_and_builds_hdf5(tmp_path, capsys):
-    hdf5 = pytest.importorskip("ectskin.io.hdf5")
     assert _cli(["capacitance", str(CAP_BOM)]) == 0
     out = capsys.readouterr().out
     assert "8 frames, 3 channels" in out and "C13: 3 masked (OL: 2, NaN: 1)" in out
@@ -743,12 +743,8 @@ def test_cli_manifest_refuses_per_trial_flags(tmp_path):
 
 
 def test_cli_main_prints_clear_error_for_bad_file(tmp_path, capsys):
-    cli = pytest.importorskip("ectskin.cli")
     bad = _copy_with(tmp_path, CAP_BOM, "133.3,1526.1,0.375,983.4,", "133.3,1526.1,0.375,98x3.4,")
-    try:
-        code = cli.main(["import", "capacitance", str(bad)])
-    except ImportError as exc:  # another command module is not written yet
-        pytest.skip(f"CLI not assembled yet: {exc}")
+    code = cli.main(["import", "capacitance", str(bad)])
     err = capsys.readouterr().err
     assert code == 2
     assert "ectskin import: error:" in err and "line 9" in err and "'C13'" in err
@@ -756,8 +752,6 @@ def test_cli_main_prints_clear_error_for_bad_file(tmp_path, capsys):
 
 
 def test_cli_generic_calls_load_generic_and_writer(tmp_path, capsys, monkeypatch):
-    hdf5 = pytest.importorskip("ectskin.io.hdf5")
-    pytest.importorskip("ectskin.io.generic")
     written = {}
 
     def fake_write(rec, path, *, overwrite=False):  # the writer has its own tests
