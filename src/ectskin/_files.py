@@ -3,7 +3,10 @@
 Every result, checkpoint, report and figure is written through :func:`atomic_write`: the bytes go
 to a hidden temporary file ``.<name>.tmp-<pid>`` in the target's folder, are flushed to disk
 (``fsync``) and renamed onto the target with ``os.replace``. A reader sees the old file or the new
-one, never half of one; on any error the temporary file is removed and the target is untouched.
+one, never half of one; on any error (a full disk included) the temporary file is removed, the
+target is untouched and the error is one :class:`~ectskin.EctskinError` naming the file.
+A run that was killed leaves its temporary file behind; the next write into the same folder removes
+such stale files of the same target (:func:`remove_stale_temps`: only those whose process is gone).
 
 JSON policy (:func:`to_jsonable`): NumPy scalars and arrays become numbers and lists, tuples
 become lists, paths become strings, dataclasses and objects with ``to_dict()`` become dicts, and
@@ -13,7 +16,9 @@ ectskin writes can be read by any JSON parser. Readers treat ``null`` as "not av
 
 from __future__ import annotations
 
+import errno
 import json
+import logging
 import math
 import os
 from collections.abc import Callable, Mapping
@@ -27,21 +32,76 @@ from ectskin._check import EctskinError
 
 TMP_MARK = ".tmp-"
 
+log = logging.getLogger(__name__)
+
 
 def temp_path(path: Path) -> Path:
     """The hidden temporary sibling ``.<name>.tmp-<pid>`` that an atomic write of ``path`` uses."""
     return path.with_name(f".{path.name}{TMP_MARK}{os.getpid()}")
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], Any]) -> Path:
-    """Call ``write(fh)`` on a binary temporary file, fsync it and rename it onto ``path``.
+def _pid_alive(pid: int) -> bool:
+    """True unless no process ``pid`` exists (a process of another user counts as alive)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    return True
 
-    The parent folder is created. On any exception the temporary file is removed, ``path`` is left
-    as it was, and an ``OSError`` (disk full, permissions) becomes one :class:`EctskinError` that
-    names the file.
+
+def remove_stale_temps(path: str | os.PathLike) -> list[Path]:
+    """Remove the temporary files ``.<name>.tmp-<pid>`` of ``path`` left by killed runs.
+
+    Only files whose process no longer exists are removed (a run that is still writing keeps its
+    file); this process's own is kept too. Returns the removed paths; never raises.
     """
     path = Path(os.fspath(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
+    prefix = f".{path.name}{TMP_MARK}"
+    removed = []
+    try:
+        candidates = [p for p in path.parent.iterdir() if p.name.startswith(prefix)]
+    except OSError:
+        return removed
+    for p in candidates:
+        pid_text = p.name[len(prefix) :]
+        if not pid_text.isdigit() or int(pid_text) == os.getpid() or _pid_alive(int(pid_text)):
+            continue
+        try:
+            p.unlink()
+        except OSError:
+            continue
+        removed.append(p)
+        log.info("removed %s, left by an earlier run (process %s) that did not finish", p, pid_text)
+    return removed
+
+
+def os_error_text(exc: OSError) -> str:
+    """The short reason of an ``OSError``: "No space left on device", "Permission denied"."""
+    if exc.errno:
+        return os.strerror(exc.errno)
+    return exc.strerror or str(exc)
+
+
+def atomic_write(
+    path: str | os.PathLike, write: Callable[[IO[bytes]], Any], *, what: str = "the file"
+) -> Path:
+    """Call ``write(fh)`` on a binary temporary file, fsync it and rename it onto ``path``.
+
+    The parent folder is created; stale temporary files of ``path`` are removed first
+    (:func:`remove_stale_temps`). On any exception the temporary file is removed, ``path`` is left
+    as it was, and an ``OSError`` (disk full, permissions) becomes one :class:`EctskinError` that
+    names the file and says that nothing was written (``what`` names the content in it).
+    """
+    path = Path(os.fspath(path))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise EctskinError(f"{path}: cannot create its folder ({os_error_text(exc)})") from None
+    remove_stale_temps(path)
     tmp = temp_path(path)
     try:
         with open(tmp, "wb") as fh:
@@ -50,7 +110,10 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], Any]) -> 
             os.fsync(fh.fileno())
         os.replace(tmp, path)
     except OSError as exc:
-        raise EctskinError(f"{path}: cannot write ({exc.strerror or exc})") from None
+        hint = "; free some space and run it again" if exc.errno == errno.ENOSPC else ""
+        raise EctskinError(
+            f"{path}: cannot write {what} ({os_error_text(exc)}); nothing was written there{hint}"
+        ) from None
     finally:
         tmp.unlink(missing_ok=True)
     return path

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 
 from ectskin import __version__
@@ -50,6 +51,11 @@ def main(argv: list[str] | None = None) -> int:
         return int(args._run(args) or 0)
     except EctskinError as exc:
         print(f"ectskin {args._name}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # the machine refused (a full disk, permissions): one line, no trace
+        where = f"{exc.filename}: " if exc.filename else ""
+        reason = os.strerror(exc.errno) if exc.errno else (exc.strerror or str(exc))
+        print(f"ectskin {args._name}: error: {where}{reason}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"ectskin {args._name}: interrupted", file=sys.stderr)

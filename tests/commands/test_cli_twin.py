@@ -1,6 +1,11 @@
 """`ectskin simulate` and `ectskin characterize`: files written, and one clear error for bad input."""
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
@@ -18,9 +23,26 @@ def test_simulate_writes_a_readable_recording(tmp_path, capsys):
     assert rec.n_trials == 8 * 3 and rec.trials[0].n_frames == 30
     assert {t.inflation for t in rec.trials} >= {(0.0, 0.0, 0.0), (15.0, 15.0, 15.0)}
     assert rec.meta["protocol"]["seed"] == 4
-    # nothing recorded is overwritten silently
+    # nothing recorded is overwritten silently; the message names the flag
     assert main(args) == 2
-    assert "exists; pass --force" in capsys.readouterr().err
+    assert "file exists; use --overwrite" in capsys.readouterr().err
+
+
+def test_simulate_output_and_overwrite_options(tmp_path, capsys):
+    """-o/--out (the positional OUT kept as an alias) and --overwrite (alias --force)."""
+    out = tmp_path / "d.h5"
+    small = ["--levels", "0", "--touch-trials", "1", "--duration", "0.2", "--workers", "1",
+             "--no-progress"]
+    assert main(["simulate", "-o", str(out), *small]) == 0
+    first = out.read_bytes()
+    assert main(["simulate", "--out", str(out), *small, "--seed", "1"]) == 2
+    assert "use --overwrite" in capsys.readouterr().err and out.read_bytes() == first
+    assert main(["simulate", str(out), "--force", *small, "--seed", "1"]) == 0  # old spellings
+    assert out.read_bytes() != first
+    assert main(["simulate", str(out), "-o", str(tmp_path / "x.h5"), *small]) == 2
+    assert "two outputs given" in capsys.readouterr().err
+    assert main(["simulate", *small]) == 2
+    assert "give -o/--out PATH" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(
@@ -63,3 +85,59 @@ def test_characterize_writes_figures_and_json(tmp_path):
     assert res["readout"]["output_step_ff"] < min(p["noise_ff"] for p in res["pairs"])
     assert len(res["touches"][4]["change"]) == 28
     assert np.isfinite(res["inflation_change_max_abs"])
+
+
+# ------------------------------------------------------------------ workers die with the driver
+def _children(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = open(f"/proc/{entry}/stat").read()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(entry))
+    return out
+
+
+def _running(pid: int) -> bool:
+    """The process exists and is not a zombie (a zombie has ended; its parent did not reap it)."""
+    try:
+        stat = open(f"/proc/{pid}/stat").read()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_killed_simulate_leaves_no_worker_alive(tmp_path, sig):
+    """Issue 12, defect 9: before, the two workers of a killed `simulate --workers 2` ran on
+    for good (blocked on a task queue whose pipe they hold open themselves)."""
+    argv = [sys.executable, "-m", "ectskin", "simulate", "-o", str(tmp_path / "s.h5"),
+            "--workers", "2", "--duration", "30", "--no-progress"]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 120
+        while len(workers) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            workers = _children(proc.pid)
+        assert len(workers) >= 2, "the workers did not start"
+        time.sleep(1.0)  # let them get to work
+        os.kill(proc.pid, sig)
+        proc.wait(timeout=60)
+        deadline = time.monotonic() + 15
+        while any(_running(w) for w in workers) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        alive = [w for w in workers if _running(w)]
+        assert alive == [], f"workers {alive} outlived the killed driver"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for w in workers:  # never leave the workers this test started behind
+            if _running(w):
+                os.kill(w, signal.SIGKILL)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from ectskin import EctskinError
+from ectskin.io import hdf5
 from ectskin.io.generic import load_generic, virtual_layout
 from ectskin.layout import default_layout
 from ectskin.learn.datasets import touch_dataset, track_dataset
@@ -180,7 +181,6 @@ def test_virtual_layout_sizes():
 
 
 def test_hdf5_round_trip_of_an_import(tmp_path):
-    hdf5 = pytest.importorskip("ectskin.io.hdf5")
     group, labels, readouts, markers, t = _data(n_channels=5)
     p = tmp_path / "rec.npz"
     np.savez(
@@ -372,3 +372,183 @@ def test_not_an_npz_missing_file_and_unknown_suffix(tmp_path):
     bad.write_bytes(b"group,c:\xe9\n")
     with pytest.raises(EctskinError, match="not UTF-8"):
         load_generic(bad)
+
+
+# ------------------------------------------------------------- issue 12: defects 11, 12, 15
+@pytest.mark.parametrize("fmt", ["csv", "npz"])
+def test_nul_byte_in_a_group_id_is_one_clear_error(tmp_path, fmt):
+    """Before: an h5py ValueError traceback at writing ("VLEN strings do not support embedded
+    NULLs"). Now the importer names the row."""
+    group = np.array(["a", "a\x00b", "a\x00b"])
+    p = tmp_path / f"nul.{fmt}"
+    if fmt == "csv":
+        _csv(tmp_path, "# frame_rate_hz: 30\ngroup,label,c:a\na,0,1\na\x00b,0,1\na\x00b,1,2\n",
+             name="nul.csv")
+        where = "line 4, column 'group'"
+    else:
+        np.savez(p, readouts=np.ones((3, 1)), group=group, labels=np.zeros(3), frame_rate_hz=30.0)
+        where = "group id at row 1"
+    with pytest.raises(EctskinError, match="NUL byte") as e:
+        load_generic(p)
+    assert where in str(e.value) and str(p) in str(e.value)
+
+
+def test_empty_group_id_is_refused_at_import(tmp_path):
+    """Before: an NPZ with an empty group id imported, and the reader refused the file written."""
+    for group in (["", ""], ["  ", "  "], ["a", ""]):
+        p = _npz(tmp_path, readouts=np.ones((2, 1)), group=np.array(group), labels=np.zeros(2),
+                 frame_rate_hz=30.0)
+        with pytest.raises(EctskinError, match="group id at row [01] is empty"):
+            load_generic(p)
+    p = _csv(tmp_path, "# frame_rate_hz: 30\ngroup,label,c:a\n\"\",0,1\n")
+    with pytest.raises(EctskinError, match="line 3, column 'group': empty"):
+        load_generic(p)
+
+
+def test_trial_names_hdf5_cannot_store_are_refused_at_the_door(tmp_path, layout):
+    from ectskin.io.recording import Trial
+
+    for name, pattern in (("", "must not be empty"), ("a\x00b", "NUL byte")):
+        with pytest.raises(EctskinError, match=pattern):
+            Trial(name, np.ones((1, layout.n_pairs)), [0.0], [0])
+
+
+FIXED = "# frame_rate_hz: 30\ngroup,label,c:a,c:b\n" + "".join(
+    f"g,0,1.50000,1.00{k:03d}\n" for k in range(230, 240)
+)
+
+
+@pytest.mark.parametrize(
+    "tail, why",
+    [
+        ("g,1,1.50000,1.0", "its last number '1.0' has 1 decimal, the 10 rows before it have 5"),
+        ("g,1,1.50000,1.", "its last number '1.' has 0 decimals"),
+        ("g,1,1.500", "it has 3 of the header's 4 cells"),
+        ("g,1,1.50000,", "it ends with an empty cell"),
+        ("g,1,1.50000,1.00239e", "its last cell '1.00239e' is not a number"),
+    ],
+)
+def test_last_line_cut_short_is_left_out_with_a_warning(tmp_path, caplog, tail, why):
+    """Issue 12, defect 15: before, '1.00239' cut to '1.0' at the end of a file without a final
+    newline was stored as 1.0. Now the cut line is left out, said so, and the rows before kept."""
+    p = _csv(tmp_path, FIXED + tail, name="cut.csv")
+    with caplog.at_level("WARNING"):
+        rec = load_generic(p)
+    assert rec.n_frames == 10  # the rows before it
+    np.testing.assert_array_equal(rec.trials[0].capacitance[:, 1], 1.0 + np.arange(230, 240) / 1e5)
+    assert "line 13 is cut short" in caplog.text and why in caplog.text
+    assert "file looks truncated" in caplog.text
+    assert rec.meta["import_notes"] == [n for n in rec.meta["import_notes"] if "line 13" in n]
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        FIXED + "g,1,1.50000,1.00239",  # complete, only the final newline missing
+        FIXED + "g,1,1.50000,1.00239\n",
+        "# frame_rate_hz: 30\ngroup,label,c:a\ng,0,1.25\ng,0,1.5\ng,1,2.0",  # mixed decimals
+    ],
+)
+def test_complete_last_line_is_kept(tmp_path, caplog, text):
+    p = _csv(tmp_path, text, name="ok.csv")
+    with caplog.at_level("WARNING"):
+        rec = load_generic(p)
+    assert rec.n_frames == text.count("\ng,")
+    assert "cut short" not in caplog.text and "import_notes" not in rec.meta
+
+
+# ------------------------------------------------------------- issue 12: dead and huge readouts
+def test_all_zero_channel_is_left_out_with_a_note(tmp_path, caplog):
+    """Before: a channel reading 0 in every frame imported silently and failed training (Eq. 2
+    divides by its reference of 0). Now it is stored as NaN, listed as unmeasured and noted."""
+    group, labels, readouts, _, t = _data(n_channels=6)
+    readouts[:, 2] = 0.0
+    readouts[:, 4] = np.nan  # never read at all
+    p = _write_csv(tmp_path / "dead.csv", group, labels, readouts, t=t)
+    with caplog.at_level("WARNING"):
+        rec = load_generic(p)
+    assert rec.meta["unmeasured_pairs"] == [2, 4]
+    assert rec.meta["dropped_channels"] == ["ch2", "ch4"]
+    assert rec.meta["channel_names"] == ["ch0", "ch1", "ch3", "ch5"]
+    assert "channel 'ch2' reads 0 in every frame" in caplog.text
+    assert "channel 'ch4' has no readout in any frame" in caplog.text
+    assert len(rec.meta["import_notes"]) == 2
+    assert all(np.isnan(tr.capacitance[:, [2, 4]]).all() for tr in rec.trials)
+    d = touch_dataset(rec)  # training data: the dead channels are left out, nothing fails
+    assert d.pair_names == ["ch0", "ch1", "ch3", "ch5"] and np.isfinite(d.x).all()
+    readouts[:, :] = 0.0
+    p = _write_csv(tmp_path / "all.csv", group, labels, readouts, t=t)
+    with pytest.raises(EctskinError, match="no channel has a usable readout"):
+        load_generic(p)
+
+
+@pytest.mark.parametrize(
+    "where, pattern",
+    [
+        ("readouts", r"line 3, column 'c:ch1': readout 1.7e\+308 is beyond ±1e\+30"),
+        ("markers", r"line 3, column 'm:mk0.y': marker coordinate -1.7e\+308"),
+        ("time", r"line 3, column 'time_s': time 1.7e\+308"),
+    ],
+)
+def test_huge_numbers_are_refused_at_import_csv(tmp_path, where, pattern):
+    """Before: 1.7e308 imported and overflowed later (calibration, statistics)."""
+    group, labels, readouts, markers, t = _data(n_channels=3, n_markers=1)
+    if where == "readouts":
+        readouts[1, 1] = 1.7e308
+    elif where == "markers":
+        markers[1, 0, 1] = -1.7e308
+    else:
+        t[1] = 1.7e308
+    p = _write_csv(tmp_path / "huge.csv", group, labels, readouts, markers, t)
+    with pytest.raises(EctskinError, match=pattern):
+        load_generic(p)
+
+
+def test_huge_numbers_are_refused_at_import_npz(tmp_path):
+    group, labels, readouts, markers, t = _data(n_channels=3, n_markers=1)
+    readouts[5, 2] = -1.7e308
+    p = _npz(tmp_path, readouts=readouts, group=group, labels=labels, timestamps=t)
+    with pytest.raises(EctskinError, match=r"'readouts' row 5, channel 2: readout -1.7e\+308"):
+        load_generic(p)
+    readouts[5, 2] = 1.0
+    p = _npz(tmp_path, readouts=readouts, group=group, labels=labels, timestamps=t,
+             reference=np.full(3, 1.7e308))
+    with pytest.raises(EctskinError, match="reference 1.7e\\+308 is beyond"):
+        load_generic(p)
+
+
+def test_names_with_a_nul_byte_are_refused_before_hdf5(tmp_path):
+    """Found by the fuzz suite: a marker name with a NUL byte imported and then failed in h5py
+    (ValueError) when the recording was written."""
+    group, labels, readouts, markers, t = _data(n_channels=3, n_markers=2)
+    p = _npz(tmp_path, readouts=readouts, group=group, labels=labels, markers=markers,
+             timestamps=t, marker_names=np.array(["tip", "a\x00b"]))
+    with pytest.raises(EctskinError, match="field 'marker_names' entry 1 is 'a\\\\x00b'"):
+        load_generic(p)
+    p = _csv(tmp_path, "# frame_rate_hz: 30\ngroup,label,c:a,m:a\x00b.x,m:a\x00b.y,m:a\x00b.z\n"
+                       "1,0,1,2,3,4\n")
+    with pytest.raises(EctskinError, match="column name 'm:a\\\\x00b.x' contains a NUL byte"):
+        load_generic(p)
+    # the writer's own check, for recordings built in Python
+    from ectskin.io.hdf5 import write_recording
+    from ectskin.io.recording import Recording
+
+    rec = load_generic(_write_csv(tmp_path / "ok.csv", group, labels, readouts, markers, t))
+    bad = virtual_layout(3, 2, 2, ["tip", "a\x00b"])
+    rec = Recording(bad, rec.trials, rec.frame_rate_hz)
+    with pytest.raises(EctskinError, match="marker name 'a\\\\x00b' contains a NUL byte"):
+        write_recording(rec, tmp_path / "r.h5")
+    assert not (tmp_path / "r.h5").exists()
+
+
+def test_group_ids_that_do_not_fit_int64_are_refused(tmp_path):
+    """Found by the fuzz suite: float ids like 1e300 were cast to int64 (undefined, one value for
+    all), so different groups could merge into one trial."""
+    p = _npz(tmp_path, readouts=np.ones((2, 1)), group=np.array([1e300, 2e300]),
+             labels=np.zeros(2), frame_rate_hz=30.0)
+    with pytest.raises(EctskinError, match="row 0 is 1e\\+300, expected an integer id"):
+        load_generic(p)
+    p = _npz(tmp_path, readouts=np.ones((2, 1)), group=np.array([1, 2**64 - 1], dtype=np.uint64),
+             labels=np.zeros(2), frame_rate_hz=30.0)
+    with pytest.raises(EctskinError, match="row 1 is 18446744073709551615, beyond the int64"):
+        load_generic(p)

@@ -692,3 +692,15 @@ def test_sigkill_at_random_moments_never_corrupts_the_file(tmp_path, layout):
         lines = out.split()
         appended = int(lines[-1]) if len(lines) > 1 else 0
         _check_killed_file(path, layout, appended, 1000.0, 0.0)
+
+
+def test_an_event_time_that_is_not_finite_is_refused_by_the_reader(tmp_path, make_recording):
+    """Found by the fuzz suite: the reader accepted an event at t = NaN, which no writer writes
+    (and write_recording refuses), so a read file could not be written back."""
+    rec = make_recording(n_frames=4)
+    rec.meta["events"] = [{"t_s": 0.5, "trial": rec.trials[0].name, "text": "x"}]
+    p = write_recording(rec, tmp_path / "e.h5")
+    with h5py.File(p, "r+") as f:
+        f["events/t_s"][0] = np.nan
+    with pytest.raises(EctskinError, match=r"/events/t_s\[0\] is nan, expected a finite time"):
+        read_recording(p)

@@ -13,7 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ectskin import cli
 from ectskin._check import EctskinError
+from ectskin.io import hdf5
 from ectskin.io.align import (
     build_recording,
     build_recording_from_manifest,
@@ -279,7 +281,8 @@ def test_motive_length_units(tmp_path):
     )
     np.testing.assert_allclose(cm.positions, ref.positions / 100, equal_nan=True)
     p = _copy_with(tmp_path, MOTIVE, ",Length Units,Meters", "")
-    with pytest.raises(EctskinError, match="no 'Length Units' field; pass length_units"):
+    with pytest.raises(EctskinError, match=r"no 'Length Units' field; give the unit "
+                                           r"\(length_units='Meters'.*--length-units"):
         read_motive_csv(p)
     np.testing.assert_allclose(
         read_motive_csv(p, length_units="Meters").positions, ref.positions, equal_nan=True
@@ -617,8 +620,58 @@ def test_build_recording_given_delay_no_mocap_and_errors(tmp_path):
     with pytest.raises(EctskinError, match="delay must be 'auto' or a number"):
         build_recording(cap, mocap, LAYOUT, delay="soon")
     three = read_motive_csv(MOTIVE)
-    with pytest.raises(EctskinError, match=r"3 markers \(Skin:M1, Skin:M2, Skin:M3\), but layout"):
+    with pytest.raises(EctskinError, match=r"missing from the take: M4, M5\. Markers are matched"):
         build_recording(cap, three, LAYOUT)
+
+
+def _take_with(tmp_path, names, file_name="take.csv"):
+    """A Motive take of the session whose markers carry ``names``; a name ending in digit k holds
+    the trajectory of layout marker Mk (M6: a sixth trajectory)."""
+    _, _, mk_t, pos, _ = _synthetic_session(0.0, seed=3, duration_s=5.0)
+    pos = np.concatenate([pos, pos[:, :1] + 50.0], axis=1)  # a sixth marker for "M6"
+    cols = [int(n[-1]) - 1 for n in names]
+    path = tmp_path / file_name
+    _write_motive(path, mk_t, pos[:, cols], names)
+    return read_motive_csv(path)
+
+
+def test_build_recording_matches_markers_by_name_or_refuses(tmp_path):
+    """Issue 12, defect 6: a take of Skin:M1, M2, M4, M5, M6 gave layout M3 the data of M4 and
+    M5 that of M6 (matched by order, logged at INFO). Now by name, or one error naming them."""
+    cp, *_ = _session_files(tmp_path, 0.0)
+    cap = read_capmeter_csv(cp)
+    gap = _take_with(tmp_path, ["Skin:M1", "Skin:M2", "Skin:M4", "Skin:M5", "Skin:M6"])
+    with pytest.raises(EctskinError) as info:
+        build_recording(cap, gap, LAYOUT, delay=0.0)
+    msg = str(info.value)
+    assert "missing from the take: M3" in msg and "not in the layout: Skin:M6" in msg
+    assert "never by their order" in msg and "--markers" in msg
+    # names without any match (the old fallback took them in file order)
+    other = _take_with(tmp_path, ["Skin:X1", "Skin:X2", "Skin:X3", "Skin:X4", "Skin:X5"], "o.csv")
+    with pytest.raises(EctskinError, match="missing from the take: M1, M2, M3, M4, M5; not in "
+                                           "the layout: Skin:X1"):
+        build_recording(cap, other, LAYOUT, delay=0.0)
+    # an extra marker (say, on the finger) is refused too, until the take's markers are selected
+    six = ["Skin:M6", "Skin:M2", "Skin:M1", "Skin:M3", "Skin:M5", "Skin:M4"]
+    extra = _take_with(tmp_path, six, "six.csv")
+    with pytest.raises(EctskinError, match="not in the layout: Skin:M6"):
+        build_recording(cap, extra, LAYOUT, delay=0.0)
+    picked = read_motive_csv(tmp_path / "six.csv", ["M2", "M1", "M3", "M5", "M4"])
+    t = build_recording(cap, picked, LAYOUT, delay=0.0).trials[0]
+    assert t.meta["mocap_markers"] == [f"Skin:M{k}" for k in range(1, 6)]  # layout order
+    in_order = _take_with(tmp_path, [f"Skin:M{k}" for k in range(1, 6)], "ok.csv")
+    want = build_recording(cap, in_order, LAYOUT, delay=0.0).trials[0]
+    np.testing.assert_array_equal(t.markers, want.markers)
+
+
+def test_cli_build_refuses_markers_that_do_not_match(tmp_path, capsys):
+    cp, *_ = _session_files(tmp_path, 0.0)
+    _take_with(tmp_path, ["Skin:M1", "Skin:M2", "Skin:M4", "Skin:M5", "Skin:M6"], "gap.csv")
+    code = cli.main(["import", "build", "--capacitance", str(cp), "--mocap",
+                     str(tmp_path / "gap.csv"), "-o", str(tmp_path / "r.h5"), "--region", "3"])
+    err = capsys.readouterr().err
+    assert code == 2 and "missing from the take: M3" in err and "Traceback" not in err
+    assert not (tmp_path / "r.h5").exists()
 
 
 def test_build_recording_from_manifest(tmp_path):
@@ -659,7 +712,6 @@ def _cli(argv):
 
 
 def test_cli_reports_and_builds_hdf5(tmp_path, capsys):
-    hdf5 = pytest.importorskip("ectskin.io.hdf5")
     assert _cli(["capacitance", str(CAP_BOM)]) == 0
     out = capsys.readouterr().out
     assert "8 frames, 3 channels" in out and "C13: 3 masked (OL: 2, NaN: 1)" in out
@@ -691,12 +743,8 @@ def test_cli_manifest_refuses_per_trial_flags(tmp_path):
 
 
 def test_cli_main_prints_clear_error_for_bad_file(tmp_path, capsys):
-    cli = pytest.importorskip("ectskin.cli")
     bad = _copy_with(tmp_path, CAP_BOM, "133.3,1526.1,0.375,983.4,", "133.3,1526.1,0.375,98x3.4,")
-    try:
-        code = cli.main(["import", "capacitance", str(bad)])
-    except ImportError as exc:  # another command module is not written yet
-        pytest.skip(f"CLI not assembled yet: {exc}")
+    code = cli.main(["import", "capacitance", str(bad)])
     err = capsys.readouterr().err
     assert code == 2
     assert "ectskin import: error:" in err and "line 9" in err and "'C13'" in err
@@ -704,8 +752,6 @@ def test_cli_main_prints_clear_error_for_bad_file(tmp_path, capsys):
 
 
 def test_cli_generic_calls_load_generic_and_writer(tmp_path, capsys, monkeypatch):
-    hdf5 = pytest.importorskip("ectskin.io.hdf5")
-    pytest.importorskip("ectskin.io.generic")
     written = {}
 
     def fake_write(rec, path, *, overwrite=False):  # the writer has its own tests
@@ -725,3 +771,84 @@ def test_cli_generic_calls_load_generic_and_writer(tmp_path, capsys, monkeypatch
     assert written["overwrite"] is True and rec.n_trials == 2 and rec.n_pairs == 3
     assert rec.frame_rate_hz == 30.0
     assert "wrote" in capsys.readouterr().out
+
+
+# ============================================================ issue 12: cut, dead and huge values
+def _fixed_capmeter(path, last_value="983.4021", newline=False):
+    """Three channels in fF with 4 decimals in every row; the last row ends with ``last_value``."""
+    rows = ["Time [s],C12 [fF],C13 [fF],C23 [fF]"]
+    rows += [f"{k / 30:.4f},1525.{k:04d},983.{k:04d},1207.{k:04d}" for k in range(12)]
+    rows.append(f"{12 / 30:.4f},1525.0012,983.0012,{last_value}")
+    path.write_text("\n".join(rows) + ("\n" if newline else ""), encoding="utf-8")
+    return path
+
+
+def test_capmeter_last_line_cut_short_is_left_out_and_reported(tmp_path, caplog):
+    """Issue 12, defect 15 (capacitance CSV): '1207.0239' cut to '1207.0' in a file without a
+    final newline was stored as is. Now the line is skipped, reported, the rows before kept."""
+    p = _fixed_capmeter(tmp_path / "cut.csv", last_value="1207.0")
+    with caplog.at_level("WARNING"):
+        cap = read_capmeter_csv(p, strict=True)
+    assert cap.n_frames == 12
+    assert "line 14 is cut short (its last number '1207.0' has 1 decimal" in caplog.text
+    (line, why), = cap.mask_report.skipped_rows
+    assert line == 14 and "cut short" in why and "truncated" in why
+    assert "line 14 skipped: cut short" in cap.mask_report.summary()
+    # cut inside a cell separator: fewer cells
+    p = tmp_path / "cut2.csv"
+    p.write_text(_fixed_capmeter(tmp_path / "x.csv").read_text()[:-10], encoding="utf-8")
+    assert read_capmeter_csv(p).n_frames == 12
+    # complete last lines are kept, with or without the final newline
+    for newline in (False, True):
+        cap = read_capmeter_csv(_fixed_capmeter(tmp_path / "ok.csv", newline=newline))
+        assert cap.n_frames == 13 and cap.values[-1, 2] == pytest.approx(983.4021e-3)
+        assert cap.mask_report.skipped_rows == []
+
+
+def test_capmeter_huge_value_is_refused(tmp_path):
+    p = _fixed_capmeter(tmp_path / "huge.csv", last_value="1.7e308", newline=True)
+    with pytest.raises(EctskinError, match=r"line 14, column 4 \(channel 'C23'\): 1.7e\+305 pF "
+                                           r"is beyond ±1e\+30 pF"):
+        read_capmeter_csv(p)
+
+
+def test_build_recording_leaves_out_an_all_zero_channel(tmp_path, caplog):
+    """Before: a channel reading 0 pF in every frame imported silently and failed at training."""
+    rng = np.random.default_rng(0)
+    t = np.arange(20) / 30
+    vals = rng.uniform(0.5, 1.5, (20, 28))
+    vals[:, 5] = 0.0
+    p = tmp_path / "dead.csv"
+    _write_capmeter(p, t, vals, PAIR_NAMES)
+    with caplog.at_level("WARNING"):
+        rec = build_recording(read_capmeter_csv(p), None, LAYOUT)
+    assert rec.meta["unmeasured_pairs"] == [5]
+    assert np.isnan(rec.trials[0].capacitance[:, 5]).all()
+    assert rec.trials[0].meta["dropped_channels"] == [LAYOUT.pair_names[5]]
+    assert f"channel {LAYOUT.pair_names[5]} reads 0 pF" in caplog.text
+    manifest = {"trials": [{"name": "a", "capacitance": "dead.csv"},
+                           {"name": "b", "capacitance": "alive.csv"}]}
+    _write_capmeter(tmp_path / "alive.csv", t, rng.uniform(0.5, 1.5, (20, 28)), PAIR_NAMES)
+    (tmp_path / "m.json").write_text(json.dumps(manifest), encoding="utf-8")
+    both = build_recording_from_manifest(tmp_path / "m.json")
+    assert both.meta["unmeasured_pairs"] == [5]  # dead in one trial: left out of all
+    assert np.isfinite(both.trials[1].capacitance).all()
+
+
+def test_motive_empty_length_units_is_like_none(tmp_path):
+    """Found by the fuzz suite: 'Length Units,' with an empty value gave an AttributeError."""
+    p = _copy_with(tmp_path, MOTIVE, ",Length Units,Meters", ",Length Units,")
+    with pytest.raises(EctskinError, match="no 'Length Units' field"):
+        read_motive_csv(p)
+    assert read_motive_csv(p, length_units="Meters").units == "Meters"
+
+
+def test_motive_huge_coordinate_is_a_bad_row(tmp_path):
+    t = np.arange(5) / 30
+    pos = np.ones((5, 1, 3))
+    p = tmp_path / "m.csv"
+    _write_motive(p, t, pos, ["Skin:M1"])
+    p.write_text(p.read_text().replace("1.000000,1.000000,1.000000\n", "1.000000,1.7e308,1.0\n",
+                                       1), encoding="utf-8")
+    with pytest.raises(EctskinError, match=r"'1.7e308' is beyond ±1e\+30 mm"):
+        read_motive_csv(p)

@@ -19,10 +19,41 @@ from __future__ import annotations
 
 import argparse
 import logging
+from pathlib import Path
 
 from ectskin._check import EctskinError, parse_floats
+from ectskin.commands._options import add_out, add_overwrite
 
 HELP = "import instrument files (capacitance CSV, Motive CSV, generic NPZ/CSV) into HDF5"
+EXAMPLES = """\
+  ectskin import capacitance readout.csv                # check a readout export
+  ectskin import capacitance readout.csv -o rec.h5 --region 7 --inflation 0,10,20
+  ectskin import mocap take.csv --markers M1,M2,M3,M4,M5
+  ectskin import build --capacitance readout.csv --mocap take.csv -o rec.h5 --region 7
+  ectskin import build --manifest trials.json -o rec.h5 --overwrite
+  ectskin import generic data.npz -o rec.h5             # docs/import-format.md
+"""
+#: Examples of each kind, at the end of ``ectskin import KIND --help``.
+KIND_EXAMPLES = {
+    "capacitance": """\
+  ectskin import capacitance readout.csv                      # report channels and masks
+  ectskin import capacitance readout.csv -o rec.h5 --region 7 --inflation 0,10,20
+  ectskin import capacitance export.csv --delimiter semicolon --time-unit ms --no-strict
+""",
+    "mocap": """\
+  ectskin import mocap take.csv                               # markers, rate, occlusions
+  ectskin import mocap take.csv --markers M1,M2,M3 --length-units Meters
+""",
+    "build": """\
+  ectskin import build --capacitance readout.csv --mocap take.csv -o rec.h5 --region 7
+  ectskin import build --capacitance readout.csv --mocap take.csv -o rec.h5 --delay 0.05
+  ectskin import build --manifest trials.json -o rec.h5 --overwrite
+""",
+    "generic": """\
+  ectskin import generic data.npz -o rec.h5
+  ectskin import generic frames.csv -o rec.h5 --frame-rate 30 --layout my_layout.json
+""",
+}
 
 log = logging.getLogger(__name__)
 
@@ -62,39 +93,44 @@ def _add_trial_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--inflation", default="", help="chamber volumes in ml, e.g. 0,10,20")
     g.add_argument("--region", type=int, default=0,
                    help="touched region for the whole trial (0 = no touch)")
-    g.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    add_overwrite(g, help="replace an existing output file (default: refuse)")
+
+
+def _kind(sub, name: str, **kw) -> argparse.ArgumentParser:
+    return sub.add_parser(name, epilog=f"examples:\n{KIND_EXAMPLES[name].rstrip()}",
+                          formatter_class=argparse.RawDescriptionHelpFormatter, **kw)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="import_kind", metavar="KIND", required=True)
 
-    p = sub.add_parser("capacitance", help="read a capacitance-meter CSV: report, or write -o",
-                       description="Read a capacitance-meter CSV export, report its channels, "
-                                   "masked cells and skipped rows; with -o write a one-trial "
-                                   "recording without markers.")
+    p = _kind(sub, "capacitance", help="read a capacitance-meter CSV: report, or write -o",
+              description="Read a capacitance-meter CSV export, report its channels, masked "
+                          "cells and skipped rows; with -o write a one-trial recording without "
+                          "markers.")
     p.add_argument("file", help="the CSV export")
-    p.add_argument("-o", "--out", default=None, help="HDF5 recording to write")
+    add_out(p, help="HDF5 recording to write (default: only report)")
     _add_capacitance_options(p)
     _add_trial_options(p)
 
-    p = sub.add_parser("mocap", help="read an OptiTrack Motive CSV and report it",
-                       description="Read an OptiTrack Motive CSV export and report its markers, "
-                                   "frame rate and occlusions.")
+    p = _kind(sub, "mocap", help="read an OptiTrack Motive CSV and report it",
+              description="Read an OptiTrack Motive CSV export and report its markers, frame "
+                          "rate and occlusions.")
     p.add_argument("file", help="the Motive CSV export")
     p.add_argument("--no-strict", dest="strict", action="store_false",
                    help="skip malformed rows (reported) instead of stopping at the first")
     _add_mocap_options(p)
 
-    p = sub.add_parser("build", help="align readout + Motive files and write a recording",
-                       description="Read a capacitance export and a Motive take, estimate their "
-                                   "delay, resample the markers onto the readout frames and write "
-                                   "an HDF5 recording; or do that for every trial of a JSON "
-                                   "manifest (docs/instrument-import.md).")
+    p = _kind(sub, "build", help="align readout + Motive files and write a recording",
+              description="Read a capacitance export and a Motive take, estimate their delay, "
+                          "resample the markers onto the readout frames and write an HDF5 "
+                          "recording; or do that for every trial of a JSON manifest "
+                          "(docs/instrument-import.md).")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--capacitance", default=None, help="capacitance-meter CSV (one trial)")
     src.add_argument("--manifest", default=None, help="JSON manifest of trials")
     p.add_argument("--mocap", default=None, help="Motive CSV of the same trial (optional)")
-    p.add_argument("-o", "--out", required=True, help="HDF5 recording to write")
+    add_out(p, help="HDF5 recording to write (required)")
     p.add_argument("--delay", default="auto",
                    help="'auto' (estimate) or the delay in s; > 0 means the markers lag")
     p.add_argument("--max-delay", type=float, default=0.5,
@@ -110,18 +146,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     _add_mocap_options(p)
     _add_trial_options(p)
 
-    p = sub.add_parser("generic", help="import a generic NPZ/CSV recording (docs/import-format.md)",
-                       description="Import a recording in the generic NPZ/CSV format and write it "
-                                   "as HDF5.")
+    p = _kind(sub, "generic", help="import a generic NPZ/CSV recording (docs/import-format.md)",
+              description="Import a recording in the generic NPZ/CSV format and write it as "
+                          "HDF5.")
     p.add_argument("file", help="the .npz or .csv file")
-    p.add_argument("-o", "--out", required=True, help="HDF5 recording to write")
+    add_out(p, help="HDF5 recording to write (required)")
     p.add_argument("--layout", default=None,
                    help="layout JSON the channels come from (default: a virtual layout built "
                         "from the data)")
     p.add_argument("--frame-rate", type=float, default=None,
                    help="frames/s, overriding the file's (default: the file's, else the "
                         "timestamps')")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    add_overwrite(p, help="replace an existing output file (default: refuse)")
 
 
 # --------------------------------------------------------------------------- helpers
@@ -151,9 +187,16 @@ def _read_mocap(args, path):
     )
 
 
+def _check_out(args) -> None:
+    """Refuse an existing output before any work, naming the flag."""
+    if args.out and Path(args.out).exists() and not args.overwrite:
+        raise EctskinError(f"{args.out}: file exists; use --overwrite to replace it")
+
+
 def _write(rec, args) -> None:
     from ectskin.io.hdf5 import write_recording
 
+    _check_out(args)
     path = write_recording(rec, args.out, overwrite=args.overwrite)
     print(f"wrote {path}: {rec.n_trials} trial(s), {rec.n_frames} frames, {rec.n_pairs} pairs, "
           f"{rec.frame_rate_hz:.3f} frames/s")
@@ -273,9 +316,18 @@ _RUNS = {
 }
 
 
+def _require_out(args: argparse.Namespace) -> None:
+    if not args.out:
+        raise EctskinError(f"import {args.import_kind} needs the recording to write: give -o/--out PATH")
+
+
 def run(args: argparse.Namespace) -> int:
     kind = args.import_kind
     if kind not in _RUNS:
         raise EctskinError(f"unknown import kind {kind!r}")
+    if kind in ("build", "generic"):
+        _require_out(args)
+    if kind != "mocap":
+        _check_out(args)
     _RUNS[kind](args)
     return 0

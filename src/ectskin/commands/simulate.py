@@ -1,4 +1,4 @@
-"""``ectskin simulate OUT.h5``: run the paper's experiment (or a variant) in the digital twin.
+"""``ectskin simulate -o OUT.h5``: run the paper's experiment (or a variant) in the digital twin.
 
 The twin and the HDF5 writer are imported inside :func:`run`: ``ectskin --help`` imports every
 command module, and should not load them for that.
@@ -12,13 +12,20 @@ import time
 from pathlib import Path
 
 from ectskin._check import EctskinError, parse_floats
+from ectskin.commands._options import add_out, add_overwrite, resolve_out
 
 HELP = "simulate the experiment protocol in the digital twin and record it to HDF5"
+EXAMPLES = """\
+  ectskin simulate -o twin.h5                          # the paper's protocol, all cores
+  ectskin simulate -o quick.h5 --levels 0,20 --touch-trials 2 --duration 5
+  ectskin simulate -o twin.h5 --overwrite --workers 2  # replace an earlier twin.h5
+"""
 log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("out", help="output HDF5 recording (refuses to overwrite without --force)")
+    add_out(p, help="HDF5 recording to write", positional=True)
+    add_overwrite(p, help="replace OUT if it exists (default: refuse)")
     p.add_argument("--levels", default="0,10,20", help="inflation levels per chamber, ml (default 0,10,20)")
     p.add_argument("--touch-trials", type=int, default=6, help="touch trials per state (default 6)")
     p.add_argument("--duration", type=float, default=30.0, help="trial duration, s (default 30)")
@@ -40,7 +47,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--layout", help="layout JSON file (default: the paper's layout)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=None, help="parallel processes (default: all cores)")
-    p.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
     p.add_argument("--no-progress", action="store_true")
 
 
@@ -49,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from ectskin.layout import default_layout, load_layout
     from ectskin.twin import Manipulator, Protocol, ReadoutConfig, simulate_experiment
 
+    out = resolve_out(args, "the HDF5 recording to write")
     if args.workers is not None and args.workers < 1:
         raise EctskinError(f"--workers must be >= 1, got {args.workers}")
     protocol = Protocol(
@@ -67,16 +74,16 @@ def run(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout) if args.layout else default_layout()
     for v in protocol.levels_ml:  # refuse impossible levels before any work
         Manipulator().check_inflation([v] * protocol.n_chambers)
-    if Path(args.out).exists() and not args.force:
-        raise EctskinError(f"{args.out} exists; pass --force to overwrite it")
+    if Path(out).exists() and not args.overwrite:
+        raise EctskinError(f"{out}: file exists; use --overwrite to replace it")
     t0 = time.perf_counter()
     rec = simulate_experiment(
         protocol, layout=layout, workers=args.workers, progress=not args.no_progress
     )
     dt = time.perf_counter() - t0
-    write_recording(rec, args.out, overwrite=args.force)
+    write_recording(rec, out, overwrite=args.overwrite)
     log.info(
         "%d trials, %d frames in %.1f s (%.0f frames/s) -> %s",
-        rec.n_trials, rec.n_frames, dt, rec.n_frames / dt, args.out,
+        rec.n_trials, rec.n_frames, dt, rec.n_frames / dt, out,
     )
     return 0

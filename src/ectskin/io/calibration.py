@@ -270,8 +270,9 @@ def touch_reference(
     if not rest:
         raise EctskinError(
             "recording has no rest-state trial (inflation all 0 ml and no contact) to calibrate "
-            "against (paper Eq. 2); pass reference=<array of "
-            f"{rec.n_pairs} readouts> or import the file with a reference field"
+            "against (paper Eq. 2); record one (inflation 0 ml, no touch), import the file with "
+            "a reference field (docs/import-format.md) or, in Python, pass reference=<array of "
+            f"{rec.n_pairs} readouts>"
         )
     frames = np.concatenate([t.capacitance[:, keep] for t in rest], axis=0)
     if not np.all(np.isfinite(frames)):

@@ -44,6 +44,18 @@ from ectskin.layout.layout import SURFACES
 GROUND_TRUTH_FIELDS = ("contact", "finger_uv_mm", "finger_height_mm")
 
 
+def check_name(what: str, name: Any) -> str:
+    """A name stored in a recording (trial, event text): a non-empty ``str`` without NUL bytes,
+    which HDF5's strings cannot hold."""
+    if not isinstance(name, str):
+        raise EctskinError(f"{what} must be a str, got {type(name).__name__} ({name!r:.60})")
+    if not name:
+        raise EctskinError(f"{what} must not be empty")
+    if "\x00" in name:
+        raise EctskinError(f"{what} {name!r} contains a NUL byte, which a recording cannot store")
+    return name
+
+
 def _bool_frames(name: str, value: Any, n: int, src: str) -> np.ndarray:
     """(n,) bool from bools or the numbers 0/1; anything else is refused, naming the frame."""
     try:
@@ -135,6 +147,7 @@ class Trial:
 
     def __post_init__(self) -> None:
         src = f"trial {self.name!r}"
+        check_name("trial name", self.name)
         self.capacitance = check_array("capacitance", self.capacitance, (None, None), source=src)
         n = self.capacitance.shape[0]
         self.timestamps = check_array("timestamps", self.timestamps, (n,), finite=True, source=src)

@@ -10,6 +10,10 @@
   caller can name the column and what it expected.
 * :class:`RowErrors`: the ``strict`` policy for a malformed data row: raise an error naming file
   and line, or skip the row, log it and remember it for the report.
+* :func:`cut_short` and :func:`truncation_note`: the last row of a file that ends without a
+  newline may have been cut in the middle (a copy that stopped: ``1.00239`` read as ``1.0``);
+  the importers leave such a row out and say so, keeping the rows before it.
+* :data:`MAX_ABS_VALUE`: the largest magnitude a number of an imported file may have.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from __future__ import annotations
 import csv
 import logging
 import re
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,6 +31,11 @@ log = logging.getLogger(__name__)
 
 #: CSV rows as :func:`csv_rows` yields them: (1-based line number, cells).
 Rows = list[tuple[int, list[str]]]
+
+#: Largest magnitude of an imported number (readouts in any unit, mm, s). Beyond it the
+#: calibration (Eq. 2 stored as float32) and the statistics of training (sums and squares)
+#: overflow to inf; such values are placeholders for "no value" (1.7e308), not measurements.
+MAX_ABS_VALUE = 1e30
 
 _THOUSANDS_SPACES = re.compile(r"^[+-]?\d{1,3}(?: \d{3})+(?:[.,]\d*)?(?:[eE][+-]?\d+)?$")
 
@@ -134,3 +143,89 @@ class RowErrors:
             raise self.error(line, reason)
         self.logger.warning("%s: line %d skipped: %s", self.src, line, reason)
         self.skipped.append((line, reason))
+
+
+# --------------------------------------------------------------------------- truncated files
+def decimals(cell: str, decimal_comma: bool = False) -> int:
+    """Digits after the decimal separator of a number cell: ``"1.00239"`` → 5, ``"2"`` → 0,
+    ``"1.5e-3"`` → 1 (the exponent does not count)."""
+    s = cell.strip()
+    for e in "eE":
+        s = s.split(e, 1)[0]
+    for sep in ".," if decimal_comma else ".":
+        if sep in s:
+            return sum(ch.isdigit() for ch in s.rsplit(sep, 1)[1])
+    return 0
+
+
+@dataclass
+class TailDecimals:
+    """The last cell of every row so far: how many were empty, and the decimals of the others
+    (one count for all: a fixed-format export; or mixed)."""
+
+    value: int | None = None
+    mixed: bool = False
+    n: int = 0  # rows
+    n_numbers: int = 0  # rows whose last cell is not empty
+    n_empty: int = 0
+
+    def add(self, cell: str, decimal_comma: bool = False) -> None:
+        self.n += 1
+        if not cell.strip():
+            self.n_empty += 1
+            return
+        d = decimals(cell, decimal_comma)
+        if self.n_numbers and d != self.value:
+            self.mixed = True
+        self.value = d
+        self.n_numbers += 1
+
+    @property
+    def fixed(self) -> int | None:
+        """The decimals every non-empty last cell had (at least two of them), else None."""
+        return self.value if self.n_numbers >= 2 and not self.mixed else None
+
+
+def cut_short(
+    cells: Sequence[str],
+    width: int,
+    tail: TailDecimals,
+    is_value: Callable[[str], bool] | None,
+    decimal_comma: bool = False,
+) -> str | None:
+    """Why the final row of a file without a newline at its end looks cut short, or None.
+
+    A copy that stops in the middle of the last row leaves fewer cells than the header's
+    ``width``, an empty last cell (where every row before it ends with a value), a last cell that
+    is no value (``is_value``, None for a text column) or a last number with fewer decimals than
+    the same column has in every row before it (``tail``: fixed-format exports). A last row that
+    ends like the rows before it is taken as complete.
+    """
+    if len(cells) < width:
+        return f"it has {len(cells)} of the header's {width} cells"
+    last = cells[-1]
+    if not last.strip():
+        if tail.n and not tail.n_empty:  # every row before it ends with a value
+            return "it ends with an empty cell"
+        return None
+    if is_value is None:
+        return None
+    if not is_value(last):
+        return f"its last cell {last.strip()!r} is not a number"
+    fixed = tail.fixed
+    d = decimals(last, decimal_comma)
+    if fixed is not None and d < fixed:
+        return (
+            f"its last number {last.strip()!r} has {d} decimal{'' if d == 1 else 's'}, the "
+            f"{tail.n} rows before it have {fixed}"
+        )
+    return None
+
+
+def truncation_note(src: str, line: int, reason: str, kept: int) -> str:
+    """The message for a last row left out by :func:`cut_short`."""
+    return (
+        f"{src}: line {line} is cut short ({reason}) and the file ends there without a "
+        f"newline: the file looks truncated (copied incompletely?); line {line} is left out, "
+        f"the {kept} data rows before it are kept"
+    )

@@ -16,8 +16,13 @@ the number of workers.
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import os
+import signal
+import sys
+import threading
+import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
 
@@ -244,11 +249,57 @@ def simulate_trial(
 
 
 # ---------------------------------------------------------------- parallel driver
+# Workers die with the driver. A worker blocks on the task queue, whose pipe every worker holds
+# open too, so it never sees the driver go: without the guards below a killed `simulate` left its
+# workers running for good. Linux kills a worker when its parent dies (prctl PR_SET_PDEATHSIG);
+# elsewhere a watchdog thread exits the worker once it is orphaned (its parent process changes),
+# and a worker whose driver died before it started exits at once. A driver that stops on an
+# exception (Ctrl-C) cancels the queued trials and terminates its workers (_stop_workers).
 _WORKER: dict = {}
+_PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+_WATCHDOG_PERIOD_S = 0.5
 
 
-def _init_worker(layout_json: str, manip: dict, disc: dict, eps_r: float, finger: dict,
-                 protocol: dict, chamber_eps_r: float | None, limit_threads: bool = True) -> None:
+def _die_with_parent(driver_pid: int) -> None:
+    """End this worker process when its parent (the driver, or the driver's fork server) goes."""
+    parent = os.getppid()
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):  # no prctl: the watchdog still works
+            log.debug("prctl(PR_SET_PDEATHSIG) unavailable; relying on the watchdog")
+    try:
+        os.kill(driver_pid, 0)
+    except ProcessLookupError:  # the driver died before this worker started
+        os._exit(1)
+    except OSError:
+        pass
+
+    def watch() -> None:
+        while os.getppid() == parent:  # an orphan is adopted by another process
+            time.sleep(_WATCHDOG_PERIOD_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="ectskin-worker-watchdog", daemon=True).start()
+
+
+def _stop_workers(ex: ProcessPoolExecutor) -> None:
+    """Cancel the queued trials and terminate the running workers now (not after their trials)."""
+    ex.shutdown(wait=False, cancel_futures=True)
+    procs = list((getattr(ex, "_processes", None) or {}).values())
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(timeout=5)
+
+
+def _init_worker(driver_pid: int | None, layout_json: str, manip: dict, disc: dict,
+                 eps_r: float, finger: dict, protocol: dict, chamber_eps_r: float | None,
+                 limit_threads: bool = True) -> None:
+    if driver_pid is not None:  # a worker process: it dies with the driver
+        _die_with_parent(driver_pid)
     if limit_threads:  # one BLAS thread per worker process: the workers are the parallelism
         _WORKER["limits"] = threadpool_limits(1)
     layout = SensorLayout.from_json(layout_json)
@@ -309,16 +360,23 @@ def simulate_experiment(
     trials: list[Trial] = []
     try:
         if workers == 1:  # in this process: limit BLAS threads only while simulating
-            _init_worker(*initargs, limit_threads=False)
+            _init_worker(None, *initargs, limit_threads=False)
             with threadpool_limits(1):
                 for job in jobs:
                     trials.append(_run_trial(job))
                     bar.update()
         else:
-            with ProcessPoolExecutor(workers, initializer=_init_worker, initargs=initargs) as ex:
+            ex = ProcessPoolExecutor(
+                workers, initializer=_init_worker, initargs=(os.getpid(), *initargs)
+            )
+            try:
                 for trial in ex.map(_run_trial, jobs, chunksize=1):
                     trials.append(trial)
                     bar.update()
+            except BaseException:
+                _stop_workers(ex)
+                raise
+            ex.shutdown()
     finally:
         bar.close()
     meta = {

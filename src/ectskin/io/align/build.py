@@ -24,33 +24,52 @@ log = logging.getLogger(__name__)
 
 # --------------------------------------------------------------------------- one trial
 def _match_markers(mocap: MocapData, layout: SensorLayout) -> np.ndarray:
-    """Column order that puts the take's markers in the layout's marker order."""
+    """Column of the take for every layout marker (layout order), matched by name.
+
+    A layout marker matches the take's marker of the same name, else the one whose name after
+    Motive's asset prefix is its name (``M1`` matches ``Skin:M1``). Every layout marker must be
+    found exactly once and every marker of the take must be a layout marker; otherwise the import
+    stops with an error naming the missing, extra and ambiguous markers. Markers are never
+    assigned by their order in the file: a take missing M3 would give M3 the data of M4.
+    """
     want = [m.name for m in layout.markers]
     have = list(mocap.marker_names)
-    short = [n.split(":")[-1] for n in have]
-    order = []
+    order: list[int] = []
+    missing: list[str] = []
+    ambiguous: list[str] = []
     for name in want:
         hits = [k for k, n in enumerate(have) if n == name] or [
-            k for k, s in enumerate(short) if s == name
+            k for k, n in enumerate(have) if n.split(":")[-1] == name
         ]
-        if len(hits) != 1:
-            order = None
-            break
-        order.append(hits[0])
-    if order is not None and len(order) == len(have):
-        return np.asarray(order, dtype=np.int64)
-    if len(have) != len(want):
+        if not hits:
+            missing.append(name)
+        elif len(hits) > 1:
+            ambiguous.append(f"{name} ({', '.join(have[k] for k in hits)})")
+        else:
+            order.append(hits[0])
+    twice = sorted({have[k] for k in order if order.count(k) > 1})
+    matched = set(order)
+    extra = [n for k, n in enumerate(have) if k not in matched]
+    if ambiguous or twice:
+        extra = []  # unmatched because ambiguous: named there
+    if missing or extra or ambiguous or twice:
+        problems = []
+        if missing:
+            problems.append(f"missing from the take: {', '.join(missing)}")
+        if extra:
+            problems.append(f"not in the layout: {', '.join(extra)}")
+        if ambiguous:
+            problems.append(f"ambiguous: {'; '.join(ambiguous)}")
+        if twice:
+            problems.append(f"matched by two layout markers: {', '.join(twice)}")
         raise EctskinError(
-            f"{mocap.path}: {len(have)} markers ({', '.join(have)}), but layout {layout.name!r} "
-            f"has {len(want)} ({', '.join(want)}); select the markers with marker_names"
+            f"{mocap.path}: the take's markers ({', '.join(have)}) do not match the markers of "
+            f"layout {layout.name!r} ({', '.join(want)}) by name; {'; '.join(problems)}. Markers "
+            "are matched by name (M1 matches Skin:M1), never by their order: select the take's "
+            "markers (marker_names=..., --markers on the command line) or name the layout's "
+            "markers as in the take"
         )
-    log.info(
-        "%s: marker names %s do not match layout markers %s; using the file order",
-        mocap.path,
-        have,
-        want,
-    )
-    return np.arange(len(have))
+    return np.asarray(order, dtype=np.int64)
 
 
 def build_recording(
@@ -74,8 +93,9 @@ def build_recording(
     ----------
     capmeter : from :func:`read_capmeter_csv`; its channels must be ``layout.n_pairs`` pairs in the
         ECT order. mocap : from :func:`read_motive_csv`, or None (no markers).
-    layout : the sensor layout; markers are matched to ``layout.markers`` by name (``M1`` matches
-        ``Skin:M1``) when all names match, else taken in file order.
+    layout : the sensor layout; the take's markers are matched to ``layout.markers`` by name
+        (``M1`` matches ``Skin:M1``); a take whose markers do not match them one to one is
+        refused, naming the missing and extra markers.
     delay : ``"auto"`` (estimate with :func:`estimate_delay`) or the delay in s (markers lag > 0).
     max_delay_s, delay_method : search range and method of the estimate (``delay="auto"``).
     trial_name : default the capacitance file's stem. inflation : chamber volumes p, ml.
@@ -125,10 +145,15 @@ def build_recording(
         )
     elif delay != "auto":
         log.info("no motion capture: the delay %r is not used", delay)
+    dead = _dead_channels(values, layout, capmeter.path)
+    stored = values.copy()
+    stored[:, dead] = np.nan  # left out of training: listed in rec.meta["unmeasured_pairs"]
+    if dead:
+        trial_meta["dropped_channels"] = [layout.pair_names[j] for j in dead]
     trial_meta.update(meta or {})
     trial = Trial(
         name=name,
-        capacitance=values,
+        capacitance=stored,
         timestamps=cap_t - cap_t[0],
         labels=np.full(capmeter.n_frames, region, dtype=np.int16),
         inflation=tuple(float(v) for v in inflation),
@@ -139,9 +164,31 @@ def build_recording(
     rate = capmeter.frame_rate_hz
     if not np.isfinite(rate):
         raise EctskinError(f"{capmeter.path}: need at least 2 frames to know the frame rate")
-    return Recording(
-        layout=layout, trials=[trial], frame_rate_hz=rate, meta={"source": "ectskin import build"}
-    )
+    rec_meta: dict[str, Any] = {"source": "ectskin import build"}
+    if dead:
+        rec_meta["unmeasured_pairs"] = dead
+    return Recording(layout=layout, trials=[trial], frame_rate_hz=rate, meta=rec_meta)
+
+
+def _dead_channels(values: np.ndarray, layout: SensorLayout, src: str) -> list[int]:
+    """Pairs (layout order) that read 0 pF in every frame, or nothing at all, logged.
+
+    Such a channel (not connected) passes the import but would fail training, where Eq. 2
+    divides by its reference of 0: its readouts are stored as NaN and its pair is listed in
+    ``rec.meta["unmeasured_pairs"]``, which every data set leaves out.
+    """
+    finite = np.isfinite(values)
+    dead = np.flatnonzero(~finite.any(axis=0) | np.all(~finite | (values == 0), axis=0))
+    if dead.size == values.shape[1]:
+        raise EctskinError(f"{src}: no channel has a usable readout (each reads 0 pF or nothing)")
+    for j in dead:
+        log.warning(
+            "%s: channel %s reads 0 pF (or nothing) in every frame, not connected?: left out "
+            "(stored as NaN, listed in unmeasured_pairs)",
+            src,
+            layout.pair_names[j],
+        )
+    return [int(j) for j in dead]
 
 
 def _check_delay(delay: Any) -> str | float:
@@ -278,6 +325,7 @@ def build_recording_from_manifest(
     if not isinstance(entries, list) or not entries:
         raise EctskinError(f"{src}: 'trials' must be a non-empty list of trial objects")
     trials = []
+    unmeasured: set[int] = set()
     rate = None
     for k, e in enumerate(entries):
         where = f"{src}: trials[{k}]"
@@ -289,12 +337,11 @@ def build_recording_from_manifest(
             )
         rate = rate or rec.frame_rate_hz
         trials.extend(rec.trials)
-    return Recording(
-        layout=layout,
-        trials=trials,
-        frame_rate_hz=rate,
-        meta={"source": "ectskin import build", "manifest": src},
-    )
+        unmeasured.update(rec.meta.get("unmeasured_pairs", []))
+    meta: dict[str, Any] = {"source": "ectskin import build", "manifest": src}
+    if unmeasured:  # a pair dead in one trial is left out of every trial's training data
+        meta["unmeasured_pairs"] = sorted(unmeasured)
+    return Recording(layout=layout, trials=trials, frame_rate_hz=rate, meta=meta)
 
 
 def _read_manifest(path: str | Path) -> dict[str, Any]:

@@ -206,7 +206,8 @@ def _channel_column(
             raise EctskinError(
                 f"{src}: column {k + 1} {text!r} (header line {header_line}) has no unit, so "
                 f"it is unclear whether it holds capacitance; give the unit in the file "
-                f"('{text} [pF]' or a units row) or pass value_unit='pF' (or 'fF')"
+                f"('{text} [pF]' or a units row) or give it (value_unit='pF' or 'fF'; "
+                "--value-unit on the command line)"
             )
         ulow = value_unit.lower()
         unit = value_unit

@@ -1,4 +1,9 @@
-"""``read_capmeter_csv``: read text → parse the header → parse the rows → cross-check → result."""
+"""``read_capmeter_csv``: read text → parse the header → parse the rows → cross-check → result.
+
+A last row cut short by an incomplete copy (the file ends without a newline inside it) is left
+out and listed among the skipped rows, with a warning (:func:`ectskin.io.text.cut_short`); a value
+beyond :data:`~ectskin.io.text.MAX_ABS_VALUE` pF is refused.
+"""
 
 from __future__ import annotations
 
@@ -16,8 +21,21 @@ from ectskin.io.capmeter.units import (
     CLOCK_UNITS,
     TIME_UNITS,
     canonical_pair_order,
+    missing_marker,
+    parse_clock,
 )
-from ectskin.io.text import RowErrors, csv_rows, detect_delimiter, read_text
+from ectskin.io.text import (
+    MAX_ABS_VALUE,
+    RowErrors,
+    Rows,
+    TailDecimals,
+    csv_rows,
+    cut_short,
+    detect_delimiter,
+    parse_number,
+    read_text,
+    truncation_note,
+)
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +76,8 @@ def read_capmeter_csv(
     """
     _check_arguments(time_unit, value_unit, delimiter, pair_order)
     src = str(path)
-    lines = read_text(path, "capacitance-meter").splitlines()
+    text = read_text(path, "capacitance-meter")
+    lines = text.splitlines()
     if not any(ln.strip() for ln in lines):
         raise EctskinError(f"{src}: the file is empty")
     delim = delimiter or detect_delimiter(lines)
@@ -73,9 +92,68 @@ def read_capmeter_csv(
         value_unit=value_unit,
     )
     errors = RowErrors(src, strict, log)
-    table = parse_rows(rows[header.data_start :], header, errors, decimal_comma)
+    data = rows[header.data_start :]
+    cut = None
+    if not text.endswith(("\n", "\r")):
+        cut = _cut_last_row(data, header, decimal_comma, src)
+        if cut is not None:
+            data = data[:-1]
+    table = parse_rows(data, header, errors, decimal_comma)
+    if cut is not None:
+        table.report.skipped_rows.append(cut)
+    _check_magnitudes(table, header, src)
     _check_relative(table, header, relative_tolerance, src)
     return _result(table, header, src, pair_order, n_pairs)
+
+
+def _cut_last_row(
+    data: Rows, header: Header, decimal_comma: bool, src: str
+) -> tuple[int, str] | None:
+    """(line, reason) when the last data row of a file without a final newline looks cut short."""
+    if not data or not any(c.strip() for c in data[-1][1]):
+        return None
+    line, cells = data[-1]
+    tail = TailDecimals()
+    for _, before in data[-51:-1]:
+        if len(before) == header.width:
+            tail.add(before[-1], decimal_comma)
+    if header.width - 1 == header.time_col:
+
+        def is_value(c: str) -> bool:
+            return parse_number(c, decimal_comma) is not None or parse_clock(c) is not None
+    else:
+
+        def is_value(c: str) -> bool:
+            return parse_number(c, decimal_comma) is not None or missing_marker(c) is not None
+
+    why = cut_short(cells, header.width, tail, is_value, decimal_comma)
+    if why is None:
+        return None
+    kept = sum(1 for _, c in data[:-1] if any(x.strip() for x in c))
+    log.warning("%s", truncation_note(src, line, why, kept))
+    return line, f"cut short ({why}); the file ends there without a newline (truncated?)"
+
+
+def _check_magnitudes(table: Table, header: Header, src: str) -> None:
+    """Refuse a value (pF) or time (s) beyond MAX_ABS_VALUE: the calibration would overflow."""
+    with np.errstate(invalid="ignore"):
+        big = np.abs(table.values) > MAX_ABS_VALUE
+    if big.any():
+        i, k = (int(v) for v in np.argwhere(big)[0])
+        c = header.values[k]
+        raise EctskinError(
+            f"{src}: line {table.lines[i]}, column {c.index + 1} (channel {c.base!r}): "
+            f"{table.values[i, k]:g} pF is beyond ±{MAX_ABS_VALUE:g} pF, where the calibration "
+            "and training overflow; a placeholder for a missing value? Write OL, NaN or leave "
+            "the cell empty (masked) instead"
+        )
+    big = np.abs(table.times) > MAX_ABS_VALUE
+    if big.any():
+        i = int(np.argmax(big))
+        raise EctskinError(
+            f"{src}: line {table.lines[i]}: time {table.times[i]:g} s is beyond "
+            f"±{MAX_ABS_VALUE:g} s"
+        )
 
 
 def _check_arguments(

@@ -96,7 +96,7 @@ class _RowParser:
                 raise EctskinError(
                     f"{self.src}: time column {self.h.time_name!r} states no unit and holds "
                     f"numbers (line {line}: {tcell.strip()!r}); name it 'Time [s]' / 'Time [ms]' "
-                    f"or pass time_unit='s' or 'ms'"
+                    f"or give the unit (time_unit='s' or 'ms'; --time-unit on the command line)"
                 )
             self.kind = "clock"
         if self.kind != "clock":

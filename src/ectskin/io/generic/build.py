@@ -1,5 +1,10 @@
 """Build the :class:`Recording` of a generic file from its parsed fields: the layout (given or
-virtual), one trial per group, references, timestamps and the frame rate."""
+virtual), one trial per group, references, timestamps and the frame rate.
+
+A channel without a usable readout (0 in every frame: not connected; or empty in every frame) is
+left out: its readouts are stored as NaN and its pair is listed in ``rec.meta["unmeasured_pairs"]``
+(which every data set leaves out), with a warning and a note in ``rec.meta["import_notes"]``.
+Kept, it would pass the import and fail training (Eq. 2 divides by a reference of 0)."""
 
 from __future__ import annotations
 
@@ -80,23 +85,39 @@ def build_recording(
             f"coordinates ('markers' / columns 'm:<marker>.x|.y|.z')"
         )
     layout = _layout(f, layout)
+    dead = _dead_channels(f)
     groups = _Groups(f.group)
     ref_by_key, per_frame_ref = _references(f, groups)
     _check_timestamps(f, groups)
     rate = _frame_rate(f, frame_rate_hz, groups)
     trials = [
-        _trial(f, groups, k, layout.n_pairs, rate, ref_by_key, per_frame_ref) for k in groups.order
+        _trial(f, groups, k, layout.n_pairs, rate, ref_by_key, per_frame_ref, dead)
+        for k in groups.order
     ]
     rec_meta: dict[str, Any] = {
         "source": "generic",
         "format": fmt,
         "file": f.source,
-        "channel_names": list(f.channel_names),
+        # the names of the measured channels (datasets.channel_names: one per measured channel)
+        "channel_names": [c for j, c in enumerate(f.channel_names) if j not in dead],
     }
     if f.marker_names is not None:
         rec_meta["marker_names"] = list(f.marker_names)
-    if layout.n_pairs > m:
-        rec_meta["unmeasured_pairs"] = list(range(m, layout.n_pairs))
+    unmeasured = sorted(set(dead) | set(range(m, layout.n_pairs)))
+    if unmeasured:
+        rec_meta["unmeasured_pairs"] = unmeasured
+    notes = list(f.notes)
+    for j, why in dead.items():
+        note = (
+            f"{f.source}: channel {f.channel_names[j]!r} {why}: left out (stored as NaN, pair "
+            f"{j} listed in unmeasured_pairs)"
+        )
+        log.warning("%s", note)
+        notes.append(note)
+    if dead:
+        rec_meta["dropped_channels"] = [f.channel_names[j] for j in dead]
+    if notes:
+        rec_meta["import_notes"] = notes
     if per_frame_ref is not None:
         rec_meta["readout_unit"] = "ratio to the per-frame reference"
     rec = Recording(layout=layout, trials=trials, frame_rate_hz=rate, meta=rec_meta)
@@ -110,6 +131,24 @@ def build_recording(
         0 if f.labels is None else int(f.labels.max()),
     )
     return rec
+
+
+def _dead_channels(f: Fields) -> dict[int, str]:
+    """Channels without a usable readout, by index: why (0 in every frame, or none at all)."""
+    finite = np.isfinite(f.readouts)
+    none = ~finite.any(axis=0)
+    zero = ~none & np.all(~finite | (f.readouts == 0), axis=0)
+    dead = {
+        int(j): "has no readout in any frame (every cell empty or NaN)"
+        for j in np.flatnonzero(none)
+    }
+    dead.update({int(j): "reads 0 in every frame (not connected?)" for j in np.flatnonzero(zero)})
+    dead = dict(sorted(dead.items()))
+    if len(dead) == f.readouts.shape[1]:
+        raise EctskinError(
+            f"{f.source}: no channel has a usable readout (each reads 0 or nothing in every frame)"
+        )
+    return dead
 
 
 def _layout(f: Fields, layout: SensorLayout | None) -> SensorLayout:
@@ -244,14 +283,16 @@ def _frame_rate(f: Fields, frame_rate_hz: float | None, groups: _Groups) -> floa
         if f.timestamps is None:
             raise EctskinError(
                 f"{src}: no timestamps and no frame rate: give timestamps ('timestamps' / column "
-                f"'time_s'), a frame_rate_hz field, or load_generic(..., frame_rate_hz=...)"
+                f"'time_s'), a frame_rate_hz field, or the rate (frame_rate_hz=...; --frame-rate on "
+                f"the command line)"
             )
         steps = np.concatenate([np.diff(f.timestamps[idx]) for idx in groups.members])
         steps = steps[np.isfinite(steps) & (steps > 0)]
         if steps.size == 0:
             raise EctskinError(
                 f"{src}: cannot infer the frame rate from the timestamps (no group has two "
-                f"increasing timestamps); pass frame_rate_hz"
+                f"increasing timestamps); give the rate (frame_rate_hz=...; --frame-rate on the "
+                "command line)"
             )
         frame_rate_hz = 1.0 / float(np.median(steps))
         log.info("%s: frame rate %.4g Hz from the median timestamp step", src, frame_rate_hz)
@@ -272,6 +313,7 @@ def _trial(
     frame_rate_hz: float,
     ref_by_key: dict[int, np.ndarray],
     per_frame_ref: np.ndarray | None,
+    dead: dict[int, str],
 ) -> Trial:
     """The trial of group ``k`` (key index): readouts padded to ``n_pairs`` with NaN."""
     m = f.readouts.shape[1]
@@ -289,6 +331,7 @@ def _trial(
         meta["reference"] = [float(v) for v in ref_by_key[int(k)]] + [None] * (n_pairs - m)
         meta["reference_kind"] = "per_trial"
     cap[:, :m] = values
+    cap[:, list(dead)] = np.nan  # left out: see _dead_channels
     if f.timestamps is not None:
         t = f.timestamps[idx]
         meta["t0_s"] = float(t[0])

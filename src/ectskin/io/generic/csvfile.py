@@ -3,10 +3,13 @@
 
 The file is streamed once: group ids are kept as text and every other column goes into one flat
 float64 buffer, so a big file costs 8 bytes per numeric cell rather than a Python string per cell.
+A last row cut short by an incomplete copy (the file ends without a newline inside it) is left
+out with a warning (:func:`ectskin.io.text.cut_short`).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from array import array
 from dataclasses import dataclass, field
@@ -16,8 +19,10 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
-from ectskin.io.generic.fields import CSV_COLUMNS, Fields, class_labels
-from ectskin.io.text import csv_rows, parse_float
+from ectskin.io.generic.fields import CSV_COLUMNS, Fields, check_magnitude, class_labels
+from ectskin.io.text import TailDecimals, csv_rows, cut_short, parse_float, truncation_note
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -33,6 +38,26 @@ class _Scan:
     flat: array = field(default_factory=lambda: array("d"))
     groups: list[str] = field(default_factory=list)
     lines: array = field(default_factory=lambda: array("q"))
+    tail: TailDecimals = field(default_factory=TailDecimals)  # the last column's format
+    notes: list[str] = field(default_factory=list)
+
+    def add_last(self, line: int, cells: list[str]) -> None:
+        """Take the file's last row, which no newline ends: left out (noted) if it looks cut."""
+        if self.header is None or not cells or cells[0].lstrip().startswith("#"):
+            return self.add(line, cells)
+        if all(not c.strip() for c in cells):
+            return None
+        last_is_text = len(self.header) - 1 == self.cols["group"]
+        why = cut_short(cells, len(self.header), self.tail, None if last_is_text else _is_number)
+        if why is None:
+            try:
+                return self.add(line, cells)
+            except EctskinError as exc:
+                why = f"it does not read: {str(exc).removeprefix(self.src + ': ')}"
+        note = truncation_note(self.src, line, why, len(self.groups))
+        log.warning("%s", note)
+        self.notes.append(note)
+        return None
 
     def add(self, line: int, cells: list[str]) -> None:
         """Take one CSV row: a blank or comment line, the header, or a data row."""
@@ -58,13 +83,20 @@ class _Scan:
             raise EctskinError(
                 f"{self.src}: line {line}, column 'group': empty cell, expected a group id"
             )
-        self.groups.append(g)
+        if "\x00" in g:
+            raise EctskinError(
+                f"{self.src}: line {line}, column 'group': the group id {g!r} contains a NUL "
+                "byte; group ids become trial names, which cannot hold one"
+            )
         values = tuple(cells[j] for j in self.numeric)
         try:
-            self.flat.extend(array("d", map(float, values)))
+            row = array("d", map(float, values))
         except ValueError:
-            self.flat.extend(self._slow_row(values, line))
+            row = self._slow_row(values, line)
+        self.flat.extend(row)  # only a row that reads whole is taken
+        self.groups.append(g)
         self.lines.append(line)
+        self.tail.add(cells[-1])
 
     def _comment(self, text: str) -> None:
         """``# frame_rate_hz: 30`` (or ``=``) above the header → meta["frame_rate_hz"]."""
@@ -116,6 +148,11 @@ def read_csv(path: Path) -> Fields:
     if np.isinf(readouts).any():
         i, j = (int(v) for v in np.argwhere(np.isinf(readouts))[0])
         raise EctskinError(f"{src}: {row(i)}, column {header[cols['c'][j]]!r} is {readouts[i, j]}")
+
+    def at(columns: list[int]):
+        return lambda k: f"{row(k[0])}, column {header[columns[k[1]]]!r}"
+
+    check_magnitude(readouts, src, "readout", at(cols["c"]))
     labels = None
     if "label" in cols:
         labels = class_labels(column(cols["label"]), n, src, "column 'label'", row)
@@ -130,10 +167,19 @@ def read_csv(path: Path) -> Fields:
         if np.isinf(markers).any():
             i = int(np.argwhere(np.isinf(markers))[0][0])
             raise EctskinError(f"{src}: {row(i)}: a marker coordinate is inf")
+        check_magnitude(
+            markers,
+            src,
+            "marker coordinate",
+            lambda k: f"{row(k[0])}, column 'm:{marker_names[k[1]]}.{'xyz'[k[2]]}'",
+        )
     reference = None
     if cols["ref"]:
         reference = np.stack([column(j) for j in cols["ref"]], axis=1)
+        check_magnitude(reference, src, "reference", at(cols["ref"]))
     timestamps = column(cols["time_s"]) if "time_s" in cols else None
+    if timestamps is not None:
+        check_magnitude(timestamps, src, "time", lambda k: f"{row(k[0])}, column 'time_s'")
     return Fields(
         src,
         readouts,
@@ -146,16 +192,36 @@ def read_csv(path: Path) -> Fields:
         [header[j][2:] for j in cols["c"]],
         marker_names,
         row,
+        scan.notes,
     )
+
+
+def _is_number(cell: str) -> bool:
+    return parse_float(cell) is not None
+
+
+def _ends_with_newline(path: Path) -> bool:
+    with open(path, "rb") as fh:
+        fh.seek(0, 2)
+        if fh.tell() == 0:
+            return True
+        fh.seek(-1, 2)
+        return fh.read(1) in (b"\n", b"\r")
 
 
 def _scan(path: Path) -> _Scan:
     src = str(path)
     scan = _Scan(src)
     try:
+        complete = _ends_with_newline(path)
         with open(path, encoding="utf-8-sig", newline="") as fh:
-            for line, cells in csv_rows(fh, src):
-                scan.add(line, cells)
+            held = None  # one row behind: the last row is read by add_last
+            for row in csv_rows(fh, src):
+                if held is not None:
+                    scan.add(*held)
+                held = row
+            if held is not None:
+                (scan.add if complete else scan.add_last)(*held)
     except UnicodeDecodeError:
         raise EctskinError(f"{src}: not UTF-8 text (is it a CSV file?)") from None
     except OSError as exc:
@@ -203,6 +269,8 @@ def _csv_columns(header: list[str], src: str, line: int) -> dict[str, Any]:
     """Column indices by role: group, time_s, label, c (list), ref (list), m (name → [x, y, z])."""
     seen: dict[str, int] = {}
     for j, h in enumerate(header):
+        if "\x00" in h:
+            raise EctskinError(f"{src}: line {line}: column name {h!r} contains a NUL byte")
         if h in seen:
             raise EctskinError(f"{src}: line {line}: duplicate column {h!r}")
         seen[h] = j

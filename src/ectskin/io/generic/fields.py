@@ -4,11 +4,12 @@ independent, and the checks both formats share."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ectskin._check import EctskinError
+from ectskin.io.text import MAX_ABS_VALUE
 
 NPZ_FIELDS = (
     "readouts",
@@ -41,6 +42,41 @@ class Fields:
     channel_names: list[str]
     marker_names: list[str] | None
     row: Callable[[int], str]  # "line 12" (CSV) / "row 11" (NPZ) of frame i
+    notes: list[str] = field(default_factory=list)  # what the reader left out, for the log
+
+
+def check_magnitude(
+    values: np.ndarray, src: str, what: str, where: Callable[[tuple[int, ...]], str]
+) -> None:
+    """Refuse a number beyond :data:`~ectskin.io.text.MAX_ABS_VALUE` (NaN passes), naming it."""
+    with np.errstate(invalid="ignore"):
+        big = np.abs(values) > MAX_ABS_VALUE
+    if big.any():
+        k = tuple(int(v) for v in np.argwhere(big)[0])
+        raise EctskinError(
+            f"{src}: {where(k)}: {what} {float(values[k]):g} is beyond ±{MAX_ABS_VALUE:g}, where the "
+            "calibration and training overflow; a placeholder for a missing value? Leave the "
+            "cell empty (NaN: masked) instead"
+        )
+
+
+def check_group_text(group: np.ndarray, src: str, row: Callable[[int], str]) -> None:
+    """Group ids given as text: none empty (or blank), none with a NUL byte (HDF5 cannot store
+    it in a trial name)."""
+    if group.dtype.kind != "U" or group.size == 0:
+        return
+    blank = np.char.str_len(np.char.strip(group)) == 0
+    if blank.any():
+        i = int(np.argmax(blank))
+        raise EctskinError(f"{src}: group id at {row(i)} is empty, expected a group id")
+    # (in Python: NumPy's own string functions drop the NUL of a search string)
+    nul = next((i for i, g in enumerate(group.tolist()) if "\x00" in g), None)
+    if nul is not None:
+        i = nul
+        raise EctskinError(
+            f"{src}: group id at {row(i)} contains a NUL byte ({str(group[i])!r}); group ids "
+            "become trial names, which cannot hold one"
+        )
 
 
 def class_labels(

@@ -9,7 +9,13 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
-from ectskin.io.generic.fields import NPZ_FIELDS, Fields, class_labels
+from ectskin.io.generic.fields import (
+    NPZ_FIELDS,
+    Fields,
+    check_group_text,
+    check_magnitude,
+    class_labels,
+)
 
 
 def _row(i: int) -> str:
@@ -35,6 +41,7 @@ def read_npz(path: Path) -> Fields:
                 f"{src}: field 'reference' must have shape ({m},), (n_groups, {m}) or ({n}, {m}), "
                 f"got {reference.shape}"
             )
+        check_magnitude(reference, src, "reference", lambda k: f"field 'reference' at {k}")
     timestamps = raw["timestamps"]
     if timestamps is not None:
         timestamps = _numeric(timestamps, src, "timestamps")
@@ -43,6 +50,7 @@ def read_npz(path: Path) -> Fields:
                 f"{src}: field 'timestamps' must have shape ({n},) (one per frame, s), got "
                 f"{timestamps.shape}"
             )
+        check_magnitude(timestamps, src, "time", lambda k: f"field 'timestamps' row {k[0]}")
     frame_rate = _frame_rate(raw["frame_rate_hz"], src)
     channel_names = _names(raw["channel_names"], m, src, "channel_names") or [
         f"ch{j + 1}" for j in range(m)
@@ -110,6 +118,9 @@ def _readouts(readouts: np.ndarray | None, src: str) -> np.ndarray:
     if np.isinf(readouts).any():
         i, j = (int(v) for v in np.argwhere(np.isinf(readouts))[0])
         raise EctskinError(f"{src}: field 'readouts' row {i}, channel {j} is {readouts[i, j]}")
+    check_magnitude(
+        readouts, src, "readout", lambda k: f"field 'readouts' row {k[0]}, channel {k[1]}"
+    )
     return readouts
 
 
@@ -139,6 +150,9 @@ def _labels_and_markers(
         if np.isinf(markers).any():
             i = int(np.argwhere(np.isinf(markers))[0][0])
             raise EctskinError(f"{src}: field {marker_field!r} row {i} holds inf")
+        check_magnitude(
+            markers, src, "marker coordinate", lambda k: f"field {marker_field!r} row {k[0]}"
+        )
     return labels, markers
 
 
@@ -162,6 +176,12 @@ def _names(a: np.ndarray | None, count: int, src: str, name: str) -> list[str] |
     if a.shape != (count,):
         raise EctskinError(f"{src}: field {name!r} must hold {count} names, got shape {a.shape}")
     names = [str(v) for v in a.tolist()]
+    for k, v in enumerate(names):
+        if not v.strip() or "\x00" in v:
+            raise EctskinError(
+                f"{src}: field {name!r} entry {k} is {v!r}; a name must be non-empty text "
+                "without NUL bytes"
+            )
     if len(set(names)) != len(names):
         raise EctskinError(f"{src}: field {name!r} has duplicate names")
     return names
@@ -173,13 +193,26 @@ def _group_ids(g: np.ndarray, n: int, src: str) -> np.ndarray:
             f"{src}: field 'group' must have shape ({n},) (one group id per frame), got {g.shape}"
         )
     if g.dtype.kind in "iu":
+        if g.dtype.kind == "u" and g.size and g.max() > np.iinfo(np.int64).max:
+            i = int(np.argmax(g > np.iinfo(np.int64).max))
+            raise EctskinError(f"{src}: field 'group' row {i} is {g[i]}, beyond the int64 ids")
         return g.astype(np.int64)
     if g.dtype.kind == "f":
-        bad = ~np.isfinite(g) | (g != np.round(g))
+        # beyond 2**53 a float no longer holds every integer: two ids could become one
+        bad = ~np.isfinite(g) | (g != np.round(g)) | (np.abs(g) > 2.0**53)
         if bad.any():
             i = int(np.argmax(bad))
             raise EctskinError(f"{src}: field 'group' row {i} is {g[i]}, expected an integer id")
         return g.astype(np.int64)
-    if g.dtype.kind in "US":
+    if g.dtype.kind == "S":  # bytes: ASCII text
+        try:
+            g = np.char.decode(g, "ascii")
+        except UnicodeDecodeError:
+            raise EctskinError(
+                f"{src}: field 'group' holds bytes that are not ASCII text; store the group ids "
+                "as integers or as a unicode string array (np.asarray(ids, dtype=str))"
+            ) from None
+    if g.dtype.kind == "U":
+        check_group_text(g, src, _row)
         return g.astype(str)
     raise EctskinError(f"{src}: field 'group' must hold integers or strings, found dtype {g.dtype}")

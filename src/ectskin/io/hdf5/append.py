@@ -5,15 +5,28 @@ The file is built (all groups and resizable datasets) under a temporary name, mo
 without clobbering an existing file and reopened in HDF5 SWMR-write mode, in which the library
 keeps the on-disk file consistent at every moment. SWMR only supports appending to datasets that
 exist when it is switched on, which is why the schema keeps all trials in one set of datasets.
+
+A full disk: before each flush the writer checks that the folder has room for the flush (its
+frames, one chunk per dataset, and :data:`SPACE_MARGIN_BYTES` for HDF5's metadata and the close).
+Where there is none, or a write fails all the same (another program filled the disk meanwhile, a
+file-size limit), the recording stops (:meth:`RecordingWriter._abort`): the file is closed without
+writing to the disk again and removed, and one :class:`~ectskin.EctskinError` says so. HDF5 cannot
+carry on with a file whose write failed: closing it normally writes its caches again, and a
+second failure inside the library's close leaves its handles half released, which crashes the
+process when they are released later (a segfault with h5py 3.16 / HDF5 2.0).
 """
 
 from __future__ import annotations
 
+import errno
 import logging
 import math
 import os
+import re
+import shutil
 import threading
 import time
+import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Self
@@ -22,7 +35,7 @@ import h5py
 import numpy as np
 
 from ectskin._check import EctskinError, check_option, check_type
-from ectskin._files import temp_path
+from ectskin._files import os_error_text, remove_stale_temps, temp_path
 from ectskin.io.hdf5.frame_args import check_frames
 from ectskin.io.hdf5.schema import (
     EVENT_FIELDS,
@@ -35,11 +48,47 @@ from ectskin.io.hdf5.schema import (
     write_events,
     write_root,
 )
-from ectskin.io.hdf5.write import fsync_path
+from ectskin.io.hdf5.write import file_image, fsync_path
+from ectskin.io.recording import check_name
 from ectskin.layout import SensorLayout
 from ectskin.layout.layout import SURFACES
 
 logger = logging.getLogger(__name__)
+
+#: Free space a flush leaves on the disk besides its own bytes: HDF5's metadata and the close.
+SPACE_MARGIN_BYTES = 1 << 20
+
+
+class _NoSpace(OSError):
+    """The folder has no room for the next flush (found before HDF5 writes anything)."""
+
+
+def _free_bytes(folder: Path) -> int | None:
+    """Bytes an unprivileged process may still write in ``folder``, or None if unknown (some
+    network and FUSE file systems report a size of 0: no check there)."""
+    try:
+        usage = shutil.disk_usage(folder)
+    except OSError:
+        return None
+    return usage.free if usage.total > 0 else None
+
+
+def _failure_text(exc: BaseException) -> str:
+    """The short reason of a failed h5py write ("No space left on device")."""
+    if isinstance(exc, _NoSpace):
+        return exc.strerror
+    if isinstance(exc, OSError) and exc.errno:
+        return os_error_text(exc)
+    found = re.search(r"error message = '([^']*)'", str(exc))
+    if found:
+        return found.group(1)
+    return str(exc).split("(")[0].strip() or type(exc).__name__
+
+
+def _exists_message(path: Path) -> str:
+    return (
+        f"{path}: file exists; use overwrite=True (--overwrite on the command line) to replace it"
+    )
 
 
 def _positive_rate(frame_rate_hz: Any) -> float:
@@ -118,11 +167,12 @@ class RecordingWriter:
         if not self.path.parent.is_dir():
             raise EctskinError(f"{self.path}: directory {self.path.parent} does not exist")
         if self.path.exists() and not overwrite:
-            raise EctskinError(f"{self.path}: file exists; pass overwrite=True to replace it")
+            raise EctskinError(_exists_message(self.path))
 
         self._clock = clock
         self._lock = threading.RLock()
         self._closed = True  # until the file is open
+        self._aborted = False  # a write failed: the file was closed and removed
         self._names: list[str] = []  # every trial started (written or buffered)
         self._trial_rows: list[dict[str, Any]] = []  # trials not yet written
         self._n_trials_written = 0
@@ -142,18 +192,28 @@ class RecordingWriter:
 
     # ------------------------------------------------------------------ setup
     def _create(self, meta_json: str, overwrite: bool, chunk_frames: int) -> None:
+        def build(f: h5py.File) -> None:
+            write_root(f, self.layout, self.frame_rate_hz, meta_json, "RecordingWriter")
+            # SWMR cannot add datasets later: create every optional one now
+            optional = [k for k in OPTIONAL_FRAMES if k != "markers" or self._has_markers_ds]
+            create_frames(f, self.layout, 0, chunk_frames, optional, compress=False)
+            create_tables(f, 0, 0)
+
+        # Built in memory and written as plain bytes: HDF5 never meets a full disk here.
+        image = file_image(build, ("v110", "v110"))
+        remove_stale_temps(self.path)
         tmp = temp_path(self.path)
         try:
-            with h5py.File(tmp, "w", libver=("v110", "v110")) as f:
-                write_root(f, self.layout, self.frame_rate_hz, meta_json, "RecordingWriter")
-                # SWMR cannot add datasets later: create every optional one now
-                optional = [k for k in OPTIONAL_FRAMES if k != "markers" or self._has_markers_ds]
-                create_frames(f, self.layout, 0, chunk_frames, optional, compress=False)
-                create_tables(f, 0, 0)
-            fsync_path(tmp)
+            with open(tmp, "wb") as fh:
+                fh.write(image)
+                fh.flush()
+                os.fsync(fh.fileno())
             self._publish(tmp, overwrite)
         except OSError as exc:
-            raise EctskinError(f"{self.path}: cannot create the recording ({exc})") from None
+            raise EctskinError(
+                f"{self.path}: cannot create the recording ({os_error_text(exc)}); nothing was "
+                "written there"
+            ) from None
         finally:
             tmp.unlink(missing_ok=True)
         # Reopen directly in SWMR-write mode: the file is never open for non-SWMR writing at path.
@@ -172,7 +232,7 @@ class RecordingWriter:
 
     def _publish(self, tmp: Path, overwrite: bool) -> None:
         """Move the built file to ``path``; without ``overwrite`` never clobber one that exists."""
-        exists = EctskinError(f"{self.path}: file exists; pass overwrite=True to replace it")
+        exists = EctskinError(_exists_message(self.path))
         if overwrite:
             os.replace(tmp, self.path)
             return
@@ -249,6 +309,7 @@ class RecordingWriter:
         check_type("trial name", name, str)
         if not name:
             raise EctskinError(f"{self.path}: trial name must not be empty")
+        check_name(f"{self.path}: trial name", name)
         if name in self._names:
             raise EctskinError(f"{self.path}: trial {name!r} already exists in this recording")
         try:
@@ -353,6 +414,8 @@ class RecordingWriter:
                     f"{self.path}: event time must be a finite number of seconds, got {t_s!r}"
                 )
             check_type("event text", text, str)
+            if "\x00" in text:
+                raise EctskinError(f"{self.path}: event text {text!r} contains a NUL byte")
             self._events.append((t, self._cur_index, text))
             self._maybe_flush()
 
@@ -364,12 +427,83 @@ class RecordingWriter:
             self._flush()
 
     def _flush(self) -> None:
-        # Idempotent: rows are written by index and the counters only move once written, so a
-        # failed flush (disk full) can be retried.
+        # Idempotent: rows are written by index and the counters only move once written.
+        self._guarded(self._write_buffers)
+
+    def _guarded(self, write: Callable[[], None]) -> None:
+        """Run ``write`` (h5py writes) after checking the free space; a failure aborts."""
         try:
-            self._write_buffers()
+            self._check_space()
+            write()
+            return
+        except (OSError, RuntimeError) as exc:  # h5py reports a failed write as either
+            reason = _failure_text(exc)
+            self._detach_disk()
+            # The traceback's frames hold h5py objects of the file: release them now, while the
+            # file writes nowhere, not later at some garbage collection.
+            traceback.clear_frames(exc.__traceback__)
+        raise self._abort(reason)
+
+    def _flush_bytes(self) -> int:
+        """Bytes the next flush may add: its frames plus one new chunk per frame dataset."""
+        data = sum(
+            a.nbytes if isinstance(a, np.ndarray) else a[1].nbytes
+            for arrays in self._buf.values()
+            for a in arrays
+        )
+        chunks = sum(
+            int(np.prod(ds.chunks)) * ds.dtype.itemsize for ds in self._fds.values() if ds.chunks
+        )
+        return data + chunks
+
+    def _check_space(self) -> None:
+        need = self._flush_bytes() + SPACE_MARGIN_BYTES
+        free = _free_bytes(self.path.parent)
+        if free is not None and free < need:
+            raise _NoSpace(
+                errno.ENOSPC,
+                f"the disk is full: {free / 1e6:.2f} MB free, the next write needs "
+                f"{need / 1e6:.2f} MB",
+            )
+
+    def _detach_disk(self) -> None:
+        """Point the file's descriptor at /dev/null: from now on HDF5 writes nowhere."""
+        try:
+            fd = self._f.id.get_vfd_handle()
+            null = os.open(os.devnull, os.O_RDWR)
+        except (OSError, RuntimeError, ValueError, TypeError) as exc:
+            logger.debug("%s: cannot detach the file from the disk: %s", self.path, exc)
+            return
+        try:
+            os.dup2(null, fd)
+        finally:
+            os.close(null)
+
+    def _abort(self, reason: str) -> EctskinError:
+        """Stop after a failed write: close the (detached) file, remove it, return the error.
+
+        What the file holds after a failed write is unknown, so it is not kept: a recording the
+        disk could not hold is gone rather than left half written.
+        """
+        frames = self._n_frames_written + self._n_buf
+        f, self._f = self._f, None
+        self._fds, self._tds, self._eds, self._buf = {}, {}, {}, {}
+        self._closed = True
+        self._aborted = True
+        try:
+            f.close()
+        except (OSError, RuntimeError, ValueError) as exc:
+            logger.debug("%s: closing after the failed write: %s", self.path, exc)
+        del f
+        try:
+            self.path.unlink(missing_ok=True)
         except OSError as exc:
-            raise EctskinError(f"{self.path}: cannot write the recording ({exc})") from None
+            logger.warning("%s: cannot remove the unfinished file: %s", self.path, exc)
+        return EctskinError(
+            f"{self.path}: cannot write the recording ({reason}); the recording stopped after "
+            f"{frames} frames and the unfinished file was removed. Free some space and record "
+            "again"
+        )
 
     def _write_buffers(self) -> None:
         t0 = time.perf_counter()
@@ -432,14 +566,8 @@ class RecordingWriter:
         with self._lock:
             if self._closed:
                 return
-            try:
-                self._flush()
-                if complete:
-                    self._f.attrs["complete"] = np.bool_(True)
-                    self._f.flush()
-            finally:
-                self._closed = True
-                self._f.close()
+            self._flush()  # a failed write aborts (closed, removed) and raises
+            self._guarded(lambda: self._finish(complete))
             fsync_path(self.path)
             logger.info(
                 "closed %s (%s): %d trials, %d frames, %d events",
@@ -450,12 +578,21 @@ class RecordingWriter:
                 self._n_events_written,
             )
 
+    def _finish(self, complete: bool) -> None:
+        if complete:
+            self._f.attrs["complete"] = np.bool_(True)
+        self._f.flush()
+        self._closed = True
+        self._f.close()
+
     def __enter__(self) -> Self:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is None:
             self.close()
+        elif self._aborted:  # the failed write already closed and removed the file
+            return
         else:
             logger.warning(
                 "%s: closed after %s; left incomplete (read it with allow_partial=True)",

@@ -343,6 +343,8 @@ class FileReader:
         text = eds["text"].asstr()[:n_events]
         out = []
         for k in range(n_events):
+            if not np.isfinite(t[k]):  # as the writers require (schema.check_events)
+                raise self.fail(f"/events/t_s[{k}] is {t[k]}, expected a finite time in s")
             j = int(tri[k])
             if not -1 <= j < len(names):
                 raise self.fail(

@@ -25,7 +25,7 @@ import numpy as np
 
 from ectskin import __version__
 from ectskin._check import EctskinError, check_type
-from ectskin.io.recording import GROUND_TRUTH_FIELDS
+from ectskin.io.recording import GROUND_TRUTH_FIELDS, check_name
 from ectskin.layout import SensorLayout
 
 FORMAT = "ectskin.recording"
@@ -116,6 +116,7 @@ def write_root(
     f: h5py.File, layout: SensorLayout, frame_rate_hz: float, meta_json: str, writer: str
 ) -> None:
     """Root attributes (``complete`` False until the writer's last step), /layout, /committed."""
+    check_layout_names(layout)
     f.attrs["format"] = FORMAT
     f.attrs["format_version"] = np.int64(FORMAT_VERSION)
     f.attrs["complete"] = np.bool_(False)
@@ -129,6 +130,17 @@ def write_root(
     g.attrs["name"] = layout.name
     c = f.create_dataset("committed", data=np.zeros(3, dtype=np.int64))
     c.attrs["fields"] = ["n_frames", "n_trials", "n_events"]
+
+
+def check_layout_names(layout: SensorLayout) -> None:
+    """The layout's name, pair names and marker names are stored as HDF5 strings: none may hold
+    a NUL byte (h5py would fail with a ValueError deep in the write)."""
+    where = f"layout {layout.name!r}"
+    check_name(f"{where}: name", layout.name)
+    for n in layout.pair_names:
+        check_name(f"{where}: pair name", n)
+    for m in layout.markers:
+        check_name(f"{where}: marker name", m.name)
 
 
 def frame_specs(
@@ -240,6 +252,8 @@ def check_events(events: Any, trial_names: list[str]) -> list[tuple[float, int, 
         if trial is not None and trial not in index:
             raise EctskinError(f"{src}[{k}].trial names no trial of the recording: {trial!r}")
         check_type(f"{src}[{k}].text", ev["text"], str)
+        if "\x00" in ev["text"]:
+            raise EctskinError(f"{src}[{k}].text contains a NUL byte, which HDF5 cannot store")
         rows.append((float(t), -1 if trial is None else index[trial], ev["text"]))
     return rows
 

@@ -1,22 +1,32 @@
 """Write a whole :class:`~ectskin.io.recording.Recording` to an HDF5 file, atomically.
 
-The file is built under the hidden temporary name of :func:`ectskin._files.temp_path`, marked
-``complete``, fsynced and renamed onto the target with ``os.replace``; the frames are stored
-gzip-compressed in chunks of about 256 KiB of capacitance.
+The file is built in memory (HDF5's ``core`` driver without a backing store, :func:`file_image`),
+marked ``complete``, and its bytes are written by :func:`ectskin._files.atomic_write`: a hidden
+temporary file, fsynced and renamed onto the target. The frames are stored gzip-compressed in
+chunks of about 256 KiB of capacitance.
+
+Why in memory: HDF5 does not survive a failed write to disk. After a write that fails (a full
+disk), closing the file flushes HDF5's caches onto the failing disk again, and a second failure
+inside the library's close leaves its handles half released: releasing them later crashes the
+process (a segfault with h5py 3.16 / HDF5 2.0). Built in memory, HDF5 never writes to disk; a full
+disk is an ``OSError`` of a plain file write, which :func:`~ectskin._files.atomic_write` turns into
+one clear error, removing the temporary file.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
-from collections.abc import Sequence
+import threading
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from ectskin._check import EctskinError, check_type
-from ectskin._files import temp_path
+from ectskin._files import atomic_write
 from ectskin.io.hdf5.schema import (
     EVENTS_KEY,
     OPTIONAL_FRAMES,
@@ -33,6 +43,8 @@ from ectskin.layout import SensorLayout
 logger = logging.getLogger(__name__)
 
 _BATCH_CHUNK_BYTES = 256 * 1024  # target size of one capacitance chunk
+_CORE_INCREMENT = 8 << 20  # the in-memory file grows by this many bytes at a time
+_image_names = itertools.count()
 
 
 def fsync_path(path: Path, directory: bool = False) -> None:
@@ -50,6 +62,18 @@ def fsync_path(path: Path, directory: bool = False) -> None:
         os.close(fd)
 
 
+def file_image(build: Callable[[h5py.File], None], libver: tuple[str, str]) -> bytes:
+    """The bytes of an HDF5 file that ``build(f)`` fills, built in memory (never on disk)."""
+    name = f"ectskin-image-{os.getpid()}-{threading.get_ident()}-{next(_image_names)}"
+    f = h5py.File(
+        name, "w", driver="core", backing_store=False, block_size=_CORE_INCREMENT, libver=libver
+    )
+    with f:
+        build(f)
+        f.flush()
+        return f.id.get_file_image()
+
+
 def _trial_meta_json(t: Trial) -> str:
     return to_json(f"trial {t.name!r}: meta", t.meta)
 
@@ -58,7 +82,10 @@ def _check_target(path: Path, overwrite: bool) -> None:
     if path.is_dir():
         raise EctskinError(f"{path}: is a directory; expected the path of an .h5 file to write")
     if path.exists() and not overwrite:
-        raise EctskinError(f"{path}: file exists; pass overwrite=True to replace it")
+        raise EctskinError(
+            f"{path}: file exists; use overwrite=True (--overwrite on the command line) to "
+            "replace it"
+        )
     if not path.parent.is_dir():
         raise EctskinError(f"{path}: directory {path.parent} does not exist")
 
@@ -66,10 +93,11 @@ def _check_target(path: Path, overwrite: bool) -> None:
 def write_recording(rec: Recording, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
     """Write ``rec`` to the HDF5 file ``path`` atomically and return the path.
 
-    The file is written to ``.<name>.tmp-<pid>`` in the same directory, marked ``complete``,
-    flushed to disk (fsync) and renamed onto ``path`` with ``os.replace``: a crash at any moment
-    leaves either no file (or the old one) at ``path``, never a partial one, and the temporary file
-    is removed on error. An existing ``path`` is refused unless ``overwrite=True``.
+    The file is built in memory, marked ``complete``, written to ``.<name>.tmp-<pid>`` in the
+    same directory, flushed to disk (fsync) and renamed onto ``path`` with ``os.replace``: a crash
+    or a full disk at any moment leaves either no file (or the old one) at ``path``, never a
+    partial one, and the temporary file is removed on error. An existing ``path`` is refused unless
+    ``overwrite=True``.
 
     ``rec.meta`` and every ``Trial.meta`` must hold JSON-able values (NumPy scalars and arrays are
     stored as numbers and lists). ``rec.meta["events"]``, if present, is a list of
@@ -90,22 +118,14 @@ def write_recording(rec: Recording, path: str | os.PathLike, *, overwrite: bool 
     for t in rec.trials:  # fail on bad metadata before touching the disk
         _trial_meta_json(t)
 
-    tmp = temp_path(path)
-    try:
-        _write_file(tmp, rec, meta_json, events)
-        fsync_path(tmp)
-        os.replace(tmp, path)
-    except BaseException as exc:
-        tmp.unlink(missing_ok=True)
-        if isinstance(exc, OSError):  # disk full, permissions, ...
-            raise EctskinError(f"{path}: cannot write the recording ({exc})") from None
-        raise
+    image = file_image(lambda f: _write_file(f, rec, meta_json, events), ("earliest", "v110"))
+    atomic_write(path, lambda fh: fh.write(image), what="the recording")
     fsync_path(path.parent, directory=True)
     logger.info("wrote %s: %d trials, %d frames", path, rec.n_trials, rec.n_frames)
     return path
 
 
-def _write_file(tmp: Path, rec: Recording, meta_json: str, events: list) -> None:
+def _write_file(f: h5py.File, rec: Recording, meta_json: str, events: list) -> None:
     layout = rec.layout
     counts = np.array([t.n_frames for t in rec.trials], dtype=np.int64)
     starts = (
@@ -113,24 +133,17 @@ def _write_file(tmp: Path, rec: Recording, meta_json: str, events: list) -> None
     )
     n_frames = int(counts.sum())
     chunk = min(max(1, n_frames), max(1, _BATCH_CHUNK_BYTES // (8 * layout.n_pairs)))
-    try:
-        f = h5py.File(tmp, "w", libver=("earliest", "v110"))
-    except OSError as exc:
-        raise EctskinError(f"{tmp.parent}: cannot create a file there ({exc})") from None
-    with f:
-        write_root(f, layout, rec.frame_rate_hz, meta_json, "write_recording")
-        optional = [
-            k for k in OPTIONAL_FRAMES if any(getattr(t, k) is not None for t in rec.trials)
-        ]
-        if layout.n_markers == 0 and "markers" in optional:  # (n, 0, 3): nothing to store
-            optional.remove("markers")
-        fds = create_frames(f, layout, n_frames, chunk, optional, compress=True)
-        tds, eds = create_tables(f, rec.n_trials, 0)
-        _write_trial_table(tds, rec.trials, starts)
-        _write_frames(fds, layout, rec.trials, starts)
-        write_events(eds, events)
-        f["committed"][:] = [n_frames, rec.n_trials, len(events)]
-        f.attrs["complete"] = np.bool_(True)
+    write_root(f, layout, rec.frame_rate_hz, meta_json, "write_recording")
+    optional = [k for k in OPTIONAL_FRAMES if any(getattr(t, k) is not None for t in rec.trials)]
+    if layout.n_markers == 0 and "markers" in optional:  # (n, 0, 3): nothing to store
+        optional.remove("markers")
+    fds = create_frames(f, layout, n_frames, chunk, optional, compress=True)
+    tds, eds = create_tables(f, rec.n_trials, 0)
+    _write_trial_table(tds, rec.trials, starts)
+    _write_frames(fds, layout, rec.trials, starts)
+    write_events(eds, events)
+    f["committed"][:] = [n_frames, rec.n_trials, len(events)]
+    f.attrs["complete"] = np.bool_(True)
 
 
 def _write_trial_table(tds: dict, trials: Sequence[Trial], starts: np.ndarray) -> None:

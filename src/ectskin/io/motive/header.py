@@ -48,11 +48,11 @@ def metadata(rows: Rows, src: str) -> dict[str, str]:
 
 def length_unit(meta: dict[str, str], length_units: str | None, src: str) -> tuple[str, float]:
     """The file's ``Length Units`` (or ``length_units``; both must agree) and its factor to mm."""
-    unit = meta.get("Length Units")
+    unit = meta.get("Length Units") or None  # an empty value states nothing
     if unit is None and length_units is None:
         raise EctskinError(
-            f"{src}: line 1 has no 'Length Units' field; pass length_units='Meters', "
-            f"'Centimeters' or 'Millimeters'"
+            f"{src}: line 1 has no 'Length Units' field; give the unit (length_units='Meters', "
+            f"'Centimeters' or 'Millimeters'; --length-units on the command line)"
         )
     if (
         unit is not None
@@ -166,7 +166,7 @@ def choose_markers(
     if "type" not in columns.labelled:
         raise EctskinError(
             f"{src}: no ',Type,...' row, so markers cannot be told from rigid bodies; "
-            f"pass marker_names"
+            f"select them by name (marker_names=...; --markers on the command line)"
         )
     types = columns.types
     chosen = []
@@ -183,8 +183,8 @@ def choose_markers(
     if not chosen:
         raise EctskinError(
             f"{src}: no labelled columns of Type 'Marker' (found types: "
-            f"{', '.join(sorted({t for t in types[2:] if t})) or 'none'}); pass marker_names "
-            f"to select by name"
+            f"{', '.join(sorted({t for t in types[2:] if t})) or 'none'}); select markers "
+            f"by name (marker_names=...; --markers on the command line)"
         )
     return chosen
 

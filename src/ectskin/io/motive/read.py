@@ -21,7 +21,7 @@ from ectskin.io.motive.header import (
     position_columns,
     stated_rate,
 )
-from ectskin.io.text import RowErrors, Rows, csv_rows, parse_float, read_text
+from ectskin.io.text import MAX_ABS_VALUE, RowErrors, Rows, csv_rows, parse_float, read_text
 
 log = logging.getLogger(__name__)
 
@@ -159,6 +159,8 @@ def _frame_and_time(cells: list[str], columns: Columns, last_t: float) -> tuple[
     tt = parse_float(cells[1])
     if tt is None or not np.isfinite(tt):
         return f"column 2 (Time (Seconds)): expected a number, found {cells[1]!r}"
+    if abs(tt) > MAX_ABS_VALUE:
+        return f"column 2 (Time (Seconds)): {cells[1].strip()!r} is beyond ±{MAX_ABS_VALUE:g} s"
     if tt <= last_t:
         return (
             f"column 2 (Time (Seconds)): time {tt:.6f} s does not increase (previous frame: "
@@ -187,6 +189,11 @@ def _marker_cells(
                 return occluded, (
                     f"column {col_idx[m, a] + 1} (marker {name!r}, {AXES[a]}): expected a "
                     f"number or an empty cell (occluded), found {cell!r}"
+                )
+            if abs(v * scale) > MAX_ABS_VALUE:
+                return occluded, (
+                    f"column {col_idx[m, a] + 1} (marker {name!r}, {AXES[a]}): {cell!r} is "
+                    f"beyond ±{MAX_ABS_VALUE:g} mm (a placeholder? leave the cell empty)"
                 )
             out[m, a] = v * scale
         if empty:
