@@ -14,6 +14,9 @@ writing to the disk again and removed, and one :class:`~ectskin.EctskinError` sa
 carry on with a file whose write failed: closing it normally writes its caches again, and a
 second failure inside the library's close leaves its handles half released, which crashes the
 process when they are released later (a segfault with h5py 3.16 / HDF5 2.0).
+
+Size: one class, the SWMR writer: creation, appends, flushes and the full-disk guard all act on
+its one open file and its frame buffers; the argument checks live in ``frame_args.py``.
 """
 
 from __future__ import annotations

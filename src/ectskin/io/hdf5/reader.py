@@ -106,7 +106,8 @@ class FileReader:
         if not complete and not allow_partial:
             raise self.fail(
                 "incomplete recording (complete=False): it was not closed properly (the writer "
-                "crashed or is still running); pass allow_partial=True to read what it holds"
+                "crashed or is still running); read what it holds with allow_partial=True "
+                "(--allow-partial on the command line of live)"
             )
         rate = self.attr(self.f, "frame_rate_hz")
         try:
