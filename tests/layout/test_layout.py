@@ -89,3 +89,11 @@ def test_layout_json_names_pairs_in_file_order():
     d["electrodes"] = list(reversed(d["electrodes"]))
     lay = SensorLayout.from_dict(d)
     assert lay.pair_names[0] == "E8-E7"
+
+
+@pytest.mark.parametrize("field, value", [("electrodes", ""), ("electrodes", "E\x001"), ("markers", "M\x00")])
+def test_names_a_file_cannot_store_are_refused(field, value):
+    d = json.loads(default_layout().to_json())
+    d[field][0]["name"] = value
+    with pytest.raises(EctskinError, match="non-empty text without NUL"):
+        SensorLayout.from_dict(d, source="bad.json")

@@ -373,7 +373,7 @@ def sphere_panels(
     With ``true_area=True`` (default) each flat panel is moved out so its centre lies on the
     sphere and scaled so its area equals the spherical cell it stands for (the cell edges are
     great circles, so the exact area is the spherical excess). Flat inscribed panels otherwise
-    shrink the sphere; with the correction the isolated-sphere capacitance is within 0.1 % of
+    shrink the sphere; with the correction the isolated-sphere capacitance is within about 0.2 % of
     4π ε0 R already at n = 6 (216 panels).
     """
     q = sphere_quads(centre, radius, n)

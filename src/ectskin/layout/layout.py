@@ -318,6 +318,8 @@ def _parse_layout(d: Any, src: str | None) -> SensorLayout:
             f"found {version!r}"
         )
     name = str(_get(d, "name", src, ""))
+    if "\x00" in name:
+        raise EctskinError(f"{_loc(src, 'name')}: a layout name must not hold a NUL byte")
 
     skins = []
     for k, s in enumerate(_list(d, "skins", src)):
@@ -440,8 +442,13 @@ def _list(d: dict, key: str, src: str | None) -> list:
 
 
 def _unique(names: list, src: str | None, field_: str, what: str) -> None:
+    """Names are unique and storable: a string name is non-empty and holds no NUL byte."""
     seen = set()
     for n in names:
+        if isinstance(n, str) and (not n.strip() or "\x00" in n):
+            raise EctskinError(
+                f"{_loc(src, field_)}: {what} name {n!r} must be non-empty text without NUL bytes"
+            )
         if n in seen:
             raise EctskinError(f"{_loc(src, field_)}: duplicate {what} {n!r}")
         seen.add(n)

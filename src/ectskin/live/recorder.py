@@ -184,8 +184,8 @@ class Recorder:
     def _raise_error(self) -> None:
         if self._error is not None:
             err = self._error
-            if isinstance(err, EctskinError):
-                raise EctskinError(f"{self.path}: recording failed: {err}") from None
+            if isinstance(err, EctskinError):  # the writer's message names the file already
+                raise EctskinError(f"recording failed: {err}") from None
             raise EctskinError(
                 f"{self.path}: recording failed: {type(err).__name__}: {err}"
             ) from None
@@ -212,7 +212,7 @@ class Recorder:
                     self._write_items(items)
                     self._writer.flush()
                 except BaseException as exc:  # keep the error for the producer; stop writing
-                    logger.error("%s: recording failed: %s", self.path, exc)
+                    logger.debug("%s: recording failed: %s", self.path, exc)  # raised to the producer
                     self._error = exc
             if self.backlog > _BACKLOG_WARN:
                 logger.warning(
