@@ -18,9 +18,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("fastapi")
-pytest.importorskip("httpx")
-
 with warnings.catch_warnings():  # starlette 1.x: "use httpx2"; httpx is what CI has
     warnings.filterwarnings("ignore", message=".*httpx2.*")
     from fastapi.testclient import TestClient

@@ -486,7 +486,8 @@ def test_json_messages_follow_the_protocol():
 
 # ------------------------------------------------------------------ real predictors
 def test_real_predictors_from_run_dirs(tmp_path):
-    torch = pytest.importorskip("torch")
+    import torch
+
     from ectskin.learn.checkpoint import save_checkpoint
     from ectskin.learn.models import C2DT, C2DTConfig, TouchMLP, TouchMLPConfig
     from ectskin.learn.predict import TouchPredictor, TrackPredictor
@@ -514,7 +515,8 @@ def test_real_predictors_from_run_dirs(tmp_path):
 
 # ------------------------------------------------------------------ CLI
 def test_cli_live_replay_with_models_jsonl_and_record(tmp_path, capsys):
-    torch = pytest.importorskip("torch")
+    import torch
+
     from ectskin.cli import main
     from ectskin.io.hdf5 import write_recording
     from ectskin.learn.checkpoint import save_checkpoint

@@ -460,7 +460,7 @@ def _outlet(name, n_channels, source_id):
 
 
 def test_lsl_stream_frames_markers_and_reconnect():
-    pytest.importorskip("pylsl")
+    import pylsl  # noqa: F401  (a dependency of the live extra: it must be there)
     name = f"ectskin-test-{time.monotonic_ns()}"
     out = _outlet(name, P + 3 * M, "ectskin-test-src")
     src = open_source(f"lsl:{name}", resolve_timeout_s=5.0, backoff_s=(0.05, 0.2))
@@ -500,7 +500,7 @@ def test_lsl_stream_frames_markers_and_reconnect():
 
 
 def test_lsl_wrong_channel_count_and_unknown_name():
-    pytest.importorskip("pylsl")
+    import pylsl  # noqa: F401  (a dependency of the live extra: it must be there)
     name = f"ectskin-test-27-{time.monotonic_ns()}"
     out = _outlet(name, 27, "ectskin-test-27")
     with pytest.raises(
@@ -542,7 +542,6 @@ def test_frame_defaults():
 def test_real_live_twin_as_source():
     """The lead's LiveTwin behind TwinSource: markers, labels, and a touch that changes the
     readouts far beyond the readout noise."""
-    pytest.importorskip("ectskin.twin.live")
     steps = [TwinStep(0.2, (0, 0, 0), None), TwinStep(0.2, (0, 0, 0), 5, 1.5)]
     src = open_source("sim", paced=False, scenario=steps)
     frames = list(src)
