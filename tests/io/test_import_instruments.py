@@ -38,6 +38,7 @@ from ectskin.layout import default_layout
 DATA = Path(__file__).parents[1] / "data" / "instruments"
 CAP_BOM = DATA / "capmeter_bom_fF.csv"
 CAP_SEMI = DATA / "capmeter_semicolon_clock.csv"
+CAP_TWO_ROW = DATA / "capmeter_two_row_header.csv"
 MOTIVE = DATA / "motive_meters_30fps.csv"
 
 
@@ -833,6 +834,63 @@ def test_build_recording_leaves_out_an_all_zero_channel(tmp_path, caplog):
     both = build_recording_from_manifest(tmp_path / "m.json")
     assert both.meta["unmeasured_pairs"] == [5]  # dead in one trial: left out of all
     assert np.isfinite(both.trials[1].capacitance).all()
+
+
+def test_capmeter_two_row_header_channel_row_over_units_row():
+    """Issue 10, item 5: ``,Ch1,,Ch2,,...`` over ``Time (s),C (pF),ΔC/C0 (%),...`` failed with
+    "channel 'C' appears twice". Values from the fixture by hand: row 1 (line 5) reads
+    10.000 pF, 12.500 pF, OL, 850.0 fF; the last row (line 24, t = 0.95 s) 10.190, 12.405, OL,
+    859.5 fF. Line 11's Ch1 relative change (55 %) disagrees with its value: ignored, not checked.
+    """
+    d = read_capmeter_csv(CAP_TWO_ROW)
+    assert d.channels == ("Ch1", "Ch2", "Ch3", "Ch4")
+    assert d.units == ("pF", "pF", "pF", "fF")
+    assert d.n_frames == 20 and d.time_unit == "s"
+    assert d.lines[0] == 5 and d.lines[-1] == 24
+    np.testing.assert_allclose(d.timestamps[[0, 1, -1]], [0.0, 0.05, 0.95])
+    np.testing.assert_allclose(d.values[0, [0, 1, 3]], [10.0, 12.5, 0.85], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d.values[-1, [0, 1, 3]], [10.19, 12.405, 0.8595], rtol=0,
+                               atol=1e-12)
+    assert d.meta == {"Instrument": "LCR logger 4ch", "Exported": "2024-05-14 10:12:00"}
+    rep = d.mask_report
+    # the relative-change columns are ignored (not read, not cross-checked), and the report says so
+    assert not any(c.relative_checked or c.relative_mismatch for c in rep.channels.values())
+    assert any("relative-change column(s) 3 (Ch1" in n and "ignored" in n for n in rep.notes)
+    # Ch3 reads OL in every row: all NaN, with a note that a built recording leaves it out
+    assert np.isnan(d.values[:, 2]).all() and rep.channels["Ch3"].counts == {"OL": 20}
+    assert any("'Ch3' has no readout in any frame (OL in every row)" in n for n in rep.notes)
+    assert "note: channel 'Ch3'" in rep.summary() and rep.to_dict()["notes"] == rep.notes
+    # one-row files carry no layout notes
+    assert read_capmeter_csv(CAP_BOM).mask_report.notes == []
+
+
+def test_capmeter_two_row_header_needs_one_name_per_capacitance_column(tmp_path):
+    """A channel row that does not name exactly the capacitance columns is no channel row: the
+    old error stands (two columns named 'C')."""
+    p = _copy_with(tmp_path, CAP_TWO_ROW, ",Ch1,,Ch2,,Ch3,,Ch4,", ",Ch1,,,,Ch3,,Ch4,")
+    with pytest.raises(EctskinError, match="channel 'C' appears twice"):
+        read_capmeter_csv(p)
+
+
+def test_build_recording_leaves_out_an_all_overload_channel_of_a_two_row_file(tmp_path, caplog):
+    """A channel reading OL in every row is left out like an all-zero one (unmeasured_pairs)."""
+    rng = np.random.default_rng(1)
+    vals = rng.uniform(0.5, 1.5, (20, 28))
+    lines = ["," + ",".join(f"{n}," for n in PAIR_NAMES),
+             "Time (s)," + ",".join(["C (pF),ΔC/C0 (%)"] * 28)]
+    for k in range(20):
+        cells = ["OL,OL" if j == 7 else f"{vals[k, j]:.5f},0.0" for j in range(28)]
+        lines.append(f"{k / 30:.5f}," + ",".join(cells))
+    p = tmp_path / "ol.csv"
+    p.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    cap = read_capmeter_csv(p, n_pairs=28)
+    assert cap.channels == tuple(PAIR_NAMES)
+    with caplog.at_level("WARNING"):
+        rec = build_recording(cap, None, LAYOUT)
+    assert rec.meta["unmeasured_pairs"] == [7]
+    assert rec.trials[0].meta["dropped_channels"] == [LAYOUT.pair_names[7]]
+    keep = [j for j in range(28) if j != 7]
+    np.testing.assert_allclose(rec.trials[0].capacitance[:, keep], vals[:, keep], atol=1e-5)
 
 
 def test_motive_empty_length_units_is_like_none(tmp_path):

@@ -37,11 +37,13 @@ class ChannelMask:
 
 @dataclass
 class MaskReport:
-    """What the reader masked or skipped: per-channel masks and skipped rows (line, reason)."""
+    """What the reader masked or skipped: per-channel masks, skipped rows (line, reason), and
+    notes on what it did with the file's layout (e.g. relative-change columns ignored)."""
 
     path: str
     channels: dict[str, ChannelMask]
     skipped_rows: list[tuple[int, str]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     @property
     def n_masked(self) -> int:
@@ -67,6 +69,7 @@ class MaskReport:
                 )
         for line, reason in self.skipped_rows:
             out.append(f"line {line} skipped: {reason}")
+        out.extend(f"note: {n}" for n in self.notes)
         return "\n".join(out) if out else "no masked cells, no skipped rows"
 
     def to_dict(self) -> dict:
@@ -87,6 +90,7 @@ class MaskReport:
                 if c.relative_mismatch
             },
             "skipped_rows": [[line, reason] for line, reason in self.skipped_rows],
+            "notes": list(self.notes),
         }
 
 

@@ -4,7 +4,7 @@ and what every column holds (time, a channel's value, its relative change, or no
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ectskin._check import EctskinError
 from ectskin.io.capmeter.units import (
@@ -44,6 +44,7 @@ class Header:
     values: list[Column]  # capacitance columns, in file order
     relative: dict[str, Column]  # relative-change column by channel name
     meta: dict[str, str]  # the metadata rows above the header
+    notes: list[str] = field(default_factory=list)  # what the import did that a user should know
 
     @property
     def width(self) -> int:
@@ -80,6 +81,11 @@ def parse_header(
     time_col = next(k for k, c in enumerate(header) if TIME_NAME.match(c.strip()))
     cols = classify(header, units, time_col, value_unit, src, header_line)
     t_unit = _time_unit(cols[time_col].unit, header[time_col], time_unit, src)
+    notes: list[str] = []
+    meta_end = h
+    if h > 0 and (groups := channel_group_row(rows[h - 1][1], cols, time_col)) is not None:
+        meta_end = h - 1
+        notes = _apply_groups(cols, groups, rows[h - 1][0], src)
     values, relative = _channel_columns(cols, header, header_line, src)
     return Header(
         line=header_line,
@@ -89,8 +95,57 @@ def parse_header(
         time_unit=t_unit,
         values=values,
         relative=relative,
-        meta=_metadata(rows[:h]),
+        meta=_metadata(rows[:meta_end]),
+        notes=notes,
     )
+
+
+def channel_group_row(cells: list[str], cols: list[Column], time_col: int) -> list[str] | None:
+    """The channel of each column when ``cells`` (the row above the column header) names each
+    channel once over its columns (``,Ch1,,Ch2,`` above ``Time (s),C (pF),ΔC/C0 (%),...``), else
+    None.
+
+    Such a row names a channel above a capacitance column, leaves the cells to its right empty up
+    to the next channel, names nothing above or left of the time column, and names a channel
+    above every capacitance column: every value column then gets the channel it stands under.
+    """
+    named = [k for k, c in enumerate(cells) if c.strip()]
+    value_cols = [c.index for c in cols if c.kind == "value"]
+    if not named or not value_cols or len(named) != len(value_cols):
+        return None
+    if named[0] <= time_col or any(cols[k].kind != "value" for k in named if k < len(cols)):
+        return None
+    if any(k >= len(cols) for k in named):
+        return None
+    groups = [""] * len(cols)
+    for k in range(len(cols)):
+        if k < len(cells) and cells[k].strip():
+            groups[k] = cells[k].strip()
+        elif k > named[0]:
+            groups[k] = groups[k - 1]
+    # one capacitance column per channel: the named ones are exactly the value columns
+    return groups if named == value_cols else None
+
+
+def _apply_groups(cols: list[Column], groups: list[str], line: int, src: str) -> list[str]:
+    """Name the columns after the channel row's cells; relative changes are ignored."""
+    ignored = []
+    for c in cols:
+        if c.kind == "value":
+            c.base = groups[c.index]
+        elif c.kind == "relative" and groups[c.index]:
+            c.base = groups[c.index]
+            c.kind = "ignore"
+            ignored.append(f"{c.index + 1} ({c.base} {c.header.strip()})")
+    notes = [f"two-row header: channel names from line {line}, units from line {line + 1}"]
+    if ignored:
+        notes.append(
+            f"relative-change column(s) {', '.join(ignored)} ignored: each channel's capacitance "
+            "column is used"
+        )
+    for n in notes:
+        log.info("%s: %s", src, n)
+    return notes
 
 
 def _metadata(rows: Rows) -> dict[str, str]:

@@ -240,6 +240,7 @@ def _result(
             f"{src}: expected {n_pairs} capacitance channels (one per electrode pair), found "
             f"{len(names)}: {', '.join(names)}"
         )
+    report.notes = list(header.notes) + _dead_channel_notes(report, table.values.shape[0], src)
     _log_masks(report, src)
     return CapmeterData(
         path=src,
@@ -253,6 +254,21 @@ def _result(
         pairs=pairs,
         meta=header.meta,
     )
+
+
+def _dead_channel_notes(report: MaskReport, n_frames: int, src: str) -> list[str]:
+    """A note for each channel with no readout in any frame (``OL`` in every row, say): it is
+    kept here, as NaN, and left out when a recording is built (``unmeasured_pairs``)."""
+    notes = []
+    for name, c in report.channels.items():
+        if c.n_masked == n_frames:
+            kinds = ", ".join(c.counts)
+            notes.append(
+                f"channel {name!r} has no readout in any frame ({kinds} in every row): left out "
+                "when a recording is built (listed in unmeasured_pairs)"
+            )
+            log.warning("%s: %s", src, notes[-1])
+    return notes
 
 
 def _log_masks(report: MaskReport, src: str) -> None:
