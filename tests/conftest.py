@@ -11,6 +11,9 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import threading
 from collections.abc import Iterable, Sequence
 
 import numpy as np
@@ -115,3 +118,35 @@ def synthetic_recording(
 def make_recording():
     """The :func:`synthetic_recording` factory."""
     return synthetic_recording
+
+
+def _spawn_cli(argv: list[str], wait_for: str):
+    """Start ``python -m ectskin.cli ARGV`` with its stderr read in a thread.
+
+    Returns ``(proc, lines, seen, reader)``: the process, the stderr lines read so far, an event
+    set once a line contains ``wait_for``, and the reading thread (join it to get every line).
+    """
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ectskin.cli", *argv],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    lines: list[str] = []
+    seen = threading.Event()
+
+    def reader():
+        for line in proc.stderr:
+            lines.append(line)
+            if wait_for in line:
+                seen.set()
+
+    thread = threading.Thread(target=reader, daemon=True)
+    thread.start()
+    return proc, lines, seen, thread
+
+
+@pytest.fixture
+def spawn_cli():
+    """The :func:`_spawn_cli` helper: a real ``ectskin`` process with its stderr watched."""
+    return _spawn_cli

@@ -12,7 +12,6 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 
 import numpy as np
@@ -173,27 +172,13 @@ def _cli(argv: list[str]) -> subprocess.Popen:
     )
 
 
-def _collect(proc: subprocess.Popen, wait_for: str) -> tuple[list[str], threading.Event]:
-    lines: list[str] = []
-    seen = threading.Event()
-
-    def reader():
-        for line in proc.stderr:
-            lines.append(line)
-            if wait_for in line:
-                seen.set()
-
-    threading.Thread(target=reader, daemon=True).start()
-    return lines, seen
-
-
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
-def test_live_record_is_closed_complete_on_sigterm_and_sighup(tmp_path, sig):
+def test_live_record_is_closed_complete_on_sigterm_and_sighup(tmp_path, sig, spawn_cli):
     """Issue 12, defect 10: the recording of `live --record` was left incomplete."""
     src = _replay(tmp_path / "c.h5")
     out = tmp_path / "live.h5"
-    proc = _cli(["live", "--source", f"replay:{src}", "--loop", "--record", str(out)])
-    lines, seen = _collect(proc, "| touch")  # the first status line: frames are flowing
+    argv = ["live", "--source", f"replay:{src}", "--loop", "--record", str(out)]
+    proc, lines, seen, reader = spawn_cli(argv, "| touch")  # the first status line: frames are flowing
     try:
         assert seen.wait(60), "".join(lines)
         time.sleep(1.0)
@@ -202,6 +187,7 @@ def test_live_record_is_closed_complete_on_sigterm_and_sighup(tmp_path, sig):
     finally:
         if proc.poll() is None:
             proc.kill()
+    reader.join(timeout=5)
     assert rc == 0, "".join(lines)
     assert read_recording(out).n_frames > 10  # complete: no allow_partial needed
     assert any(f"{signal.Signals(sig).name} received" in ln for ln in lines)

@@ -374,26 +374,10 @@ def test_sim_trials_metadata_match_their_frames(tmp_path):
     assert frames[-1].label == 10
 
 
-def _stop_with(sig: int, argv: list[str], wait_for: str) -> tuple[int, str]:
+def _stop_with(spawn_cli, sig: int, argv: list[str], wait_for: str) -> tuple[int, str]:
     """Run ``python -m ectskin.cli ARGV``, wait until stderr shows ``wait_for`` and ~1 s more,
     send ``sig``; returns (exit code, stderr)."""
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "ectskin.cli", *argv],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    lines: list[str] = []
-    seen = threading.Event()
-
-    def reader():
-        for line in proc.stderr:
-            lines.append(line)
-            if wait_for in line:
-                seen.set()
-
-    th = threading.Thread(target=reader, daemon=True)
-    th.start()
+    proc, lines, seen, th = spawn_cli(argv, wait_for)
     try:
         assert seen.wait(60), "".join(lines)
         time.sleep(1.0)
@@ -407,13 +391,13 @@ def _stop_with(sig: int, argv: list[str], wait_for: str) -> tuple[int, str]:
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
-def test_record_closes_the_file_complete_on_sigterm_and_sighup(tmp_path, sig):
+def test_record_closes_the_file_complete_on_sigterm_and_sighup(tmp_path, sig, spawn_cli):
     """Issue 12, defect 10: `kill PID` or a closed terminal left the recording incomplete, and
     every reader then refused it."""
     src = write_recording(_recording(), tmp_path / "in.h5")
     out = tmp_path / "rec.h5"
     argv = ["record", "-o", str(out), "--source", f"replay:{src}", "--loop"]
-    rc, err = _stop_with(sig, argv, "recording replay:")
+    rc, err = _stop_with(spawn_cli, sig, argv, "recording replay:")
     assert rc == 0, err
     rec = read_recording(out)  # complete: no allow_partial needed
     assert rec.n_frames > 10
