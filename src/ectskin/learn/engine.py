@@ -1,7 +1,7 @@
 """The epoch loops (DETR ``engine.py`` style): :func:`train_one_epoch` and :func:`evaluate`.
 
 Both take a task's criterion (:mod:`ectskin.learn.tasks`): its ``loss`` on a training batch, its
-``eval_sums`` (three float64 sums per batch) and ``finish`` (those sums → validation loss and
+``eval_sums`` (a fixed-length vector of float64 sums per batch) and ``finish`` (those sums → validation loss and
 metric). A non-finite training loss stops training with an error naming the epoch and batch.
 
 Determinism: :func:`epoch_indices` and :func:`seed_for` derive every seed of an epoch from
@@ -185,9 +185,12 @@ def evaluate(
     """(val_loss, val_metric) over ``indices`` of every rank (touch: CE, accuracy; track: mm², AD mm)."""
     model.eval()
     indices = indices.to(d.device)
-    sums = torch.zeros(3, dtype=torch.float64, device=d.device)
+    sums = None
     for b in range(0, len(indices), batch_size):
-        sums += criterion.eval_sums(model, data.batch(indices[b : b + batch_size])).double()
+        part = criterion.eval_sums(model, data.batch(indices[b : b + batch_size])).double()
+        sums = part if sums is None else sums + part
+    if sums is None:
+        raise EctskinError("evaluate: no validation samples")
     all_reduce(sums, d)
     return criterion.finish(sums.cpu())
 

@@ -11,6 +11,11 @@ and applies overrides, checking every field at the door.
   (windows of one trajectory are strongly correlated, so a subset per epoch loses little),
   batch 256, divided by 1.2 every 2 epochs, validated on a fixed subset of 4 096 windows. Both
   keep the paper's optimizer and best-validation rule.
+* contact (ours, :mod:`ectskin.learn.tasks.contact`): ``paper`` = the paper's optimiser for
+  100 epochs of batch 256; ``quick`` = 15 epochs, each on a fresh random subset of 32 768
+  training windows, validated on a fixed subset of 16 384, the learning rate divided by 1.2
+  every 3 epochs. Both add the inflation shift of the ``robust`` recipe to every training
+  window and keep the weights with the lowest validation localisation error.
 * ``robust`` (touch only; ours, not the paper's): the paper's TouchMLP, unchanged, trained with
   a recipe meant to generalise to unseen (inflation state, touch placement) combinations. Per
   training frame it adds an *inflation shift*, the difference between the mean no-contact
@@ -68,11 +73,23 @@ PROFILES: dict[str, dict[str, TrainSettings]] = {
     "paper": {
         "touch": TrainSettings(epochs=100, batch_size=256),
         "track": TrainSettings(epochs=150, batch_size=255),
+        "contact": TrainSettings(
+            epochs=100, batch_size=256, inflation_shift=True, select="val_metric"
+        ),
     },
     "quick": {
         "touch": TrainSettings(epochs=30, batch_size=256, step_size=5),
         "track": TrainSettings(
             epochs=20, batch_size=256, step_size=2, samples_per_epoch=8192, val_samples=4096
+        ),
+        "contact": TrainSettings(
+            epochs=15,
+            batch_size=256,
+            step_size=3,
+            samples_per_epoch=32768,
+            val_samples=16384,
+            inflation_shift=True,
+            select="val_metric",
         ),
     },
     "robust": {
@@ -91,6 +108,9 @@ PROFILES: dict[str, dict[str, TrainSettings]] = {
 PROFILE_TASKS = tuple(dict.fromkeys(task for per_task in PROFILES.values() for task in per_task))
 #: Tasks that learn class labels: the recipe's augmentation and label smoothing apply to them.
 RECIPE_TASKS = ("touch",)
+#: Tasks whose training may add the inflation shift (touch, and contact, which reads the same
+#: calibrated frames)
+SHIFT_TASKS = ("touch", "contact")
 #: The fields of the touch recipe, stored as ``recipe`` in config.json and metrics.json.
 RECIPE_FIELDS = ("inflation_shift", "mixup_alpha", "label_smoothing", "select")
 
@@ -118,7 +138,9 @@ def profile_settings(task: str, profile: str = "paper", **overrides: Any) -> Tra
         raise EctskinError(f"unknown training setting(s): {', '.join(unknown)}")
     settings = replace(PROFILES[profile][task], **overrides)
     _check_settings(settings)
-    if task not in RECIPE_TASKS and (settings.augments or settings.label_smoothing > 0):
+    shift = settings.inflation_shift and task not in SHIFT_TASKS
+    others = settings.mixup_alpha > 0 or settings.label_smoothing > 0
+    if task not in RECIPE_TASKS and (shift or others):
         raise EctskinError(
             "training settings 'inflation_shift', 'mixup_alpha' and 'label_smoothing' apply to "
             f"task {' or '.join(repr(t) for t in RECIPE_TASKS)} only, got "

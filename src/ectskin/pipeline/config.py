@@ -11,14 +11,22 @@ run                 task     window  prior  role
 ``track``           track    10      yes    the paper's C2DT
 ``track_no_prior``  track    10      no     ablation: absolute calibration, no initial coordinates
 ``track_window_1``  track    1       yes    ablation: 1 frame instead of 10
+``contact``         contact  10      –      ours: finger count, points, forces, hover, on
+                                            the contact experiment (``contact.h5``)
 ==================  =======  ======  =====  ==========================================
+
+The contact run trains on its own recording, the *contact experiment*
+(:meth:`ReproduceConfig.contact_protocol`): the paper's finger, forces and handling, with the
+chambers at their lowest and highest level (8 states), touches anywhere in their region with
+the finger sliding to new points, lifting, hovering and approaching, and a second finger in some
+trials: what continuous contact models need and the paper's protocol does not hold.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -39,7 +47,10 @@ RUNS: dict[str, tuple[str, int, bool]] = {
     "track": ("track", 10, True),
     "track_no_prior": ("track", 10, False),
     "track_window_1": ("track", 1, True),
+    "contact": ("contact", 10, True),
 }
+#: the run trained on the contact experiment
+CONTACT_RUN = "contact"
 #: ablation key in metrics.json → run name
 ABLATIONS = {"no_prior": "track_no_prior", "window_1": "track_window_1"}
 #: runs trained with a fixed profile of ectskin.learn.train instead of the config's ``profile``
@@ -84,6 +95,11 @@ class ReproduceConfig:
         Include the two tracking ablations, the baselines, the twin's characterisation.
     robust : bool
         Also train and evaluate the TouchMLP with the ``robust`` profile.
+    contact : bool
+        Also simulate the contact experiment (:meth:`contact_protocol`; with a given
+        ``recording``: that recording, when it carries finger ground truth), train and evaluate
+        the contact model on it with its baselines, and reconstruct ECT images of its test
+        touches.
     device : str, optional
         Training device (default: CUDA when available).
     progress : bool
@@ -111,6 +127,7 @@ class ReproduceConfig:
     baselines: bool = True
     characterize: bool = True
     robust: bool = True
+    contact: bool = True
     device: str | None = None
     progress: bool = True
     threads: int | str | None = "auto"
@@ -154,6 +171,26 @@ class ReproduceConfig:
             + (("touch_robust",) if self.robust else ())
             + ("track",)
             + (tuple(ABLATIONS.values()) if self.ablations else ())
+        )
+
+    def contact_protocol(self) -> Protocol | None:
+        """The contact experiment: the simulated protocol with the chambers at its lowest and
+        highest level only, touches placed anywhere in their region (3 points per trial), lifts,
+        hover and approach, and a second finger in 30 % of the touch trials; None when a
+        recording is given."""
+        base = self.simulation_protocol()
+        if base is None:
+            return None
+        levels = tuple(sorted({min(base.levels_ml), max(base.levels_ml)}))
+        return replace(
+            base,
+            levels_ml=levels,
+            touch_placement="uniform",
+            touch_dwells=3,
+            lifts=True,
+            hover=True,
+            approach=True,
+            **({"second_finger": 0.3} if hasattr(base, "second_finger") else {}),
         )
 
     def simulation_protocol(self) -> Protocol | None:

@@ -90,7 +90,70 @@ REPORT_FIGURES = (
         "touch_robust_learning_curves",
     ),
     ("track", "learning_curves", "C2DT training and validation loss", "track_learning_curves"),
+    (
+        "contact",
+        "contact_error_map",
+        "Contact localisation error over each face (ContactNet, test trials of the contact experiment)",
+        "contact_error_map",
+    ),
+    (
+        "contact",
+        "contact_force",
+        "Contact force, predicted against true (ContactNet)",
+        "contact_force",
+    ),
+    (
+        "contact",
+        "contact_hover",
+        "Hover detection rate against the finger's height (ContactNet)",
+        "contact_hover",
+    ),
 )
+#: contact metrics copied to metrics.json's ``contact`` (and, for each baseline, beside them)
+CONTACT_KEYS = (
+    "loc_mm_mean",
+    "loc_mm_median",
+    "loc_mm_p90",
+    "face_accuracy",
+    "force_mae_n",
+    "force_rel",
+    "hover_detect_mm",
+    "contact_accuracy",
+    "n_single_contact_frames",
+)
+#: two-finger metrics copied to ``multi``
+MULTI_KEYS = (
+    "count_accuracy",
+    "count_accuracy_by_true",
+    "count_confusion",
+    "loc_mm_mean",
+    "loc_mm_median",
+    "loc_mm_p90",
+    "n_fingers",
+    "n_two_finger_frames",
+)
+
+
+def contact_blocks(run: Mapping[str, Any]) -> dict[str, Any]:
+    """``contact`` and ``multi`` of metrics.json from the contact run's metrics.json."""
+    c = run.get("contact", {})
+    baselines = c.get("baselines") or {}
+    contact = {k: c.get(k) for k in CONTACT_KEYS}
+    contact.update(
+        per_face=c.get("per_face"),
+        per_state=c.get("per_state"),
+        hover=c.get("hover"),
+        force=c.get("force"),
+        window=c.get("window"),
+        arch=c.get("arch"),
+        training=c.get("training"),
+        split=c.get("split"),
+        baselines={b: {k: v.get(k) for k in CONTACT_KEYS} for b, v in baselines.items()},
+    )
+    multi_of = lambda m: {k: (m.get("multi") or {}).get(k) for k in MULTI_KEYS}  # noqa: E731
+    multi = multi_of(c)
+    multi["baselines"] = {b: multi_of(v) for b, v in baselines.items()}
+    return {"contact": contact, "multi": multi}
 
 
 def combine_metrics(
@@ -102,8 +165,10 @@ def combine_metrics(
     protocol: Protocol | None,
     data_settings: Mapping[str, Any],
     data_path: Path,
+    contact: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The OUT_DIR/metrics.json dict from ``results`` ({run: its metrics.json})."""
+    """The OUT_DIR/metrics.json dict from ``results`` ({run: its metrics.json}) and the contact
+    run's metrics.json (``contact``, None when it did not run)."""
     m: dict[str, Any] = {
         "format": METRICS_FORMAT,
         "version": 1,
@@ -128,6 +193,8 @@ def combine_metrics(
                 abl[key] = {k: r.get(k) for k in ABLATION_KEYS if k in r}
         if abl:
             m["track"]["ablations"] = abl
+    if contact is not None:
+        m.update(contact_blocks(contact))
     try:
         n_trials = len(list_trials(data_path))
     except EctskinError:

@@ -3,6 +3,7 @@
 :func:`reproduce` is what ``ectskin reproduce OUT_DIR`` and ``ectskin demo`` run. It writes::
 
     data.h5                       the simulated experiment (paper §3 protocol)
+    contact.h5                    the contact experiment (ours, see ectskin.pipeline.config)
     characterize/                 Fig. 3, Fig. 4 and characterize.json of the twin
     runs/<run>/                   one training per run of :data:`ectskin.pipeline.config.RUNS`
                                   (model.pt, metrics.csv, split.json, metrics.json, figures)
@@ -32,6 +33,7 @@ from ectskin._check import EctskinError, check_type
 from ectskin._files import read_json, write_json_atomic
 from ectskin.learn.threads import torch_threads
 from ectskin.pipeline.config import ReproduceConfig
+from ectskin.pipeline.contact import contact_data, contact_run
 from ectskin.pipeline.metrics import combine_metrics, copy_figures
 from ectskin.pipeline.runner import StepRunner
 from ectskin.pipeline.steps import characterise, evaluate_runs, simulate_or_load, train_runs
@@ -66,6 +68,11 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
         characterise(runner, config)
     train_runs(runner, config, data_path, data_settings, threads)
     results = evaluate_runs(runner, config, data_path, data_settings)
+    contact = None
+    if config.contact:
+        found = contact_data(runner, config)
+        if found is not None:
+            contact = contact_run(runner, config, *found, threads)
 
     metrics = combine_metrics(
         results,
@@ -75,10 +82,12 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
         protocol=config.simulation_protocol(),
         data_settings=data_settings,
         data_path=data_path,
+        contact=contact,
     )
     if config.command:
         metrics["command"] = config.command
-    figures = copy_figures(out, config.run_names, config.figure_format)
+    runs = config.run_names + (("contact",) if contact is not None else ())
+    figures = copy_figures(out, runs, config.figure_format)
     metrics["figures"] = dict(figures)
     metrics["timings_s"]["total"] = time.perf_counter() - t_start
     write_json_atomic(out / "metrics.json", metrics)

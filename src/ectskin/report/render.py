@@ -21,6 +21,7 @@ from typing import Any
 from ectskin import __version__
 from ectskin._check import EctskinError
 from ectskin._files import write_text_atomic
+from ectskin.report.contact import contact_sections
 from ectskin.report.tables import (
     ROBUST_LABEL,
     ablation_note,
@@ -165,6 +166,7 @@ def _sections(metrics: Mapping[str, Any], figures: list[tuple[str, Path]]) -> li
         ]
         s.append(("h2", "Largest touch confusions"))
         s.append(("table", (("true class", "predicted", "frames", "adjacent regions"), rows)))
+    s.extend(contact_sections(metrics))
     abl = ablation_rows(metrics)
     if abl:
         s.append(("h2", "Tracking ablations"))

@@ -3,6 +3,7 @@
 ==========  ===================  ============================================================
 ``touch``   :class:`TouchTask`   touch class per calibrated frame (TouchMLP), Fig. 7
 ``track``   :class:`TrackTask`   marker coordinates from a window of frames (C2DT), Fig. 9/10
+``contact`` :class:`ContactTask` finger count, points (mm), forces (N), hover (ContactNet)
 ==========  ===================  ============================================================
 
 :func:`get_task` gives the task of a name (the ``task`` of ``ectskin train`` and config.json),
@@ -13,11 +14,12 @@ from __future__ import annotations
 
 from ectskin._check import EctskinError, check_option
 from ectskin.learn.tasks.base import Criterion, EvalCase, Task
+from ectskin.learn.tasks.contact import ContactCriterion, ContactTask
 from ectskin.learn.tasks.touch import TouchCriterion, TouchTask
 from ectskin.learn.tasks.track import TrackCriterion, TrackTask
 
 #: task name → task
-TASKS: dict[str, Task] = {task.name: task for task in (TouchTask(), TrackTask())}
+TASKS: dict[str, Task] = {task.name: task for task in (TouchTask(), TrackTask(), ContactTask())}
 
 
 def get_task(name: str) -> Task:
@@ -37,6 +39,8 @@ def task_for_model(kind: str) -> Task:
 
 __all__ = [
     "TASKS",
+    "ContactCriterion",
+    "ContactTask",
     "Criterion",
     "EvalCase",
     "Task",

@@ -60,7 +60,8 @@ class Criterion(ABC):
 
     @abstractmethod
     def eval_sums(self, model: nn.Module, batch: tuple[torch.Tensor, ...]) -> torch.Tensor:
-        """(3,) sums over ``batch``: loss sum, metric sum, sample count."""
+        """Sums over ``batch`` that :meth:`finish` turns into (val_loss, val_metric): a vector of
+        fixed length per task (touch and track: loss sum, metric sum, sample count)."""
 
     @abstractmethod
     def finish(self, sums: torch.Tensor) -> tuple[float, float]:

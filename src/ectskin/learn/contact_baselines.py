@@ -1,0 +1,185 @@
+"""Baselines of the contact task, fit on the training split and scored like the model.
+
+Each baseline reads the window's last frame (standardised) and predicts the same columns as
+:class:`~ectskin.learn.models.contact.ContactNet` (:data:`~ectskin.learn.models.contact.PRED_COLUMNS`,
+one finger slot filled, the others copies), so one function computes the metrics of all:
+
+==================  =====================================================================
+``region_centre``   the touch classifier's answer turned into a point: logistic regression
+                    (the strongest touch baseline) over no touch + the regions, the point is
+                    the predicted region's centre; force = the mean training force
+``knn``             5 nearest training frames: count and hover by vote, face by vote among
+                    frames in contact, (u, v) and force their mean
+``ridge``           ridge regression of (u, v) and force on frames in contact; count, face and
+                    hover by logistic regression
+==================  =====================================================================
+
+Classical models are fit on a seeded random subsample of at most ``max_train`` frames.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from typing import Any
+
+import numpy as np
+
+from ectskin._check import EctskinError
+from ectskin.learn.contact_data import MAX_FINGERS, ContactData
+from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
+
+CONTACT_BASELINES = ("region_centre", "knn", "ridge")
+MAX_TRAIN = 10000
+
+
+def _frames(data: ContactData) -> np.ndarray:
+    return np.asarray(data.x[:, -1, :], dtype=np.float64)
+
+
+def _subsample(n: int, max_train: int, seed: int) -> np.ndarray:
+    if n <= max_train:
+        return np.arange(n)
+    return np.sort(np.random.default_rng(seed).choice(n, max_train, replace=False))
+
+
+def _pack(count, p_contact, p_hover, face, uv, force) -> np.ndarray:
+    n = len(count)
+    slot = np.column_stack([face, uv[:, 0], uv[:, 1], np.full(n, np.nan), force])
+    out = np.empty((n, len(PRED_COLUMNS) + MAX_FINGERS * len(SLOT_COLUMNS)))
+    out[:, 0], out[:, 1], out[:, 2] = count, p_contact, p_hover
+    for s in range(MAX_FINGERS):
+        a = len(PRED_COLUMNS) + s * len(SLOT_COLUMNS)
+        out[:, a : a + len(SLOT_COLUMNS)] = slot
+    return out
+
+
+def _logreg(seed: int):
+    from sklearn.linear_model import LogisticRegression
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+
+    return make_pipeline(StandardScaler(), LogisticRegression(max_iter=200, random_state=seed))
+
+
+def _fit_classes(model, x: np.ndarray, y: np.ndarray):
+    """Fit ``model`` on (x, y), or a constant when y has one class; returns predict_proba-like
+    callable giving P(class == 1) and a predict callable."""
+    classes = np.unique(y)
+    if classes.size == 1:
+        c = classes[0]
+        return (lambda z: np.full(len(z), float(c == 1))), (lambda z: np.full(len(z), c))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.fit(x, y)
+    pos = list(model.classes_).index(1) if 1 in model.classes_ else None
+
+    def proba(z):
+        return model.predict_proba(z)[:, pos] if pos is not None else np.zeros(len(z))
+
+    return proba, model.predict
+
+
+def region_centre_baseline(
+    train: ContactData, test: ContactData, region_centres: np.ndarray, *, seed: int = 0
+) -> np.ndarray:
+    """Region classifier → the region's centre. ``region_centres`` (n_regions + 1, 3): (face
+    index, u, v) of each region id (row 0 unused)."""
+    idx = _subsample(train.n_samples, MAX_TRAIN, seed)
+    x = _frames(train)[idx]
+    region = train.group_region[train.group[idx]] * (train.count[idx] > 0)
+    clf = _logreg(seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        clf.fit(x, region)
+    xt = _frames(test)
+    proba = clf.predict_proba(xt)
+    r = clf.classes_[proba.argmax(1)]
+    p_contact = 1.0 - (proba[:, list(clf.classes_).index(0)] if 0 in clf.classes_ else 0.0)
+    hover_p, _ = _fit_classes(_logreg(seed), x, train.hover[idx].astype(int))
+    centre = region_centres[np.clip(r, 0, len(region_centres) - 1)]
+    on = train.count > 0
+    mean_force = float(train.force[on, 0].mean()) if on.any() else 0.0
+    return _pack(
+        (r > 0).astype(float),
+        p_contact,
+        hover_p(xt),
+        centre[:, 0],
+        centre[:, 1:],
+        np.full(len(xt), mean_force),
+    )
+
+
+def knn_baseline(train: ContactData, test: ContactData, *, seed: int = 0, k: int = 5) -> np.ndarray:
+    """k nearest standardised training frames (see the module docstring)."""
+    from sklearn.neighbors import KNeighborsClassifier, KNeighborsRegressor
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+
+    idx = _subsample(train.n_samples, MAX_TRAIN, seed)
+    x = _frames(train)[idx]
+    xt = _frames(test)
+    count = np.minimum(train.count[idx], 1)
+    cnt = make_pipeline(StandardScaler(), KNeighborsClassifier(k))
+    p_contact, count_pred = _fit_classes(cnt, x, count)
+    hov = make_pipeline(StandardScaler(), KNeighborsClassifier(k))
+    p_hover, _ = _fit_classes(hov, x, train.hover[idx].astype(int))
+    on = count > 0
+    face = np.zeros(len(xt))
+    uv = np.zeros((len(xt), 2))
+    force = np.zeros(len(xt))
+    if on.any():
+        _, face_pred = _fit_classes(
+            make_pipeline(StandardScaler(), KNeighborsClassifier(k)), x[on], train.face[idx][on, 0]
+        )
+        face = face_pred(xt)
+        reg = make_pipeline(StandardScaler(), KNeighborsRegressor(k))
+        targets = np.column_stack([train.uv[idx][on, 0], train.force[idx][on, 0]])
+        reg.fit(x[on], targets)
+        out = reg.predict(xt)
+        uv, force = out[:, :2], out[:, 2]
+    return _pack(count_pred(xt), p_contact(xt), p_hover(xt), face, uv, force)
+
+
+def ridge_baseline(train: ContactData, test: ContactData, *, seed: int = 0) -> np.ndarray:
+    """Ridge for (u, v) and force, logistic regression for count, face and hover."""
+    from sklearn.linear_model import RidgeCV
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+
+    idx = _subsample(train.n_samples, MAX_TRAIN, seed)
+    x = _frames(train)[idx]
+    xt = _frames(test)
+    count = np.minimum(train.count[idx], 1)
+    p_contact, count_pred = _fit_classes(_logreg(seed), x, count)
+    p_hover, _ = _fit_classes(_logreg(seed), x, train.hover[idx].astype(int))
+    on = count > 0
+    face = np.zeros(len(xt))
+    uv = np.zeros((len(xt), 2))
+    force = np.zeros(len(xt))
+    if on.any():
+        _, face_pred = _fit_classes(_logreg(seed), x[on], train.face[idx][on, 0])
+        face = face_pred(xt)
+        reg = make_pipeline(StandardScaler(), RidgeCV(alphas=np.logspace(-3, 3, 13)))
+        reg.fit(x[on], np.column_stack([train.uv[idx][on, 0], train.force[idx][on, 0]]))
+        out = reg.predict(xt)
+        uv, force = out[:, :2], np.maximum(out[:, 2], 0.0)
+    return _pack(count_pred(xt), p_contact(xt), p_hover(xt), face, uv, force)
+
+
+def contact_baselines(
+    train: ContactData, test: ContactData, region_centres: np.ndarray, *, seed: int = 0
+) -> dict[str, tuple[np.ndarray, float]]:
+    """{name: (predictions (n_test, columns), fit+predict seconds)} of :data:`CONTACT_BASELINES`."""
+    if train.n_samples == 0 or test.n_samples == 0:
+        raise EctskinError("contact baselines: the training or test split is empty")
+    out: dict[str, Any] = {}
+    for name, fn in (
+        ("region_centre", lambda: region_centre_baseline(train, test, region_centres, seed=seed)),
+        ("knn", lambda: knn_baseline(train, test, seed=seed)),
+        ("ridge", lambda: ridge_baseline(train, test, seed=seed)),
+    ):
+        t0 = time.perf_counter()
+        pred = fn()
+        out[name] = (pred, time.perf_counter() - t0)
+    return out

@@ -1,0 +1,98 @@
+"""Contact inference on a stream: :class:`ContactPredictor` (a trained ContactNet run).
+
+``predict(window)`` gives the raw columns of :meth:`ContactNet.decode`; ``read(window)`` one
+:class:`ContactReading` per frame: finger count, probabilities of contact and hover, and per
+finger its face, point (mm), uncertainty (mm, the model's own, one standard deviation per axis)
+and force (N).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
+from ectskin.learn.predict import _as_input, _Predictor, forward_batches
+
+
+@dataclass(frozen=True)
+class Finger:
+    """One finger of a :class:`ContactReading`."""
+
+    face: str
+    u_mm: float
+    v_mm: float
+    sigma_mm: float
+    force_n: float
+
+
+@dataclass(frozen=True)
+class ContactReading:
+    """What the contact model says about one frame."""
+
+    count: int
+    p_contact: float
+    p_hover: float
+    fingers: tuple[Finger, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "count": self.count,
+            "p_contact": self.p_contact,
+            "p_hover": self.p_hover,
+            "fingers": [vars(f) for f in self.fingers],
+        }
+
+
+class ContactPredictor(_Predictor):
+    """Contact count, points, forces and hover from a window of calibrated frames."""
+
+    kind = "contact_net"
+
+    @property
+    def window(self) -> int:
+        return int(self.config.window)
+
+    @property
+    def faces(self) -> list[str]:
+        names = self.payload.get("extra", {}).get("faces") or []
+        return [str(f) for f in names] or [f"face{k}" for k in range(self.config.n_faces)]
+
+    @property
+    def face_extent(self) -> dict[str, Any]:
+        """{face: [[u_lo, u_hi], [v_lo, v_hi]]} mm of the skins the model was trained on."""
+        return dict(self.payload.get("extra", {}).get("face_extent") or {})
+
+    def predict(self, window_calibrated: Any) -> np.ndarray:
+        """(k, n_pairs) window, oldest frame first → (3 + S · 5,) columns (``PRED_COLUMNS``,
+        then ``SLOT_COLUMNS`` per slot); batched (B, k, n_pairs) → (B, columns)."""
+        x, batched = _as_input(
+            "window",
+            window_calibrated,
+            (self.window, self.n_pairs),
+            f"ContactPredictor({self.source})",
+            self.pair_names,
+        )
+        out = forward_batches(self.model, [x], output=self.model.decode, device=self.device)
+        return out if batched else out[0]
+
+    def read(self, window_calibrated: Any) -> ContactReading:
+        """One window → its :class:`ContactReading` (the first ``count`` slots are fingers)."""
+        row = np.asarray(self.predict(window_calibrated), dtype=np.float64)
+        if row.ndim != 1:
+            raise ValueError("ContactPredictor.read takes one window; use predict for a batch")
+        count = int(row[PRED_COLUMNS.index("count")])
+        fingers = []
+        faces = self.faces
+        for s in range(count):
+            a = len(PRED_COLUMNS) + s * len(SLOT_COLUMNS)
+            face, u, v, sigma, force = row[a : a + len(SLOT_COLUMNS)]
+            fingers.append(Finger(faces[int(face)], float(u), float(v), float(sigma), float(force)))
+        return ContactReading(
+            count=count,
+            p_contact=float(row[PRED_COLUMNS.index("p_contact")]),
+            p_hover=float(row[PRED_COLUMNS.index("p_hover")]),
+            fingers=tuple(fingers),
+        )

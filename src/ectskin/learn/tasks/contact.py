@@ -1,0 +1,414 @@
+"""Contact: where, how hard and how many fingers touch, and whether one hovers (:class:`ContactTask`).
+
+Data: :func:`ectskin.learn.contact_data.contact_dataset` (per-frame ground truth of the twin or
+of an import with contact labels); model: :class:`~ectskin.learn.models.contact.ContactNet`.
+
+Training loss (:class:`ContactCriterion`), per frame:
+
+* cross-entropy of the finger count (0, 1, 2);
+* frames with no finger on the skin: binary cross-entropy of hover;
+* frames with fingers: per finger, cross-entropy of its face, smooth-L1 of its (u, v) (in units
+  of the face's half extent, weight :data:`POSITION_WEIGHT`) and of its force (in units of the
+  training force scale), and the Gaussian negative log-likelihood of the position under the
+  predicted variance (with the position itself held fixed, so the variance learns the error
+  without pulling the point). One finger is slot 0; two are matched to the slots in the
+  cheaper of the two orders (permutation-invariant).
+
+Validation metric: the mean distance (mm) between each finger's true and predicted points,
+slot 0 for one finger, matched for two; a wrong face is charged the body's thickness across
+(:mod:`ectskin.learn.contact_metrics`). Test metrics: localisation (mean / median / p90, per face,
+per inflation state, a map per face), force, hover detection against height, finger count and
+per-finger error after Hungarian matching, each beside the baselines of
+:mod:`ectskin.learn.contact_baselines` on the same test frames.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from ectskin._check import EctskinError
+from ectskin.io import Recording
+from ectskin.learn.augment import no_contact_means
+from ectskin.learn.contact_baselines import contact_baselines
+from ectskin.learn.contact_data import (
+    CONTACT_SPLIT,
+    HOVER_MAX_MM,
+    MAX_FINGERS,
+    ContactData,
+    contact_dataset,
+)
+from ectskin.learn.contact_metrics import (
+    force_metrics,
+    hover_metrics,
+    localisation_metrics,
+    multi_metrics,
+    rest_points,
+)
+from ectskin.learn.engine import Tensors
+from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS, ContactNet, ContactNetConfig
+from ectskin.learn.normalizer import Normalizer
+from ectskin.learn.predict import forward_batches
+from ectskin.learn.profiles import TrainSettings
+from ectskin.learn.tasks.base import Criterion, EvalCase, Task, as_tensor, build_config
+from ectskin.twin.mechanics import ManipulatorConfig
+from ectskin.viz.contact import plot_error_maps, plot_force_scatter, plot_hover_curve
+
+#: windows per batch when predicting a test split
+PREDICT_BATCH = 4096
+#: weight of the position term against the cross-entropies
+POSITION_WEIGHT = 10.0
+#: smooth-L1 transition of the position and force terms (normalised units)
+SMOOTH_BETA = 0.02
+
+
+def body_size() -> tuple[float, float]:
+    """(width, thickness) of the body in mm: the twin's default manipulator (the faces' rest
+    geometry of :func:`~ectskin.learn.contact_metrics.rest_points`)."""
+    c = ManipulatorConfig()
+    return float(c.width_mm), float(c.thickness_mm)
+
+
+def slot_columns(pred: np.ndarray, slot: int) -> dict[str, np.ndarray]:
+    """The columns of finger slot ``slot`` of a prediction array, by name."""
+    a = len(PRED_COLUMNS) + slot * len(SLOT_COLUMNS)
+    return {name: pred[:, a + k] for k, name in enumerate(SLOT_COLUMNS)}
+
+
+class ContactCriterion(Criterion):
+    """See the module docstring. ``thickness`` (mm) charges a wrong face in the metric."""
+
+    def __init__(
+        self, model: nn.Module, thickness_mm: float, state_means: torch.Tensor | None = None
+    ) -> None:
+        super().__init__()
+        self.thickness = float(thickness_mm)
+        self.state_means = state_means  # (n_states, P) or None: no inflation shift
+        self.shift_states = 0 if state_means is None else len(state_means)
+
+    @property
+    def augments(self) -> bool:
+        return self.state_means is not None
+
+    @staticmethod
+    def _finger_loss(out, s: int, face, uv_n, f_n) -> torch.Tensor:
+        """(B,) loss of slot ``s`` against one finger (face (B,), uv_n (B, 2), f_n (B,))."""
+        ce = F.cross_entropy(out["face"][:, s], face.clamp_min(0), reduction="none")
+        pos = F.smooth_l1_loss(out["uv"][:, s], uv_n, reduction="none", beta=SMOOTH_BETA).sum(-1)
+        lv = out["log_var"][:, s]
+        err2 = (out["uv"][:, s].detach() - uv_n).square().sum(-1)
+        nll = 0.5 * (2 * lv + err2 * torch.exp(-lv))
+        force = F.smooth_l1_loss(out["force"][:, s], f_n, reduction="none", beta=SMOOTH_BETA)
+        return ce + POSITION_WEIGHT * pos + 0.1 * nll + force
+
+    def _targets(self, model: nn.Module, face, uv, force):
+        m = getattr(model, "module", model)
+        f = face.clamp_min(0)
+        uv_n = (uv - m.uv_centre[f]) / m.uv_half[f]  # (B, S, 2)
+        return uv_n, force / m.force_scale
+
+    def _per_sample(self, model: nn.Module, batch) -> tuple[torch.Tensor, dict]:
+        x, count, face, uv, force, hover = batch
+        out = model(x)
+        loss = F.cross_entropy(out["count"], count, reduction="none")
+        off = count == 0
+        bce = F.binary_cross_entropy_with_logits(out["hover"], hover, reduction="none")
+        loss = loss + torch.where(off, bce, torch.zeros_like(bce))
+        uv_n, f_n = self._targets(model, face, uv, force)
+        straight = sum(
+            self._finger_loss(out, s, face[:, s], uv_n[:, s], f_n[:, s]) for s in range(2)
+        )
+        swapped = sum(
+            self._finger_loss(out, s, face[:, 1 - s], uv_n[:, 1 - s], f_n[:, 1 - s])
+            for s in range(2)
+        )
+        one = self._finger_loss(out, 0, face[:, 0], uv_n[:, 0], f_n[:, 0])
+        fingers = torch.where(count >= 2, torch.minimum(straight, swapped), one)
+        loss = loss + torch.where(count > 0, fingers, torch.zeros_like(fingers))
+        return loss, out
+
+    def loss(self, model, batch, rng):
+        if rng is not None and self.state_means is not None:
+            # the inflation shift: the same window seen at another inflation, as the difference
+            # of the no-contact means of two training states drawn at random
+            x, *rest = batch
+            ab = torch.from_numpy(rng.integers(0, len(self.state_means), size=(2, len(x))))
+            shift = self.state_means[ab[0].to(x.device)] - self.state_means[ab[1].to(x.device)]
+            batch = (x + shift[:, None, :], *rest)
+        return self._per_sample(model, batch)[0].mean()
+
+    def _distance(self, model, out, batch) -> tuple[torch.Tensor, torch.Tensor]:
+        """Summed finger distance (mm) and finger count of ``batch``."""
+        _, count, face, uv, _, _ = batch
+        m = getattr(model, "module", model)
+        pf = out["face"].argmax(-1)  # (B, S)
+        p_uv = m.uv_centre[pf] + out["uv"] * m.uv_half[pf]
+
+        def dist(s, j):
+            d2 = (p_uv[:, s] - uv[:, j]).square().sum(-1)
+            wrong = (pf[:, s] != face[:, j]).to(d2.dtype)
+            return torch.sqrt(d2 + wrong * self.thickness**2)
+
+        two = torch.minimum(dist(0, 0) + dist(1, 1), dist(0, 1) + dist(1, 0))
+        per = torch.where(
+            count >= 2, two, torch.where(count == 1, dist(0, 0), torch.zeros_like(two))
+        )
+        return per.sum(), count.clamp_max(2).sum().to(per.dtype)
+
+    def eval_sums(self, model, batch) -> torch.Tensor:
+        loss, out = self._per_sample(model, batch)
+        dist, n_fingers = self._distance(model, out, batch)
+        return torch.stack([loss.sum(), dist, n_fingers, loss.new_tensor(len(loss))])
+
+    def finish(self, sums: torch.Tensor) -> tuple[float, float]:
+        loss, dist, n_fingers, n = sums.tolist()
+        return loss / n, dist / max(n_fingers, 1.0)
+
+
+class ContactTask(Task):
+    """Contact (see the module docstring): :class:`ContactData` → :class:`ContactNet`."""
+
+    name = "contact"
+    model_kind = ContactNet.kind
+    data_type = "ContactData"
+    arrays = ("x", "count", "face", "uv", "force", "hover")
+    batch_fields = ("x", "count", "face", "uv", "force", "hover")
+    metric_name = "loc_mm"
+    lower_is_better_metric = True
+    split_counts = CONTACT_SPLIT
+    figure_captions: ClassVar[dict[str, str]] = {
+        "contact_error_map": "Contact localisation error over each face (mean mm per 5 mm cell)",
+        "contact_force": "Contact force: predicted against true, test frames in contact",
+        "contact_hover": "Hover detection rate against the finger's height",
+    }
+
+    # ------------------------------------------------------------------ data
+    def check_options(self, *, window: int, prior: bool) -> None:
+        if isinstance(window, bool) or not isinstance(window, int | np.integer) or window < 1:
+            raise EctskinError(f"window must be an integer >= 1 (frames), got {window!r}")
+        if not prior:
+            raise EctskinError(
+                "the prior option applies to 'track' only, got prior=False for 'contact'"
+            )
+
+    def dataset(
+        self, rec: Recording, *, window: int = 10, prior: bool = True, reference: Any = "auto"
+    ) -> ContactData:
+        return contact_dataset(rec, window=window, reference=reference)
+
+    def dataset_options(self, config: ContactNetConfig) -> dict[str, Any]:
+        return {"window": int(config.window)}
+
+    def stratify(self, data: ContactData) -> np.ndarray | None:
+        return data.group_region if len(data.group_region) else None
+
+    def _check_shapes(self, data: Any, what: str) -> None:
+        n = data.x.shape[0]
+        s = MAX_FINGERS
+        want = {"count": (n,), "face": (n, s), "uv": (n, s, 2), "force": (n, s), "hover": (n,)}
+        if data.x.ndim != 3:
+            raise EctskinError(
+                f"{what}: contact data must have x (n, k, n_pairs), got {data.x.shape}"
+            )
+        for name, shape in want.items():
+            got = getattr(data, name).shape
+            if got != shape:
+                raise EctskinError(f"{what}: contact {name} must have shape {shape}, got {got}")
+        bad = (data.count < 0) | (data.count > s)
+        if bad.any():
+            raise EctskinError(f"{what}: finger count must be 0..{s}, got {data.count[bad][0]}")
+
+    def tensors(self, data: Any, device: torch.device) -> Tensors:
+        return Tensors(
+            (
+                as_tensor(data.x, np.float32, device),
+                as_tensor(data.count, np.int64, device),
+                as_tensor(data.face, np.int64, device),
+                as_tensor(data.uv, np.float32, device),
+                as_tensor(data.force, np.float32, device),
+                as_tensor(data.hover, np.float32, device),
+            )
+        )
+
+    # ------------------------------------------------------------------ model
+    def build_model(self, data: Any, model_options: dict[str, Any] | None) -> ContactNet:
+        shape = {
+            "n_pairs": int(data.x.shape[2]),
+            "window": int(data.x.shape[1]),
+            "n_faces": len(data.faces),
+            "max_fingers": MAX_FINGERS,
+        }
+        return ContactNet(build_config(ContactNetConfig, shape, model_options))
+
+    def fit_normalization(self, model: nn.Module, data: Any) -> dict[str, Any]:
+        """Per-pair mean / std of the training windows; each face's centre and half extent
+        (from the layout's skins); the force scale (the mean force of training frames in
+        contact, 1 N without any)."""
+        norm = Normalizer.fit(data.x)
+        centre = np.array(
+            [[np.mean(data.face_extent[f][0]), np.mean(data.face_extent[f][1])] for f in data.faces]
+        )
+        half = np.array(
+            [
+                [np.ptp(data.face_extent[f][0]) / 2, np.ptp(data.face_extent[f][1]) / 2]
+                for f in data.faces
+            ]
+        )
+        on = data.count > 0
+        scale = float(data.force[on, 0].mean()) if on.any() else 1.0
+        model.set_normalization(
+            norm.mean, norm.std, centre, np.maximum(half, 1e-3), max(scale, 1e-3)
+        )
+        return {
+            "x": norm.to_dict(),
+            "uv_centre": centre.tolist(),
+            "uv_half": half.tolist(),
+            "force_scale": scale,
+        }
+
+    def checkpoint_extra(self, data: Any) -> dict[str, Any]:
+        return {
+            "faces": list(data.faces),
+            "face_extent": {f: [list(a), list(b)] for f, (a, b) in data.face_extent.items()},
+            "hover_max_mm": HOVER_MAX_MM,
+        }
+
+    # ------------------------------------------------------------------ training
+    def criterion(
+        self, model, settings: TrainSettings, train_data: Any, device
+    ) -> ContactCriterion:
+        """With ``settings.inflation_shift``, the no-contact means (last frame of each window) of
+        the training split's no-contact trials (at least two, else skipped with a note)."""
+        state_means, notes = None, []
+        if settings.inflation_shift:
+            frames = SimpleNamespace(
+                x=train_data.x[:, -1, :],
+                group=train_data.group,
+                group_region=train_data.group_region,
+            )
+            means = no_contact_means(frames)
+            if len(means) >= 2:
+                state_means = torch.from_numpy(means).to(device)
+            else:
+                notes.append(
+                    f"inflation shift skipped: the training data holds {len(means)} no-contact "
+                    "trial(s), at least 2 are needed"
+                )
+        criterion = ContactCriterion(model, body_size()[1], state_means)
+        criterion.notes.extend(notes)
+        return criterion
+
+    # ------------------------------------------------------------------ evaluation
+    def predict(self, model: nn.Module, data: ContactData) -> np.ndarray:
+        """(n, 3 + S · 5) float32 predictions: :data:`PRED_COLUMNS`, then per slot
+        :data:`SLOT_COLUMNS`."""
+        m = getattr(model, "module", model)
+        return forward_batches(model, [data.x], batch_size=PREDICT_BATCH, output=m.decode)
+
+    def test_metrics(self, case: EvalCase) -> dict[str, Any]:
+        m = contact_report(case.test, case.pred)
+        m["window"] = int(case.config.window)
+        m["arch"] = case.config.arch
+        return m
+
+    def baseline_metrics(self, train: Any, test: Any, *, seed: int) -> dict[str, Any]:
+        out = {}
+        for name, (pred, seconds) in contact_baselines(
+            train, test, train.region_centre, seed=seed
+        ).items():
+            m = contact_report(test, pred, with_maps=False)
+            m["fit_s"] = seconds
+            out[name] = m
+        return out
+
+    def figures(self, case: EvalCase, metrics: dict[str, Any]) -> dict[str, Any]:
+        test, pred = case.test, case.pred
+        single = test.count == 1
+        p0 = slot_columns(pred, 0)
+        return {
+            "contact_error_map": plot_error_maps(metrics["map"], test.face_extent),
+            "contact_force": plot_force_scatter(test.force[single, 0], p0["force_n"][single]),
+            "contact_hover": plot_hover_curve(
+                metrics["hover"]["curve"], metrics["hover"]["rate_threshold"]
+            ),
+        }
+
+
+def _state_name(state: tuple[float, ...]) -> str:
+    return "/".join(f"{v:g}" for v in state) + " ml" if state else "-"
+
+
+def contact_report(
+    test: ContactData, pred: np.ndarray, *, with_maps: bool = True
+) -> dict[str, Any]:
+    """Every contact metric of predictions ``pred`` (columns of :meth:`ContactTask.predict`) on
+    ``test``; the map arrays (for the figure) only ``with_maps``."""
+    width, thickness = body_size()
+    faces = list(test.faces)
+    n = test.n_samples
+    p_face = np.stack([slot_columns(pred, s)["face"] for s in range(MAX_FINGERS)], 1).astype(int)
+    p_uv = np.stack(
+        [
+            np.column_stack([slot_columns(pred, s)["u_mm"], slot_columns(pred, s)["v_mm"]])
+            for s in range(MAX_FINGERS)
+        ],
+        1,
+    )
+    t_face = np.clip(test.face, 0, None)
+    true_pts = rest_points(faces, t_face, test.uv, width_mm=width, thickness_mm=thickness)
+    pred_pts = rest_points(
+        faces, np.clip(p_face, 0, len(faces) - 1), p_uv, width_mm=width, thickness_mm=thickness
+    )
+    single = test.count == 1
+    loc = localisation_metrics(
+        true_pts[single, 0],
+        pred_pts[single, 0],
+        true_face=t_face[single, 0],
+        pred_face=p_face[single, 0],
+        faces=faces,
+        state=test.state[single],
+        state_names=[_state_name(s) for s in test.states],
+        true_uv=test.uv[single, 0] if with_maps else None,
+        face_extent=test.face_extent if with_maps else None,
+    )
+    p0 = slot_columns(pred, 0)
+    force = force_metrics(test.force[single, 0], p0["force_n"][single])
+    off = test.count == 0
+    hover = hover_metrics(
+        test.height[off],
+        test.hover[off] > 0.5,
+        pred[off, PRED_COLUMNS.index("p_hover")] > 0.5,
+        finger_present=np.isfinite(test.height[off]),
+        hover_max_mm=HOVER_MAX_MM,
+    )
+    count_pred = pred[:, PRED_COLUMNS.index("count")].astype(int)
+    multi = multi_metrics(test.count, count_pred, true_pts, pred_pts, MAX_FINGERS)
+    detect_true = test.count > 0
+    detect_pred = count_pred > 0
+    out: dict[str, Any] = {
+        **{k: loc[k] for k in ("loc_mm_mean", "loc_mm_median", "loc_mm_p90", "face_accuracy")},
+        "n_single_contact_frames": int(single.sum()),
+        "force_mae_n": force["force_mae_n"],
+        "force_rel": force.get("force_rel"),
+        "hover_detect_mm": hover["hover_detect_mm"],
+        "contact_accuracy": float(np.mean(detect_true == detect_pred)) if n else None,
+        "count_accuracy": multi["count_accuracy"],
+        "per_face": loc["per_face"],
+        "per_state": loc.get("per_state", {}),
+        "force": force,
+        "hover": hover,
+        "multi": multi,
+        "sigma_mm_median": (
+            float(np.nanmedian(p0["sigma_mm"][single]))
+            if single.any() and np.isfinite(p0["sigma_mm"]).any()
+            else None
+        ),
+    }
+    if with_maps and "map" in loc:
+        out["map"] = loc["map"]
+    return out

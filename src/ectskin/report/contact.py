@@ -1,0 +1,193 @@
+"""The report's contact sections: where, how hard and how many fingers, and ECT images.
+
+Each number stands beside the goal of issue 10 and beside the strongest baseline scored on the
+same test frames, with the margin; nothing here computes a metric, it only words metrics.json's
+``contact``, ``multi`` and ``ect_image`` blocks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from ectskin.report.wording import DASH, baseline_name, lookup, pct
+
+#: the goals of the contact work (issue 10), beside each number
+GOALS = {
+    "loc_mm_mean": "≤ 3 mm at every inflation state",
+    "force_mae_n": "≤ 0.2 N",
+    "hover_detect_mm": "≥ 5 mm",
+    "count_accuracy": "≥ 95 %",
+    "ect_loc": "≤ 2 × the learned model's error",
+}
+#: (key, label, unit, lower is better)
+CONTACT_ROWS = (
+    ("loc_mm_mean", "Contact point: mean error", "mm", True),
+    ("loc_mm_median", "Contact point: median error", "mm", True),
+    ("loc_mm_p90", "Contact point: 90th percentile error", "mm", True),
+    ("face_accuracy", "Face (front / back) right", "%", False),
+    ("force_mae_n", "Force: mean absolute error", "N", True),
+    ("force_rel", "Force: MAE / mean force", "%", True),
+    ("hover_detect_mm", "Hover detected up to (≥ 90 % of frames)", "mm", False),
+    ("contact_accuracy", "Touch / no touch right", "%", False),
+)
+
+
+def _value(v: Any, unit: str) -> str:
+    if not isinstance(v, int | float):
+        return DASH
+    if unit == "%":
+        return pct(v)
+    if unit == "N":
+        return f"{v:.3f} N"
+    return f"{v:.2f} mm"
+
+
+def _best(baselines: Mapping[str, Any], key: str, lower: bool) -> tuple[str, float] | None:
+    found = [(k, v.get(key)) for k, v in baselines.items() if isinstance(v.get(key), int | float)]
+    if not found:
+        return None
+    return min(found, key=lambda kv: kv[1]) if lower else max(found, key=lambda kv: kv[1])
+
+
+def _margin(model: Any, best: tuple[str, float] | None, unit: str, lower: bool) -> str:
+    if best is None or not isinstance(model, int | float):
+        return DASH
+    diff = best[1] - model if lower else model - best[1]
+    if unit == "%":
+        return f"{'+' if diff >= 0 else '−'}{abs(diff) * 100:.1f} points"
+    return f"{'better' if diff >= 0 else 'worse'} by {_value(abs(diff), unit)}"
+
+
+def contact_table(block: Mapping[str, Any], rows=CONTACT_ROWS) -> list[tuple[str, ...]]:
+    """Rows "metric · goal · model · strongest baseline · margin" of a contact-like block."""
+    baselines = lookup(block, "baselines") or {}
+    out = []
+    for key, label, unit, lower in rows:
+        model = block.get(key)
+        best = _best(baselines, key, lower)
+        out.append(
+            (
+                label,
+                GOALS.get(key, DASH),
+                _value(model, unit),
+                f"{baseline_name(best[0])} {_value(best[1], unit)}" if best else DASH,
+                _margin(model, best, unit, lower),
+            )
+        )
+    return out
+
+
+def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
+    """The report's (kind, payload) items for ``contact``, ``multi`` and ``ect_image``."""
+    s: list[tuple[str, Any]] = []
+    c = lookup(metrics, "contact")
+    header = ("metric", "goal", "this run", "strongest baseline", "margin")
+    if isinstance(c, Mapping) and c:
+        s.append(("h2", "Contact: where and how hard (beyond the paper)"))
+        s.append(
+            (
+                "p",
+                "ContactNet (ours) reads a window of calibrated frames and gives the finger count, "
+                "each finger's face, point (mm) and force (N), and whether a finger hovers. It "
+                "is trained and tested on the contact experiment (contact.h5: the paper's finger, "
+                "forces and handling; chambers at their lowest and highest level; touches "
+                "anywhere in the region, lifts, hover and a second finger), split by trial. "
+                "Errors are straight-line distances on the body at rest: a wrong face costs at "
+                "least the body's thickness. Baselines: "
+                + ", ".join(baseline_name(b) for b in (c.get("baselines") or {}))
+                + " (the region classifier's region centre, k-nearest neighbours, ridge).",
+            )
+        )
+        s.append(("table", (header, contact_table(c))))
+        per_state = c.get("per_state") or {}
+        if per_state:
+            rows = [
+                (
+                    name,
+                    _value(v.get("loc_mm_mean"), "mm"),
+                    _value(v.get("loc_mm_p90"), "mm"),
+                    str(v.get("n_frames")),
+                )
+                for name, v in per_state.items()
+            ]
+            s.append(("p", "Contact point error per inflation state (chamber volumes):"))
+            s.append(("table", (("state", "mean", "p90", "frames"), rows)))
+        per_face = c.get("per_face") or {}
+        if per_face:
+            rows = [
+                (
+                    name,
+                    _value(v.get("loc_mm_mean"), "mm"),
+                    _value(v.get("loc_mm_median"), "mm"),
+                    str(v.get("n_frames")),
+                )
+                for name, v in per_face.items()
+            ]
+            s.append(("table", (("face", "mean", "median", "frames"), rows)))
+    multi = lookup(metrics, "multi")
+    if isinstance(multi, Mapping) and multi and multi.get("count_accuracy") is not None:
+        s.append(("h2", "Two fingers"))
+        rows = (
+            ("count_accuracy", "Finger count (0, 1, 2) right", "%", False),
+            ("loc_mm_mean", "Per finger, matched (Hungarian): mean error", "mm", True),
+            ("loc_mm_p90", "Per finger, matched: 90th percentile", "mm", True),
+        )
+        s.append(("table", (header, contact_table(multi, rows))))
+        by_true = multi.get("count_accuracy_by_true") or {}
+        if by_true:
+            s.append(
+                (
+                    "p",
+                    "Count right, by the true count: "
+                    + "; ".join(
+                        f"{k} finger(s) {pct(v)}" for k, v in by_true.items() if v is not None
+                    )
+                    + f". Two-finger test frames: {multi.get('n_two_finger_frames', DASH)}.",
+                )
+            )
+    ect = lookup(metrics, "ect_image")
+    if isinstance(ect, Mapping) and ect:
+        s.append(("h2", "ECT images without training"))
+        learned = lookup(metrics, "contact.loc_mm_mean")
+        s.append(
+            (
+                "p",
+                "Images of the permittivity change from the readouts alone, with the sensitivity "
+                "(Jacobian) of the current deformation from the method of moments; the contact "
+                "point is the image's peak. No training data. Goal: "
+                + GOALS["ect_loc"]
+                + (f" (here ≤ {2 * learned:.2f} mm)." if isinstance(learned, int | float) else "."),
+            )
+        )
+        rows = []
+        for name, v in (ect.get("methods") or {}).items():
+            ratio = (
+                f"{v['loc_mm_mean'] / learned:.1f} ×"
+                if isinstance(learned, int | float)
+                and isinstance(v.get("loc_mm_mean"), int | float)
+                else DASH
+            )
+            rows.append(
+                (
+                    name,
+                    _value(v.get("loc_mm_mean"), "mm"),
+                    _value(v.get("loc_mm_median"), "mm"),
+                    pct(v.get("face_accuracy")) if v.get("face_accuracy") is not None else DASH,
+                    ratio,
+                )
+            )
+        rows.append(
+            (
+                "ContactNet (learned)",
+                _value(learned, "mm"),
+                _value(lookup(metrics, "contact.loc_mm_median"), "mm"),
+                pct(lookup(metrics, "contact.face_accuracy")),
+                "1.0 ×",
+            )
+        )
+        s.append(("table", (("method", "mean error", "median", "face right", "× learned"), rows)))
+        timing = ect.get("timing") or {}
+        if timing:
+            s.append(("p", "Timing: " + "; ".join(f"{k} {v}" for k, v in timing.items()) + "."))
+    return s

@@ -1,0 +1,124 @@
+"""The contact task: its data set against hand-built trials, its loss's finger matching, and a
+model that learns an analytic flat-skin readout far better than the region-centre baseline."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from ectskin.io import Recording, Trial
+from ectskin.learn.contact_baselines import region_centre_baseline
+from ectskin.learn.contact_data import MAX_FINGERS, contact_dataset
+from ectskin.learn.models.contact import ContactNet, ContactNetConfig
+from ectskin.learn.tasks import get_task
+from ectskin.learn.tasks.contact import ContactCriterion, contact_report
+from ectskin.learn.train import train
+
+
+def _flat_skin_recording(layout, n_frames=60, n_trials=40, seed=0) -> Recording:
+    """A flat skin whose readout is analytic in the finger's point: each pair's change is a
+    Gaussian bump of the distance from the finger to the pair's own spot on the front face,
+    times the force (so (u, v) and F are recoverable), on a per-pair base."""
+    rng = np.random.default_rng(seed)
+    p = layout.n_pairs
+    base = rng.uniform(0.5, 2.0, p)
+    spots = np.column_stack([rng.uniform(-25, 25, p), rng.uniform(0, 120, p)])
+    t = np.arange(n_frames) / 30
+    trials = [
+        Trial(
+            "rest",
+            base + rng.normal(0, 1e-5, (n_frames, p)),
+            t,
+            np.zeros(n_frames),
+            inflation=(0.0, 0.0, 0.0),
+            meta={"kind": "no_contact"},
+            contact=np.zeros(n_frames, bool),
+            finger_uv_mm=np.full((n_frames, 2), np.nan),
+            finger_height_mm=np.full(n_frames, np.nan),
+            force=np.zeros(n_frames),
+        )
+    ]
+    front = [r for r in layout.regions if r.surface == "front"]
+    for k in range(n_trials):
+        reg = front[k % len(front)]
+        uv = np.array([rng.uniform(*reg.u_mm), rng.uniform(*reg.v_mm)])
+        force = np.linspace(0.5, 1.5, n_frames)
+        d2 = ((spots - uv) ** 2).sum(1)
+        bump = np.exp(-d2 / (2 * 30.0**2))
+        c = base * (1 - 0.05 * force[:, None] * bump[None, :])
+        trials.append(
+            Trial(
+                f"touch_{k}",
+                c + rng.normal(0, 1e-5, c.shape),
+                t,
+                np.full(n_frames, reg.id),
+                inflation=(0.0, 0.0, 0.0),
+                region=reg.id,
+                meta={"kind": "touch"},
+                contact=np.ones(n_frames, bool),
+                finger_uv_mm=np.repeat(uv[None], n_frames, 0),
+                finger_height_mm=np.zeros(n_frames),
+                force=force,
+                finger_surface="front",
+            )
+        )
+    return Recording(layout, trials, 30.0)
+
+
+def test_dataset_targets_by_hand(layout):
+    rec = _flat_skin_recording(layout, n_frames=5, n_trials=2)
+    # make trial touch_0 lift at frame 3 to 4 mm (hover) and frame 4 to 40 mm (not hover)
+    t = rec.trials[1]
+    t.contact[3:] = False
+    t.finger_uv_mm[3:] = np.nan
+    t.finger_height_mm[3:] = [4.0, 40.0]
+    t.force[3:] = 0.0
+    d = contact_dataset(rec, window=3)
+    assert d.x.shape == (15, 3, layout.n_pairs)
+    rows = d.group == 1
+    assert d.count[rows].tolist() == [1, 1, 1, 0, 0]
+    assert d.hover[rows].tolist() == [0, 0, 0, 1, 0]
+    assert d.face[rows, 0].tolist() == [0, 0, 0, -1, -1]
+    assert (d.face[:, 1] == -1).all() and MAX_FINGERS == 2
+    np.testing.assert_allclose(d.uv[rows][0, 0], t.finger_uv_mm[0])
+    # the window of frame 0 is frame 0 repeated; of frame 4, frames 2, 3, 4
+    np.testing.assert_array_equal(d.x[rows][0, 0], d.x[rows][0, 2])
+    np.testing.assert_array_equal(d.x[rows][4, 0], d.x[rows][2, 2])
+
+
+def test_the_loss_matches_two_fingers_in_either_order():
+    torch.manual_seed(0)
+    model = ContactNet(ContactNetConfig(n_pairs=4, window=2, n_faces=2)).eval()  # no dropout
+    crit = ContactCriterion(model, thickness_mm=20.0)
+    x = torch.randn(3, 2, 4)
+    count = torch.tensor([2, 2, 1])
+    face = torch.tensor([[0, 1], [1, 0], [0, -1]])
+    uv = torch.tensor(
+        [[[1.0, 2.0], [3.0, 40.0]], [[5.0, 6.0], [-7.0, 80.0]], [[0.0, 10.0], [0.0, 0.0]]]
+    )
+    force = torch.tensor([[1.0, 0.5], [0.7, 1.2], [0.9, 0.0]])
+    hover = torch.zeros(3)
+    swap = torch.tensor([1, 0])
+    a, _ = crit._per_sample(model, (x, count, face, uv, force, hover))
+    b, _ = crit._per_sample(model, (x, count, face[:, swap], uv[:, swap], force[:, swap], hover))
+    torch.testing.assert_close(a[:2], b[:2])  # two fingers: the order does not matter
+    assert not torch.allclose(a[2], b[2])  # one finger is slot 0, the empty slot is not a finger
+
+
+def test_contact_model_learns_a_flat_skin_better_than_region_centres(layout, tmp_path):
+    rec = _flat_skin_recording(layout, n_frames=40, n_trials=60)
+    task = get_task("contact")
+    d = task.dataset(rec, window=2)
+    groups = np.arange(d.n_groups)
+    tr, va, te = d.select(groups[:-12]), d.select(groups[-12:-6]), d.select(groups[-6:])
+    train("contact", tr, va, tmp_path / "run", profile="quick", seed=0, epochs=12, progress=False)
+    from ectskin.learn.checkpoint import load_checkpoint
+
+    model, _, _ = load_checkpoint(tmp_path / "run" / "model.pt", kind="contact_net")
+    m = contact_report(te, task.predict(model, te), with_maps=False)
+    base = contact_report(te, region_centre_baseline(tr, te, tr.region_centre), with_maps=False)
+    # the readout is a smooth function of (u, v): a regression of it beats "the region's centre"
+    assert m["loc_mm_mean"] < 0.6 * base["loc_mm_mean"]
+    assert m["face_accuracy"] == pytest.approx(1.0)
+    assert m["count_accuracy"] == pytest.approx(1.0)
