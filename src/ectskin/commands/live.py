@@ -188,14 +188,10 @@ def run(args: argparse.Namespace) -> int:
             stack.enter_context(torch_threads(args.threads))
             layout = _known_layout(args)  # a model for another skin is refused before it is built
             touch = (
-                TouchPredictor.from_run(args.touch_model, layout=layout)
-                if args.touch_model
-                else None
+                TouchPredictor.from_run(args.touch_model, layout=layout) if args.touch_model else None
             )
             track = (
-                TrackPredictor.from_run(args.track_model, layout=layout)
-                if args.track_model
-                else None
+                TrackPredictor.from_run(args.track_model, layout=layout) if args.track_model else None
             )
         with stop_on_signals("closing the recording" if args.record else "stopping"):
             return _run(args, touch, track, ref_markers)
