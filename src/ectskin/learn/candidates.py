@@ -34,6 +34,10 @@ Files of the run directory (beside the MLP's ``model.pt`` when the MLP was train
   pipeline of one of the four classifiers; anything else is refused, naming the file.
 
 scikit-learn and skops are imported on use (they cost a second at start-up).
+
+Size: the candidates' fitting, selection and both of their files (model.skops with its
+trusted-type checks, candidates.json) share the names and settings defined here; split apart
+they would import each other.
 """
 
 from __future__ import annotations
