@@ -184,6 +184,19 @@ def test_a_classical_model_alone_trains_evaluates_and_predicts(tmp_path, data_fi
     assert pred.model_name == "knn" and pred.n_classes == 19
 
 
+def test_the_boosted_trees_fast_path_equals_scikit_learn():
+    x = np.random.default_rng(0).standard_normal((64, 28))
+    three = _problem("xor", 4, 100, 3)
+    three.y[:5] = 0  # three classes: one tree per class and iteration, a softmax
+    two = _problem("xor", 4, 100, 3)  # two classes: one tree per iteration, a logit
+    for data in (three, two):
+        model, _, _ = fit_classical("gbt", data, seed=1)
+        ref = model.estimator.predict_proba(x)  # scikit-learn's own path
+        fast = model.predict_proba(x)
+        assert isinstance(model._fast, cand._BoostedTrees)  # the fast path answered
+        assert np.allclose(fast[:, model.estimator.classes_], ref, atol=1e-6)
+
+
 def test_the_forest_fast_path_equals_scikit_learn():
     tr = _problem("xor", 4, 100, 3)
     model, _, _ = fit_classical("random_forest", tr, seed=1)
