@@ -61,7 +61,15 @@ def summary_lines(metrics: dict) -> list[str]:
                 else ""
             )
             + ")"
+            + (f" with {t['selected_model']}" if t.get("selected_model", "mlp") != "mlp" else "")
         )
+        for name, c in (t.get("candidates") or {}).items():
+            val = c.get("val_accuracy")
+            lines.append(
+                f"  candidate {name}: test accuracy {100 * c['test_accuracy']:.2f} %"
+                + (f", validation {100 * val:.2f} %" if val is not None else "")
+                + (" (selected)" if c.get("selected") else "")
+            )
         tr = t.get("training") or {}
         if tr.get("recipe") is not None:
             lines.append(

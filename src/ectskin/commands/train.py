@@ -4,6 +4,9 @@ Thin wrapper over :func:`ectskin.learn.train.train_from_recording`. An existing 
 is resumed (same settings and data); ``--overwrite`` (alias ``--force``) starts it over. The
 default profile is the paper's, meant for a GPU: on a CPU the training says so at the start and
 estimates its remaining time after the first epoch; ``--profile quick`` is the CPU setting. Runs
+``--model`` (touch) chooses the classifier: the paper's TouchMLP (``mlp``, default), ``auto`` (the
+MLP and the classical candidates, the best validation accuracy selected, see
+:mod:`ectskin.learn.candidates`) or one classical model alone. Runs
 unchanged on several processes (distributed data parallel)::
 
     torchrun --nproc_per_node 3 -m ectskin.cli train track data.h5 --out runs/track
@@ -22,12 +25,18 @@ from pathlib import Path
 from ectskin.commands._options import add_out, add_overwrite, resolve_out
 from ectskin.learn.profiles import PROFILE_TASKS, PROFILES
 
+#: ``--model`` values: ectskin.learn.candidates.TOUCH_MODELS, listed here because importing that
+#: module loads torch, which every ``ectskin`` call would pay for (a test keeps the two equal)
+MODELS = ("mlp", "auto", "gbt", "random_forest", "logreg", "knn")
+
 HELP = "train the touch classifier (TouchMLP) or the tracking transformer (C2DT) on a recording"
 EXAMPLES = """\
   ectskin train touch data.h5 -o runs/touch --profile quick   # minutes on a laptop CPU
   ectskin train track data.h5 -o runs/track                   # the paper's settings (GPU)
   ectskin train track data.h5 -o runs/track --epochs 200      # resume, extended to 200 epochs
   ectskin train touch data.h5 -o runs/touch --overwrite       # start the run over
+  ectskin train touch data.h5 -o runs/auto --model auto --profile quick  # best on validation
+  ectskin train touch data.h5 -o runs/gbt --model gbt         # gradient-boosted trees alone
   torchrun --nproc_per_node 3 -m ectskin.cli train track data.h5 -o runs/track
 """
 log = logging.getLogger(__name__)
@@ -44,6 +53,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="training settings: the paper's (default; meant for a GPU, slow on a CPU), quick "
         "for a CPU, or robust (touch only: the paper's TouchMLP with a recipe that generalises "
         "to unseen inflation/touch combinations, see docs/architecture.md)",
+    )
+    p.add_argument(
+        "--model",
+        choices=MODELS,
+        default="mlp",
+        help="touch classifier: mlp, the paper's TouchMLP (default); auto: the MLP and the "
+        "classical candidates (gbt, random_forest, logreg, knn), the best validation accuracy "
+        "selected (candidates.json); or one classical model alone (model.skops)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the split and training (default 0)")
     p.add_argument("--epochs", type=int, default=None, help="override the profile's epochs")
@@ -86,9 +103,12 @@ def run(args: argparse.Namespace) -> int:
         device=args.device,
         progress=not args.no_progress,
         threads=args.threads,
+        model=args.model,
     )
     summary = train_from_recording(args.task, args.data, out, config)
-    if int(os.environ.get("RANK", "0")) == 0:
+    if int(os.environ.get("RANK", "0")) != 0:
+        return 0
+    if "best_epoch" in summary:
         log.info(
             "%s: best epoch %d of %d, val_loss %.4g, val_%s %.4g, %.1f s on %s x %d -> %s",
             args.task,
@@ -101,5 +121,17 @@ def run(args: argparse.Namespace) -> int:
             summary["device"],
             summary["world_size"],
             out / "model.pt",
+        )
+    if "selected_model" in summary:
+        scores = ", ".join(
+            f"{k} {100 * v:.2f} %" for k, v in summary["candidates"].items() if v is not None
+        )
+        log.info(
+            "%s: selected %s (%s); validation accuracy: %s -> %s",
+            args.task,
+            summary["selected_model"],
+            summary["selected_because"],
+            scores,
+            out / "candidates.json",
         )
     return 0

@@ -11,6 +11,13 @@ The stages, each a short function:
    curves;
 4. ``metrics.json``, written atomically.
 
+A touch run trained with a model choice (``--model auto`` or a classical model, see
+:mod:`ectskin.learn.candidates`) is evaluated with the model its ``candidates.json`` selects (the
+main metrics, with ``selected_model``); ``candidates`` adds every candidate's test accuracy beside
+its validation accuracy: the MLP from ``model.pt``, the selected classical model from
+``model.skops``, the other classical candidates refit on the train split of the evaluated data
+with their recorded settings and seed (the same models training fit on the same data).
+
 Where the results go (:func:`evaluation_files`): on the run's own data (the file named in
 ``split.json``) ``metrics.json`` and the figures in the run folder; on other data
 ``metrics_<data file stem>.json`` and figures ``<figure>_<data file stem>.<format>`` beside
@@ -32,6 +39,15 @@ from torch import nn
 from ectskin._check import EctskinError
 from ectskin._files import save_figure_atomic, write_json_atomic
 from ectskin.io import Recording, read_recording
+from ectskin.learn.candidates import (
+    CLASSICAL_FILE,
+    ClassicalModel,
+    accuracy,
+    fit_classical,
+    load_classical,
+    read_candidates,
+    thread_limit,
+)
 from ectskin.learn.checkpoint import check_channels, check_layout, load_checkpoint
 from ectskin.learn.runfiles import (
     read_metrics,
@@ -40,7 +56,7 @@ from ectskin.learn.runfiles import (
     training_summary,
 )
 from ectskin.learn.splits import split_from_names
-from ectskin.learn.tasks import EvalCase, Task, task_for_model
+from ectskin.learn.tasks import EvalCase, Task, get_task, task_for_model
 from ectskin.viz import DEFAULT_DPI, check_figure_options, figure_file
 from ectskin.viz.learning import plot_learning_curves
 
@@ -68,16 +84,23 @@ class Run:
 
     path: Path
     task: Task
-    model: nn.Module
-    config: Any  # the model's config dataclass
+    model: nn.Module | None  # the MLP / C2DT of model.pt (None: a classical model alone)
+    config: Any  # the answering model's config (a ClassicalConfig for a classical model)
     payload: dict[str, Any]  # the checkpoint (extra: pair names, kept epoch, profile, ...)
     split: dict[str, Any]  # split.json
     run_config: dict[str, Any] | None  # config.json (None: the run has none)
     metrics_rows: list[dict[str, float]]  # metrics.csv ([] when absent)
+    candidates: dict[str, Any] | None = None  # candidates.json (None: an MLP run)
+    classical: ClassicalModel | None = None  # the selected classical model (model.skops)
+
+    @property
+    def selected(self) -> str:
+        """The model the run answers with: "mlp" or a classical candidate's name."""
+        return "mlp" if self.candidates is None else str(self.candidates["selected"])
 
     @property
     def model_file(self) -> Path:
-        return self.path / "model.pt"
+        return self.path / (CLASSICAL_FILE if self.classical is not None else "model.pt")
 
 
 def read_run(run_dir: str | Path) -> Run:
@@ -89,13 +112,26 @@ def read_run(run_dir: str | Path) -> Run:
     run = Path(run_dir)
     if not run.is_dir():
         raise EctskinError(f"run directory {run} does not exist")
-    model, config, payload = load_checkpoint(run / "model.pt")
-    task = task_for_model(payload["kind"])
+    candidates = read_candidates(run)
+    model, config, payload, classical = None, None, {}, None
+    if candidates is None or "mlp" in candidates["candidates"]:
+        model, config, payload = load_checkpoint(run / "model.pt")
+        task = task_for_model(payload["kind"])
+    else:
+        task = get_task("touch")  # only touch runs choose among candidates
+    if candidates is not None and candidates["selected"] != "mlp":
+        classical = load_classical(run / CLASSICAL_FILE)
+        if classical.name != candidates["selected"]:
+            raise EctskinError(
+                f"{run / CLASSICAL_FILE}: holds {classical.name!r} but candidates.json selects "
+                f"{candidates['selected']!r}; train again"
+            )
+        config = classical.config
     split = read_split(run)
     if split.get("task", task.name) != task.name:
         raise EctskinError(
             f"{run / 'split.json'}: task {split.get('task')!r} does not match the model "
-            f"in model.pt ({payload['kind']!r})"
+            f"in model.pt ({payload.get('kind')!r})"
         )
     metrics_path = run / "metrics.csv"
     return Run(
@@ -107,6 +143,8 @@ def read_run(run_dir: str | Path) -> Run:
         split=split,
         run_config=read_run_config(run, task.name),
         metrics_rows=read_metrics(metrics_path) if metrics_path.is_file() else [],
+        candidates=candidates,
+        classical=classical,
     )
 
 
@@ -242,6 +280,10 @@ def evaluate_run(
     check_layout(run.model_file, run.config, rec.layout)
     case, split = _test_case(run, rec)
     m = run.task.test_metrics(case)
+    if run.task.name == "touch":
+        m["selected_model"] = run.selected
+    if run.candidates is not None:
+        m["candidates"] = _candidates_on_test(run, case, split)
     if baselines:
         train = case.data.select(split["train"])
         m["baselines"] = run.task.baseline_metrics(train, case.test, seed=seed)
@@ -304,8 +346,46 @@ def _test_case(run: Run, rec: Recording) -> tuple[EvalCase, dict[str, Any]]:
     check_channels(run.model_file, run.config, ds.n_pairs)
     split = split_from_names(run.split, ds.group_names, source=str(run.path / "split.json"))
     test = ds.select(split["test"])
-    pred = task.predict(run.model, test)
+    if run.classical is not None:
+        pred = run.classical.predict(test.x)
+    else:
+        pred = task.predict(run.model, test)
     return EvalCase(data=ds, test=test, pred=pred, recording=rec, config=run.config), split
+
+
+def _candidates_on_test(run: Run, case: EvalCase, split: dict[str, Any]) -> dict[str, Any]:
+    """Every candidate of candidates.json on the test split: {name: val_accuracy,
+    test_accuracy, n_test_frames, n_misclassified, model (where it came from), selected}."""
+    test, doc = case.test, run.candidates or {}
+    train = None
+    out: dict[str, Any] = {}
+    for name, info in doc.get("candidates", {}).items():
+        if name == run.selected:
+            pred, source = case.pred, run.model_file.name
+        elif name == "mlp":
+            pred, source = run.task.predict(run.model, test), "model.pt"
+        else:
+            if train is None:
+                train = case.data.select(split["train"])
+            settings = info.get("settings") or {}
+            with thread_limit(1):
+                model, _, _ = fit_classical(
+                    name,
+                    train,
+                    seed=int(settings.get("seed", 0)),
+                    max_train=settings.get("max_train"),
+                )
+            pred, source = model.predict(test.x), "refit on the train split"
+        wrong = int((pred != test.y).sum())
+        out[name] = {
+            "val_accuracy": info.get("val_accuracy"),
+            "test_accuracy": accuracy(pred, test.y),
+            "n_test_frames": int(test.n_samples),
+            "n_misclassified": wrong,
+            "model": source,
+            "selected": name == run.selected,
+        }
+    return out
 
 
 def _training(run: Run) -> dict[str, Any]:

@@ -3,7 +3,11 @@
 :class:`TouchPredictor` and :class:`TrackPredictor` rebuild their model from a run directory's
 ``model.pt`` alone (see :mod:`ectskin.learn.checkpoint`). The training-set normalisation lives in
 the model's buffers, so both take *calibrated* readouts (paper Eq. 2) exactly as the data sets
-hold them. Calls run in eval mode under ``torch.inference_mode`` on the CPU by default (latency
+hold them. A touch run that selected a classical model (``candidates.json``, see
+:mod:`ectskin.learn.candidates`) answers with its ``model.skops`` instead (its standardisation is
+part of the model), through ``predict_proba``, with the same output.
+
+Calls run in eval mode under ``torch.inference_mode`` on the CPU by default (latency
 figures: ``benchmarks/bench_train.py`` and ``BENCHMARKS.md``).
 
 :func:`forward_batches` is the one batched inference path: the predictors and the evaluation of
@@ -20,6 +24,12 @@ import numpy as np
 import torch
 
 from ectskin._check import EctskinError
+from ectskin.learn.candidates import (
+    CLASSICAL_FILE,
+    ClassicalModel,
+    load_classical,
+    read_candidates,
+)
 from ectskin.learn.checkpoint import load_checkpoint
 
 
@@ -133,9 +143,51 @@ class _Predictor:
 
 
 class TouchPredictor(_Predictor):
-    """Touch class probabilities from calibrated frames (TouchMLP)."""
+    """Touch class probabilities from calibrated frames: the run's TouchMLP, or the classical
+    model its ``candidates.json`` selects (``classical``; ``model`` is then None)."""
 
     kind = "touch_mlp"
+
+    def __init__(
+        self,
+        model: torch.nn.Module | None,
+        config: Any,
+        payload: dict,
+        source: str,
+        classical: ClassicalModel | None = None,
+    ) -> None:
+        self.classical = classical
+        if classical is None:
+            super().__init__(model, config, payload, source)
+            return
+        self.model = None
+        self.config = classical.config
+        self.payload = {"kind": f"touch_{classical.name}", "extra": {}}
+        self.source = source
+        self.device = torch.device("cpu")
+        self.pair_names = list(classical.pair_names)
+
+    @classmethod
+    def from_run(
+        cls, run_dir: str | Path, *, device: str | torch.device = "cpu", layout: Any = None
+    ):
+        """Load the model a run answers with: ``run_dir/model.skops`` when the run's
+        ``candidates.json`` selects a classical model, else ``run_dir/model.pt`` (on
+        ``device``); or the model file itself (``.skops`` or a checkpoint). With ``layout`` a
+        model trained for another skin is refused before it is used."""
+        path = Path(run_dir)
+        if path.is_dir():
+            doc = read_candidates(path)
+            if doc is not None and doc["selected"] != "mlp":
+                path = path / CLASSICAL_FILE
+        if path.suffix == ".skops":
+            return cls(None, None, {}, str(path), classical=load_classical(path, layout=layout))
+        return super().from_run(run_dir, device=device, layout=layout)
+
+    @property
+    def model_name(self) -> str:
+        """ "mlp" or the classical candidate answering."""
+        return "mlp" if self.classical is None else self.classical.name
 
     @property
     def n_classes(self) -> int:
@@ -151,7 +203,10 @@ class TouchPredictor(_Predictor):
             f"TouchPredictor({self.source})",
             self.pair_names,
         )
-        probs = forward_batches(self.model, [x], output=_softmax, device=self.device)
+        if self.classical is not None:
+            probs = self.classical.predict_proba(x.numpy())
+        else:
+            probs = forward_batches(self.model, [x], output=_softmax, device=self.device)
         return probs if batched else probs[0]
 
     def classify(self, c_calibrated: Any) -> np.ndarray | int:

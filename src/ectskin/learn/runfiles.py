@@ -40,6 +40,7 @@ METRICS_COLUMNS = ("epoch", "train_loss", "val_loss", "val_metric", "lr", "secon
 #: (besides these: evaluations on other data, ``metrics_<data stem>.json``, and figures).
 RUN_FILES = frozenset(
     {"model.pt", "last.pt", "metrics.csv", "config.json", "split.json", "metrics.json"}
+    | {"candidates.json", "model.skops"}  # the touch model choice (ectskin.learn.candidates)
 )
 #: suffixes of the figures an evaluation writes into a run directory
 FIGURE_SUFFIXES = frozenset({".png", ".pdf", ".svg"})

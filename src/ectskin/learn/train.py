@@ -23,6 +23,15 @@ Distributed data parallel: the same :func:`train` runs unchanged under
 ``batch_size`` is divisible by N). Only rank 0 writes files and shows progress. Each rank
 augments its own shard (mixup pairs frames within the rank's batch).
 
+Touch model choice (``model=``, ``--model``; :mod:`ectskin.learn.candidates`): "mlp" (default)
+trains the paper's TouchMLP as above and nothing else; "auto" trains it, then fits the classical
+candidates on the same training split, scores every candidate on the validation split and writes
+``candidates.json`` (and ``model.skops`` when a classical model is selected); a classical name
+("gbt", "random_forest", "logreg", "knn") fits that model alone (no MLP). The choice is recorded in
+``config.json`` (``model_choice``): a run is resumed only with the same choice. Resuming an "auto"
+run refits the classical candidates (seeded: the same models) and selects again. Only rank 0 fits
+them.
+
 Size: the public entry points and the staged steps of one run (set-up, header, epochs,
 summary) share the run's ``_Job`` state; split across modules they would pass it around.
 """
@@ -40,10 +49,25 @@ import numpy as np
 import torch
 from torch import nn
 
-from ectskin._check import EctskinError
-from ectskin._files import to_jsonable
+from ectskin._check import EctskinError, check_option
+from ectskin._files import read_json_object, to_jsonable
 from ectskin.io import read_recording
-from ectskin.learn.checkpoint import save_checkpoint
+from ectskin.learn.candidates import (
+    CANDIDATES_FILE,
+    CLASSICAL,
+    CLASSICAL_FILE,
+    TOUCH_MODELS,
+    CandidateResult,
+    ClassicalModel,
+    accuracy,
+    candidate_names,
+    fit_candidates,
+    read_candidates,
+    save_classical,
+    select_candidate,
+    write_candidates,
+)
+from ectskin.learn.checkpoint import load_checkpoint, save_checkpoint
 from ectskin.learn.distributed import Dist, barrier, setup, wrap
 from ectskin.learn.engine import (
     Progress,
@@ -96,7 +120,11 @@ class TrainConfig:
     model_options : model hyper-parameters (e.g. ``{"d_model": 32}``); the shape fields come
         from the data.
     threads : torch CPU threads while training (:mod:`ectskin.learn.threads`: an int, "auto");
-        None: :data:`~ectskin.learn.threads.TRAIN_DEFAULT_THREADS`. Ignored on CUDA.
+        None: :data:`~ectskin.learn.threads.TRAIN_DEFAULT_THREADS`. Ignored on CUDA. The
+        classical candidates use as many native threads.
+    model : touch only: "mlp" (the paper's TouchMLP, default), "auto" (every candidate, the
+        best on validation selected) or one classical candidate
+        (:data:`~ectskin.learn.candidates.TOUCH_MODELS`, see the module docstring).
     """
 
     profile: str = "paper"
@@ -112,6 +140,7 @@ class TrainConfig:
     split_seed: int | None = None
     model_options: dict[str, Any] | None = None
     threads: int | str | None = None
+    model: str = "mlp"
 
 
 def train_from_recording(
@@ -135,6 +164,7 @@ def train_from_recording(
     t.check_options(window=config.window, prior=config.prior)
     resolve_threads(config.threads)
     check_run_folder(out, resume=config.resume)
+    check_model_choice(t, config.model, out, resume=config.resume)
     data_path = Path(data_path)
     data = t.dataset(read_recording(data_path), window=config.window, prior=config.prior)
     counts = config.counts or t.split_counts
@@ -163,6 +193,7 @@ def train_from_recording(
         model_options=config.model_options,
         split=split,
         threads=config.threads,
+        model=config.model,
     )
     summary.update({f"n_{k}": int(p.n_samples) for k, p in parts.items()})
     return summary
@@ -185,6 +216,7 @@ def train(
     split: dict[str, Any] | None = None,
     settings: dict[str, Any] | None = None,
     threads: int | str | None = None,
+    model: str = "mlp",
 ) -> dict[str, Any]:
     """Train the model of ``task`` ("touch": TouchMLP, "track": C2DT) and write ``out_dir``.
 
@@ -201,13 +233,18 @@ def train(
         applies (config.json's ``recipe``: ``inflation_shift_states`` 0).
     seed, device, progress, model_options, threads : as in :class:`TrainConfig`.
     split : trial names per split to record in ``split.json`` (default: the train/val names).
+    model : "mlp", "auto" or a classical candidate (touch only; see the module docstring and
+        :mod:`ectskin.learn.candidates`).
 
     Returns a summary dict: best_epoch (1-based), best_val_loss, best_val_metric, metric
     (its name), select (the rule that chose best_epoch), recipe (as in config.json), epochs,
     epochs_run, resumed_from, seconds_total, seconds_this_run, seconds_per_epoch, world_size,
-    device, out_dir.
+    device, out_dir. With a model choice other than "mlp" also model_choice, selected_model,
+    selected_because and candidates ({name: validation accuracy}); a classical model alone has
+    no epochs (best_val_metric is its validation accuracy).
     """
     t = get_task(task)
+    check_model_choice(t, model, out_dir, resume=resume)
     overrides = dict(settings or {})
     overrides.update(
         {k: v for k, v in (("epochs", epochs), ("batch_size", batch_size)) if v is not None}
@@ -223,9 +260,186 @@ def train(
     n_threads = TRAIN_DEFAULT_THREADS if threads is None else threads
     resolve_threads(n_threads)  # an invalid value fails before the process group is set up
     d = setup(device)
-    job = _Job(t, s, profile, int(seed), resume, d, progress, model_options, split, Path(out_dir))
-    with torch_threads(n_threads if d.device.type == "cpu" else None):
-        return _train(job, train_data, val_data)
+    job = _Job(
+        t, s, profile, int(seed), resume, d, progress, model_options, split, Path(out_dir), model
+    )
+    if d.main and not resume:
+        _remove_stale(job.out_dir, model)
+    with torch_threads(n_threads if d.device.type == "cpu" else None) as used_threads:
+        native = used_threads if d.device.type == "cpu" else resolve_threads(n_threads)
+        if model in CLASSICAL:
+            return _train_classical(job, train_data, val_data, native)
+        summary = _train(job, train_data, val_data)
+        if model == "auto" and d.main:
+            summary.update(_choose(job, train_data, val_data, summary, native))
+        return summary
+
+
+# ============================================================================ model choice
+def check_model_choice(task: Task, model: str, out: str | Path, *, resume: bool) -> None:
+    """Refuse a model choice the task does not have ("mlp" only for tracking) or, when resuming,
+    one other than the run's own (config.json's ``model_choice``; "mlp" when absent)."""
+    check_option("model", model, TOUCH_MODELS)
+    if task.name != "touch" and model != "mlp":
+        raise EctskinError(
+            f"--model applies to 'touch' only: {task.name!r} trains its paper model, got "
+            f"model={model!r}"
+        )
+    path = Path(out) / "config.json"
+    if not (resume and path.is_file()):
+        return
+    before = read_json_object(path, "run config").get("model_choice", "mlp")
+    if before != model:
+        raise EctskinError(
+            f"{path}: the run in this folder was trained with --model {before}, not --model "
+            f"{model}; use another output folder, or start over with --overwrite"
+        )
+
+
+def _remove_stale(out: Path, model: str) -> None:
+    """Starting over (``resume=False``): remove the files of an earlier run that this one would
+    not replace, so that no earlier selection or model survives beside the new one."""
+    stale = [CANDIDATES_FILE, CLASSICAL_FILE]
+    if model in CLASSICAL:
+        stale += ["model.pt", "last.pt", "metrics.csv"]  # no MLP in this run
+    gone = [out / n for n in stale if (out / n).is_file()]
+    for p in gone:
+        p.unlink()
+    if gone:
+        logger.warning("starting over (--overwrite): removed %s", ", ".join(str(p) for p in gone))
+
+
+def _fingerprints(train_data: Any, val_data: Any) -> dict[str, str]:
+    return {
+        "train_fingerprint": fingerprint(train_data.x, train_data.y),
+        "val_fingerprint": fingerprint(val_data.x, val_data.y),
+    }
+
+
+def _choose(
+    job: _Job, train_data: Any, val_data: Any, summary: dict[str, Any], threads: int | None
+) -> dict[str, Any]:
+    """``model="auto"`` after the MLP is trained (rank 0): the MLP's kept weights and every
+    classical candidate scored on the whole validation split; the best selected and committed."""
+    mlp, mlp_config, _ = load_checkpoint(job.out_dir / "model.pt")
+    mlp_acc = accuracy(job.task.predict(mlp, val_data), val_data.y)
+    logger.info("touch candidate mlp: validation accuracy %.4f", mlp_acc)
+    names = tuple(n for n in candidate_names("auto") if n != "mlp")
+    results, models = fit_candidates(names, train_data, val_data, seed=job.seed, threads=threads)
+    results = {
+        "mlp": CandidateResult(
+            "mlp",
+            mlp_acc,
+            float(summary["seconds_total"]),
+            int(train_data.x.shape[0]),
+            {"profile": job.profile, "best_epoch": summary["best_epoch"], **asdict(mlp_config)},
+        ),
+        **results,
+    }
+    return _commit(job, train_data, val_data, results, models)
+
+
+def _train_classical(
+    job: _Job, train_data: Any, val_data: Any, threads: int | None
+) -> dict[str, Any]:
+    """``model`` = one classical candidate: fit it alone (rank 0) and commit it; a finished run
+    with the same seed and data is left as it is."""
+    d, out, name = job.d, job.out_dir, job.model_choice
+    t0 = time.perf_counter()
+    if d.main:
+        done = read_candidates(out) if job.resume else None
+        fps = _fingerprints(train_data, val_data)
+        if done is not None:
+            same = done.get("seed") == job.seed and all(done.get(k) == v for k, v in fps.items())
+            if not same:
+                raise EctskinError(
+                    f"{out / CANDIDATES_FILE}: the run was fit with another seed or other data; "
+                    "use another output folder, or start over with --overwrite"
+                )
+            logger.info("%s: %s already fit; nothing to do", out / CANDIDATES_FILE, name)
+            return _classical_summary(job, done, time.perf_counter() - t0)
+        out.mkdir(parents=True, exist_ok=True)
+        header = {
+            "task": job.task.name,
+            "model_choice": name,
+            "seed": job.seed,
+            "n_train": int(train_data.x.shape[0]),
+            "n_val": int(val_data.x.shape[0]),
+            "pair_names": list(getattr(train_data, "pair_names", []) or []),
+            "data_fingerprint": fps["train_fingerprint"],
+        }
+        write_run_config(out / "config.json", header)
+        split = job.split or {
+            "train": split_names_of(train_data),
+            "val": split_names_of(val_data),
+        }
+        write_run_config(out / "split.json", split)
+        results, models = fit_candidates(
+            (name,), train_data, val_data, seed=job.seed, threads=threads
+        )
+        _commit(job, train_data, val_data, results, models)
+    barrier(d)
+    return _classical_summary(job, read_candidates(out), time.perf_counter() - t0)
+
+
+def _commit(
+    job: _Job,
+    train_data: Any,
+    val_data: Any,
+    results: dict[str, CandidateResult],
+    models: dict[str, ClassicalModel],
+) -> dict[str, Any]:
+    """Select among ``results`` and write the selection: candidates.json is removed first and
+    written last (atomically), so a run interrupted in between has no selection, never one that
+    names another model than model.skops holds."""
+    out = job.out_dir
+    name, why = select_candidate({k: r.val_accuracy for k, r in results.items()})
+    (out / CANDIDATES_FILE).unlink(missing_ok=True)
+    if name in models:
+        save_classical(out / CLASSICAL_FILE, models[name])
+    else:
+        (out / CLASSICAL_FILE).unlink(missing_ok=True)  # an earlier selection's
+    doc = {
+        "model": job.model_choice,
+        "selected": name,
+        "selected_because": why,
+        "metric": "validation accuracy (the whole validation split)",
+        "tie_order": list(candidate_names("auto")),
+        "seed": job.seed,
+        **_fingerprints(train_data, val_data),
+        "n_train": int(train_data.x.shape[0]),
+        "n_val": int(val_data.x.shape[0]),
+        "candidates": {k: r.to_json() for k, r in results.items()},
+    }
+    write_candidates(out, doc)
+    logger.info("touch model: selected %s (%s)", name, why)
+    return {
+        "model_choice": job.model_choice,
+        "selected_model": name,
+        "selected_because": why,
+        "candidates": {k: r.val_accuracy for k, r in results.items()},
+    }
+
+
+def _classical_summary(job: _Job, doc: dict[str, Any] | None, seconds: float) -> dict[str, Any]:
+    """train's return value for a classical model alone."""
+    doc = doc or {}
+    cands = doc.get("candidates", {})
+    selected = doc.get("selected", job.model_choice)
+    return {
+        "task": job.task.name,
+        "model_choice": job.model_choice,
+        "selected_model": selected,
+        "selected_because": doc.get("selected_because"),
+        "candidates": {k: c.get("val_accuracy") for k, c in cands.items()},
+        "best_val_metric": cands.get(selected, {}).get("val_accuracy"),
+        "metric": job.task.metric_name,
+        "fit_seconds": cands.get(selected, {}).get("fit_seconds"),
+        "seconds_total": seconds,
+        "world_size": job.d.world_size,
+        "device": "cpu",
+        "out_dir": str(job.out_dir),
+    }
 
 
 # ============================================================================ the run
@@ -243,6 +457,7 @@ class _Job:
     model_options: dict[str, Any] | None
     split: dict[str, Any] | None
     out_dir: Path
+    model_choice: str = "mlp"
 
 
 @dataclass
@@ -319,6 +534,7 @@ def _write_header(
     job.out_dir.mkdir(parents=True, exist_ok=True)
     config = {
         "task": job.task.name,
+        "model_choice": job.model_choice,
         "profile": job.profile,
         "seed": job.seed,
         "settings": asdict(job.settings),

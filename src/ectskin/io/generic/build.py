@@ -355,4 +355,32 @@ def _trial(
         region=region,
         markers=None if f.markers is None else f.markers[idx],
         meta=meta,
+        **_truth(f, groups, k, idx),
     )
+
+
+def _truth(f: Fields, groups: _Groups, k: int, idx: np.ndarray) -> dict[str, Any]:
+    """The Trial's ground-truth fields of group ``k`` (rows ``idx``) from the file's contact
+    labels: contact, finger_uv_mm, finger_height_mm, force, finger_surface (the one face of
+    the group; a group naming two faces is an error naming the group and the row)."""
+    gt = f.truth
+    if gt is None:
+        return {}
+    out: dict[str, Any] = {
+        "contact": None if gt.contact is None else gt.contact[idx],
+        "finger_uv_mm": None if gt.position_mm is None else gt.position_mm[idx],
+        "finger_height_mm": None if gt.height_mm is None else gt.height_mm[idx],
+        "force": None if gt.force_n is None else gt.force_n[idx],
+    }
+    if gt.surface is not None:
+        faces = gt.surface[idx]
+        named = faces[faces != ""]
+        if named.size and np.any(named != named[0]):
+            j = int(idx[np.argmax((faces != "") & (faces != named[0]))])
+            raise EctskinError(
+                f"{f.source}: group {groups.keys[k].item()!r}: surface must be one face per "
+                f"group, expected {str(named[0])!r} (as in its first rows), found "
+                f"{str(gt.surface[j])!r} at {f.row(j)}"
+            )
+        out["finger_surface"] = str(named[0]) if named.size else None
+    return out

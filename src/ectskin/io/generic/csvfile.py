@@ -19,7 +19,13 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
-from ectskin.io.generic.fields import CSV_COLUMNS, Fields, check_magnitude, class_labels
+from ectskin.io.generic.fields import (
+    CSV_COLUMNS,
+    Fields,
+    check_magnitude,
+    class_labels,
+    ground_truth,
+)
 from ectskin.io.text import TailDecimals, csv_rows, cut_short, parse_float, truncation_note
 
 log = logging.getLogger(__name__)
@@ -34,9 +40,10 @@ class _Scan:
     header: list[str] | None = None
     header_line: int = 0
     cols: dict[str, Any] = field(default_factory=dict)  # see _csv_columns
-    numeric: list[int] = field(default_factory=list)  # columns parsed as numbers (all but group)
+    numeric: list[int] = field(default_factory=list)  # columns parsed as numbers (all but text)
     flat: array = field(default_factory=lambda: array("d"))
     groups: list[str] = field(default_factory=list)
+    surfaces: list[str] = field(default_factory=list)  # the 'surface' column, when present
     lines: array = field(default_factory=lambda: array("q"))
     tail: TailDecimals = field(default_factory=TailDecimals)  # the last column's format
     notes: list[str] = field(default_factory=list)
@@ -47,7 +54,7 @@ class _Scan:
             return self.add(line, cells)
         if all(not c.strip() for c in cells):
             return None
-        last_is_text = len(self.header) - 1 == self.cols["group"]
+        last_is_text = len(self.header) - 1 in (self.cols["group"], self.cols.get("surface"))
         why = cut_short(cells, len(self.header), self.tail, None if last_is_text else _is_number)
         if why is None:
             try:
@@ -71,7 +78,8 @@ class _Scan:
             self.header = [c.strip() for c in cells]
             self.header_line = line
             self.cols = _csv_columns(self.header, self.src, line)
-            self.numeric = [j for j in range(len(self.header)) if j != self.cols["group"]]
+            text = (self.cols["group"], self.cols.get("surface"))
+            self.numeric = [j for j in range(len(self.header)) if j not in text]
             return
         if len(cells) != len(self.header):
             raise EctskinError(
@@ -95,6 +103,8 @@ class _Scan:
             row = self._slow_row(values, line)
         self.flat.extend(row)  # only a row that reads whole is taken
         self.groups.append(g)
+        if "surface" in self.cols:
+            self.surfaces.append(cells[self.cols["surface"]].strip())
         self.lines.append(line)
         self.tail.add(cells[-1])
 
@@ -180,6 +190,21 @@ def read_csv(path: Path) -> Fields:
     timestamps = column(cols["time_s"]) if "time_s" in cols else None
     if timestamps is not None:
         check_magnitude(timestamps, src, "time", lambda k: f"{row(k[0])}, column 'time_s'")
+    truth = ground_truth(
+        src,
+        n,
+        row,
+        lambda key: "columns 'x_mm', 'z_mm'" if key == "position_mm" else f"column {key!r}",
+        contact=column(cols["contact"]) if "contact" in cols else None,
+        position_mm=(
+            np.stack([column(cols["x_mm"]), column(cols["z_mm"])], axis=1)
+            if "x_mm" in cols
+            else None
+        ),
+        force_n=column(cols["force_n"]) if "force_n" in cols else None,
+        height_mm=column(cols["height_mm"]) if "height_mm" in cols else None,
+        surface=np.asarray(scan.surfaces, dtype=str) if "surface" in cols else None,
+    )
     return Fields(
         src,
         readouts,
@@ -193,6 +218,7 @@ def read_csv(path: Path) -> Fields:
         marker_names,
         row,
         scan.notes,
+        truth,
     )
 
 
@@ -262,7 +288,19 @@ def _csv_kind(name: str) -> tuple[str, bool]:
         return "a reference readout", False
     if name == "label":
         return "a class number", False
+    if name == "contact":
+        return "0 or 1", False
+    if name in ("x_mm", "z_mm"):
+        return "a position in mm (empty = no finger)", True
+    if name == "height_mm":
+        return "a height in mm (empty = no finger)", True
+    if name == "force_n":
+        return "a force in N", False
     return "a time in s", False
+
+
+#: the optional contact-label columns (docs/import-format.md)
+TRUTH_COLUMNS = ("contact", "x_mm", "z_mm", "force_n", "height_mm", "surface")
 
 
 def _csv_columns(header: list[str], src: str, line: int) -> dict[str, Any]:
@@ -277,7 +315,7 @@ def _csv_columns(header: list[str], src: str, line: int) -> dict[str, Any]:
     cols: dict[str, Any] = {"c": [], "ref": [], "m": {}}
     refs: dict[str, int] = {}
     for j, h in enumerate(header):
-        if h in ("group", "time_s", "label"):
+        if h in ("group", "time_s", "label", *TRUTH_COLUMNS):
             cols[h] = j
         elif h.startswith("c:") and len(h) > 2:
             cols["c"].append(j)
@@ -294,6 +332,11 @@ def _csv_columns(header: list[str], src: str, line: int) -> dict[str, Any]:
     if not cols["c"]:
         raise EctskinError(
             f"{src}: line {line}: no readout columns; name them 'c:<channel>' (e.g. 'c:E1-E2')"
+        )
+    if ("x_mm" in cols) != ("z_mm" in cols):
+        raise EctskinError(
+            f"{src}: line {line}: the position on the skin needs both columns 'x_mm' and 'z_mm', "
+            f"found only {'x_mm' if 'x_mm' in cols else 'z_mm'!r}"
         )
     if refs:
         names = [header[j][2:] for j in cols["c"]]

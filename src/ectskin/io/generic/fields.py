@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -21,8 +22,18 @@ NPZ_FIELDS = (
     "frame_rate_hz",
     "channel_names",
     "marker_names",
+    "contact",
+    "position_mm",
+    "force_n",
+    "height_mm",
+    "surface",
 )
-CSV_COLUMNS = "group, time_s, label, c:<channel>, ref:<channel>, m:<marker>.x|.y|.z"
+CSV_COLUMNS = (
+    "group, time_s, label, c:<channel>, ref:<channel>, m:<marker>.x|.y|.z, contact, x_mm, z_mm, "
+    "force_n, height_mm, surface"
+)
+#: the faces a ``surface`` may name (those of ectskin.layout.layout.SURFACES)
+SURFACE_NAMES = ("front", "back", "right", "left")
 #: Largest touch class a file may use (a virtual layout gets one region per class).
 MAX_CLASS = 1000
 
@@ -43,6 +54,127 @@ class Fields:
     marker_names: list[str] | None
     row: Callable[[int], str]  # "line 12" (CSV) / "row 11" (NPZ) of frame i
     notes: list[str] = field(default_factory=list)  # what the reader left out, for the log
+    truth: GroundTruth | None = None  # contact labels (see ground_truth), None: not given
+
+
+@dataclass
+class GroundTruth:
+    """Per-frame contact labels of a file, checked (n frames); each None where not given.
+
+    ``contact`` (n,) bool; ``position_mm`` (n, 2) float64 (u, v) of the point under the finger,
+    NaN rows without a finger; ``height_mm`` (n,) float64, 0 in contact, NaN without a finger;
+    ``force_n`` (n,) float64 ≥ 0; ``surface`` (n,) str ("" = not given).
+    """
+
+    contact: np.ndarray | None
+    position_mm: np.ndarray | None
+    height_mm: np.ndarray | None
+    force_n: np.ndarray | None
+    surface: np.ndarray | None
+
+
+def ground_truth(
+    src: str,
+    n: int,
+    row: Callable[[int], str],
+    name: Callable[[str], str],
+    *,
+    contact: np.ndarray | None,
+    position_mm: np.ndarray | None,
+    force_n: np.ndarray | None,
+    height_mm: np.ndarray | None,
+    surface: np.ndarray | None,
+) -> GroundTruth | None:
+    """Check the contact labels of a file and complete them (``docs/import-format.md``).
+
+    Inputs are float64 arrays (NaN = empty) of n rows, ``position_mm`` (n, 2), ``surface`` (n,)
+    text; ``name(key)`` is how the format calls a field in messages ("field 'contact'",
+    "column 'contact'"). Rules: contact is 0 or 1; a position row is two finite numbers or
+    empty; a contact frame has a position (when positions are given); without a ``contact``
+    field a frame with a position is a contact frame; force finite and ≥ 0; height ≥ 0, 0 (or
+    empty) in contact, and given exactly where a position is outside contact (without a height
+    field the height is 0 in contact, and a position outside contact is an error: its height is
+    unknown). Every refusal names the file, the row, the field, what was expected and found.
+    """
+    if all(v is None for v in (contact, position_mm, force_n, height_mm, surface)):
+        return None
+
+    def fail(i: int, key: str, expected: str, found: Any) -> EctskinError:
+        return EctskinError(f"{src}: {row(i)}, {name(key)}: expected {expected}, found {found}")
+
+    if position_mm is not None:
+        nan = np.isnan(position_mm)
+        bad = np.isinf(position_mm).any(axis=1) | (nan[:, 0] != nan[:, 1])
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise fail(i, "position_mm", "two finite numbers (mm) or none", position_mm[i].tolist())
+        check_magnitude(
+            position_mm, src, "position", lambda k: f"{row(k[0])}, {name('position_mm')}"
+        )
+        has_pos = ~nan[:, 0]
+    if contact is not None:
+        bad = ~np.isin(contact, (0.0, 1.0))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise fail(i, "contact", "0 or 1", contact[i])
+        touching = contact == 1.0
+        if position_mm is not None and np.any(touching & ~has_pos):
+            i = int(np.argmax(touching & ~has_pos))
+            raise fail(i, "position_mm", "a position where contact is 1", "none")
+    elif position_mm is not None:
+        touching = has_pos  # documented: a position without a contact field means contact
+    else:
+        touching = None
+    if force_n is not None:
+        bad = ~np.isfinite(force_n) | (force_n < 0)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise fail(i, "force_n", "a finite force >= 0 N", force_n[i])
+        check_magnitude(force_n, src, "force", lambda k: f"{row(k[0])}, {name('force_n')}")
+    height = None
+    if height_mm is not None:
+        height = height_mm.copy()
+        bad = np.isinf(height) | (height < 0)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise fail(i, "height_mm", "a height >= 0 mm or none", height[i])
+        if touching is not None:
+            bad = touching & ~np.isnan(height) & (height != 0)
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise fail(i, "height_mm", "0 (or none) in a contact frame", height[i])
+            height[touching] = 0.0
+        if position_mm is not None:
+            bad = has_pos != ~np.isnan(height)
+            if bad.any():
+                i = int(np.argmax(bad))
+                found = f"position {position_mm[i].tolist()}, height {height[i]}"
+                raise fail(
+                    i, "height_mm", "a height wherever a position is given, else none", found
+                )
+    elif touching is not None and position_mm is not None:
+        above = has_pos & ~touching
+        if above.any():
+            i = int(np.argmax(above))
+            raise fail(
+                i,
+                "position_mm",
+                "no position outside contact without a height_mm field (the height is unknown)",
+                position_mm[i].tolist(),
+            )
+        height = np.where(touching, 0.0, np.nan)
+    if surface is not None:
+        bad = ~np.isin(surface, ("", *SURFACE_NAMES))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise fail(i, "surface", f"one of {', '.join(SURFACE_NAMES)}", repr(str(surface[i])))
+    return GroundTruth(
+        contact=None if touching is None else touching.astype(bool),
+        position_mm=position_mm,
+        height_mm=height,
+        force_n=force_n,
+        surface=surface,
+    )
 
 
 def check_magnitude(

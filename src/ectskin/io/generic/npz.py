@@ -12,9 +12,11 @@ from ectskin._check import EctskinError
 from ectskin.io.generic.fields import (
     NPZ_FIELDS,
     Fields,
+    GroundTruth,
     check_group_text,
     check_magnitude,
     class_labels,
+    ground_truth,
 )
 
 
@@ -72,7 +74,38 @@ def read_npz(path: Path) -> Fields:
         channel_names,
         marker_names,
         _row,
+        truth=_truth(raw, n, src),
     )
+
+
+def _truth(raw: dict[str, np.ndarray | None], n: int, src: str) -> GroundTruth | None:
+    """The contact labels (contact, position_mm, force_n, height_mm, surface), checked."""
+    arrays: dict[str, np.ndarray | None] = {}
+    for key, shape in (
+        ("contact", (n,)),
+        ("position_mm", (n, 2)),
+        ("force_n", (n,)),
+        ("height_mm", (n,)),
+    ):
+        a = raw[key]
+        if a is not None:
+            a = _numeric(a, src, key)
+            if a.shape != shape:
+                raise EctskinError(
+                    f"{src}: field {key!r} must have shape {shape} (one per frame), got {a.shape}"
+                )
+        arrays[key] = a
+    surface = raw["surface"]
+    if surface is not None:
+        if surface.dtype.kind == "S":
+            surface = np.char.decode(surface, "ascii", errors="replace")
+        if surface.dtype.kind != "U" or surface.shape != (n,):
+            raise EctskinError(
+                f"{src}: field 'surface' must hold a face name per frame (text, shape ({n},)), "
+                f"got dtype {surface.dtype}, shape {surface.shape}"
+            )
+        surface = np.char.strip(surface).astype(str)
+    return ground_truth(src, n, _row, lambda key: f"field {key!r}", surface=surface, **arrays)
 
 
 def _load(path: Path, src: str) -> dict[str, np.ndarray | None]:
