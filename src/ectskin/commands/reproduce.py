@@ -14,6 +14,7 @@ import sys
 
 from ectskin._check import EctskinError
 from ectskin.commands._options import add_figure_options, add_out, add_overwrite, resolve_out
+from ectskin.commands.train import MODELS as TOUCH_MODEL_CHOICES
 from ectskin.report import results_table
 
 HELP = (
@@ -48,6 +49,18 @@ def add_common_arguments(p: argparse.ArgumentParser, *, default_profile: str) ->
     p.add_argument("--seed", type=int, default=0, help="seed of simulation, splits and training")
     p.add_argument("--epochs", type=int, default=None, help="override the epochs of every training")
     p.add_argument("--no-ablations", action="store_true", help="skip the two tracking ablations")
+    p.add_argument(
+        "--touch-model",
+        default="mlp",
+        choices=TOUCH_MODEL_CHOICES,
+        help="model of the touch run: mlp (the paper's TouchMLP, default) or a choice of "
+        "docs/model-choice.md (auto: every candidate, selected on the validation split)",
+    )
+    p.add_argument(
+        "--no-contact",
+        action="store_true",
+        help="skip the contact experiment, the contact model and the ECT images (docs/contact.md)",
+    )
     p.add_argument(
         "--no-robust",
         action="store_true",
@@ -98,6 +111,8 @@ def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
         epochs=args.epochs,
         ablations=not args.no_ablations,
         robust=not args.no_robust,
+        touch_model=args.touch_model,
+        contact=not args.no_contact,
         baselines=not args.no_baselines,
         device=args.device,
         threads=threads_option(args.threads),

@@ -43,7 +43,11 @@ log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("task", choices=PROFILE_TASKS, help="touch: TouchMLP; track: C2DT")
+    p.add_argument(
+        "task",
+        choices=PROFILE_TASKS,
+        help="touch: TouchMLP; track: C2DT; contact: ContactNet (docs/contact.md)",
+    )
     p.add_argument("data", help="recording: HDF5 (.h5) or a generic .npz / .csv import")
     add_out(p, help="run directory (model.pt, metrics.csv, split.json, ...); required")
     p.add_argument(

@@ -33,6 +33,7 @@ from typing import Any
 
 from ectskin._check import EctskinError, check_option, check_type
 from ectskin.io import Recording
+from ectskin.learn.candidates import TOUCH_MODELS
 from ectskin.learn.threads import resolve_threads
 from ectskin.twin import Protocol
 from ectskin.viz import DEFAULT_DPI, check_figure_options
@@ -95,6 +96,10 @@ class ReproduceConfig:
         Include the two tracking ablations, the baselines, the twin's characterisation.
     robust : bool
         Also train and evaluate the TouchMLP with the ``robust`` profile.
+    touch_model : str
+        The model of the ``touch`` run: ``mlp`` (the paper's TouchMLP) or a choice of
+        :mod:`ectskin.learn.candidates` (``auto``: every candidate, selected on the validation
+        split; the report lists them all).
     contact : bool
         Also simulate the contact experiment (:meth:`contact_protocol`; with a given
         ``recording``: that recording, when it carries finger ground truth), train and evaluate
@@ -128,6 +133,7 @@ class ReproduceConfig:
     characterize: bool = True
     robust: bool = True
     contact: bool = True
+    touch_model: str = "mlp"
     device: str | None = None
     progress: bool = True
     threads: int | str | None = "auto"
@@ -160,6 +166,7 @@ class ReproduceConfig:
             object.__setattr__(self, "epochs", MappingProxyType(dict(self.epochs)))
         elif self.epochs is not None:
             _check_positive_int("epochs", self.epochs)
+        check_option("touch_model", self.touch_model, TOUCH_MODELS)
         resolve_threads(self.threads)  # an invalid value fails here, before any work
         check_figure_options(self.figure_format, self.dpi)
 

@@ -117,7 +117,9 @@ def run_settings(
     """The settings a training of run ``name`` depends on (and its evaluation, with
     ``baselines``)."""
     task, window, prior = RUNS[name]
+    model = {"model": config.touch_model} if name == "touch" and config.touch_model != "mlp" else {}
     return {
+        **model,
         "data": digest(data_settings),
         "task": task,
         "window": window,
@@ -153,6 +155,7 @@ def train_runs(
             device=config.device,
             progress=config.progress,
             threads=threads,
+            model=settings.get("model", "mlp"),
         )
         log.info("train %s: %s, window %d, prior %s, profile %s", name, *RUNS[name], run_profile)
         fit = partial(train_from_recording, task, data_path, run_dir, train_config)

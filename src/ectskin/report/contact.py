@@ -78,9 +78,35 @@ def contact_table(block: Mapping[str, Any], rows=CONTACT_ROWS) -> list[tuple[str
     return out
 
 
+def candidate_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
+    """The touch run's model choice (``--touch-model auto``): every candidate's validation and
+    test accuracy, the selected one marked (selection on validation only)."""
+    cands = lookup(metrics, "touch.candidates")
+    if not isinstance(cands, Mapping) or not cands:
+        return []
+    rows = [
+        (
+            name + (" (selected)" if v.get("selected") else ""),
+            pct(v.get("val_accuracy")),
+            pct(v.get("test_accuracy")),
+        )
+        for name, v in cands.items()
+    ]
+    text = (
+        "The touch run chose its model on the validation split among these candidates "
+        "(docs/model-choice.md); the test accuracy of each is shown, none was used to choose. "
+        f"The touch results above are those of `{lookup(metrics, 'touch.selected_model')}`."
+    )
+    return [
+        ("h2", "Touch model choice"),
+        ("p", text),
+        ("table", (("candidate", "validation", "test"), rows)),
+    ]
+
+
 def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
     """The report's (kind, payload) items for ``contact``, ``multi`` and ``ect_image``."""
-    s: list[tuple[str, Any]] = []
+    s: list[tuple[str, Any]] = list(candidate_sections(metrics))
     c = lookup(metrics, "contact")
     header = ("metric", "goal", "this run", "strongest baseline", "margin")
     if isinstance(c, Mapping) and c:
