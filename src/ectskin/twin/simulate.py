@@ -11,7 +11,11 @@ What is computed once, per trial and per frame:
   motion-capture noise models.
 
 Each trial draws from its own random stream ``(seed, index)``, so the result does not depend on
-the number of workers.
+the number of workers; a second finger (``Protocol.second_finger``) from its own,
+``(seed, index, 2)``, and :class:`SecondFingerResponse` adds its effect to :class:`TouchResponse`.
+
+Size: the per-trial readout models (one finger, a second finger) and the parallel driver that
+runs them belong together: the driver's workers build exactly these models.
 """
 
 from __future__ import annotations
