@@ -46,7 +46,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="the experimenter's hand pushes the body with up to this force, N (0: no hand)",
     )
     p.add_argument(
-        "--second-finger", type=float, default=0.0, metavar="FRACTION",
+        "--second-finger",
+        type=float,
+        default=0.0,
+        metavar="FRACTION",
         help="fraction of touch trials in which a second finger also presses (default 0)",
     )
     p.add_argument("--layout", help="layout JSON file (default: the paper's layout)")

@@ -148,7 +148,9 @@ def check_second_finger(
     NaN without the finger; ``surface`` the face it presses (given exactly when the arrays are).
     Raises an :class:`EctskinError` naming ``src``, the field and the first bad frame.
     """
-    given = {k: v is not None for k, v in zip(SECOND_FINGER_FIELDS, (contact2, finger2_uv_mm, force2))}
+    given = {
+        k: v is not None for k, v in zip(SECOND_FINGER_FIELDS, (contact2, finger2_uv_mm, force2))
+    }
     if not any(given.values()):
         if surface is not None:
             raise EctskinError(

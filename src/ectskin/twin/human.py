@@ -150,9 +150,7 @@ def finger_path(
     return FingerPath(contact, uv, force, height, shear)
 
 
-def second_finger_path(
-    n: int, fps: float, aimed_uv, lo_uv, hi_uv, protocol, rng
-) -> FingerPath:
+def second_finger_path(n: int, fps: float, aimed_uv, lo_uv, hi_uv, protocol, rng) -> FingerPath:
     """The second finger over one trial: aimed at ``aimed_uv`` (2,), kept in [lo, hi], on the skin
     from a random landing frame to a random leaving frame (module docstring), away otherwise."""
     f_lo, f_hi = protocol.force_range_n

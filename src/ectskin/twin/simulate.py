@@ -315,25 +315,29 @@ def simulate_trial(
         response = TouchResponse(sensor, p, plan.surface, path, hand, push_dir, protocol)
         c_true = response(path, hand)
         touch = Touch(plan.surface, tuple(path.uv_mm.mean(axis=0)))
-        if plan.second_surface is not None:  # a second finger presses for part of the trial
+        path2 = None
+        if plan.second_surface is not None:
             path2 = _second_path(plan, protocol, sensor, n, fps)
+        if path2 is not None and path2.contact.any():  # a second finger presses for a while
             c_true = c_true + SecondFingerResponse(response, path, plan.second_surface, path2)(
                 path, path2
             )
-            touch = (touch, Touch(plan.second_surface, tuple(path2.uv_mm[path2.contact].mean(axis=0))))
+            uv2 = tuple(path2.uv_mm[path2.contact].mean(axis=0))
+            touch = (touch, Touch(plan.second_surface, uv2))
             forces = np.column_stack([path.force_n, path2.force_n])
             handling = Handling(
                 np.stack([path.shear_n, path2.shear_n], axis=1), hand.push, hand.push_force_n
             )
             markers_true = sensor.marker_positions(p, touch, forces, handling)
+        else:
+            markers_true = sensor.marker_positions(p, touch, path.force_n, handling)
+        if path2 is not None:  # (a trial of a few frames may end before it lands)
             truth.update(
                 contact2=path2.contact,
                 finger2_uv_mm=path2.uv_mm,
                 force2=path2.force_n,
                 finger2_surface=plan.second_surface,
             )
-        else:
-            markers_true = sensor.marker_positions(p, touch, path.force_n, handling)
         n_solves = response.n_solves
         labels[path.contact] = plan.region
         truth.update(
