@@ -202,13 +202,13 @@ def test_v1_file_reads_with_the_ground_truth_none(layout):
     assert [r["has_force"] for r in rows] == [False, True]
 
 
-def test_v1_file_written_again_is_version_2(tmp_path):
+def test_v1_file_written_again_is_the_current_version(tmp_path):
     out = write_recording(read_recording(V1_FILE), tmp_path / "new.h5")
     back = read_recording(out)
-    assert back.format_version == FORMAT_VERSION == 2
+    assert back.format_version == FORMAT_VERSION == 3
     assert [t.has_ground_truth for t in back.trials] == [False, False]
     with h5py.File(out, "r") as f:
-        assert int(f.attrs["format_version"]) == 2
+        assert int(f.attrs["format_version"]) == 3
         assert list(f["trials/has_contact"][()]) == [False, False]
         assert "contact" not in f["frames"]  # no trial has it: no dataset
 

@@ -142,10 +142,10 @@ def test_round_trip_is_bit_exact(tmp_path, layout):
     assert back.trials[0].finger_height_mm[1:2].tobytes() == NAN_PAYLOAD.tobytes()
     assert back.trials[0].has_ground_truth and back.trials[1].has_ground_truth
     assert back.trials[0].contact.dtype == np.bool_
-    assert back.format_version == FORMAT_VERSION == 2 and back.source == str(path)
+    assert back.format_version == FORMAT_VERSION == 3 and back.source == str(path)
     with h5py.File(path, "r") as f:  # a closed file opens in any HDF5 tool
         assert f.attrs["complete"] and f.attrs["format"] == "ectskin.recording"
-        assert f.attrs["format_version"] == 2
+        assert f.attrs["format_version"] == 3
         assert f["frames/capacitance"].compression == "gzip"
         assert list(f["frames/capacitance"].attrs["pair_names"])[:2] == list(layout.pair_names[:2])
 
@@ -313,7 +313,7 @@ MALFORMED = {
     ),
     "missing ground-truth column": (
         lambda p: _edit(p, lambda f: f.__delitem__("trials/has_contact")),
-        r"missing dataset /trials/has_contact \(required by ectskin.recording version 2\)",
+        r"missing dataset /trials/has_contact \(required by ectskin.recording version 3\)",
     ),
     "missing ground-truth dataset": (
         lambda p: _edit(p, lambda f: f.__delitem__("frames/finger_uv_mm")),

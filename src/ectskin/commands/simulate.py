@@ -19,6 +19,7 @@ EXAMPLES = """\
   ectskin simulate -o twin.h5                          # the paper's protocol, all cores
   ectskin simulate -o quick.h5 --levels 0,20 --touch-trials 2 --duration 5
   ectskin simulate -o twin.h5 --overwrite --workers 2  # replace an earlier twin.h5
+  ectskin simulate -o two.h5 --second-finger 0.3       # 30 % of touch trials: two fingers
 """
 log = logging.getLogger(__name__)
 
@@ -44,6 +45,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--push-max", type=float, default=2.0,
         help="the experimenter's hand pushes the body with up to this force, N (0: no hand)",
     )
+    p.add_argument(
+        "--second-finger",
+        type=float,
+        default=0.0,
+        metavar="FRACTION",
+        help="fraction of touch trials in which a second finger also presses (default 0)",
+    )
     p.add_argument("--layout", help="layout JSON file (default: the paper's layout)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=None, help="parallel processes (default: all cores)")
@@ -68,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
         hover=args.hover,
         approach=args.approach,
         push_max_n=args.push_max,
+        second_finger=args.second_finger,
         seed=args.seed,
         readout=ReadoutConfig(gain_snr_db=args.snr_db),
     )

@@ -15,6 +15,9 @@ field                   shape                          meaning
 ``contact``             (n_frames,) bool               the finger is on the skin
 ``finger_uv_mm``        (n_frames, 2) float64          skin point under the fingertip, mm
 ``finger_height_mm``    (n_frames,) float64            fingertip height above the skin, mm
+``contact2``            (n_frames,) bool               a second finger is on the skin
+``finger2_uv_mm``       (n_frames, 2) float64          skin point under the second finger, mm
+``force2``              (n_frames,) float64            the second finger's force, N
 ======================  =============================  ======================================
 
 ``markers``, ``force`` and the finger ground truth (``contact``, ``finger_uv_mm``,
@@ -27,6 +30,12 @@ of ``finger_surface`` (the face the finger is on or over: (x, z) on ``front``/``
 :mod:`ectskin.layout.layout`), ``finger_height_mm`` the fingertip's height above the skin. Both
 are NaN in frames without a finger (the same frames for both); in contact frames the height is
 0 and the point is known. :func:`require_ground_truth` refuses a recording without them.
+
+A second finger (the twin's ``Protocol.second_finger``) has its own ground truth,
+:data:`SECOND_FINGER_FIELDS`, all three or none (None: no second finger in the trial), and
+``finger2_surface``, the face it presses. It exists only on the skin: ``finger2_uv_mm`` is NaN and
+``force2`` 0 (or NaN, unknown) in the frames without it. ``labels`` stay the first finger's;
+:attr:`Trial.n_contacts` counts the fingers on the skin per frame.
 """
 
 from __future__ import annotations
@@ -42,6 +51,8 @@ from ectskin.layout.layout import SURFACES
 
 #: The per-frame finger ground truth of a :class:`Trial` (each optional, all three needed).
 GROUND_TRUTH_FIELDS = ("contact", "finger_uv_mm", "finger_height_mm")
+#: The per-frame ground truth of a second finger (all three or none).
+SECOND_FINGER_FIELDS = ("contact2", "finger2_uv_mm", "force2")
 
 
 def check_name(what: str, name: Any) -> str:
@@ -127,6 +138,58 @@ def check_ground_truth(
     return contact, finger_uv_mm, finger_height_mm
 
 
+def check_second_finger(
+    src: str, n: int, contact2: Any, finger2_uv_mm: Any, force2: Any, surface: Any
+) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """Checked ground truth of a second finger over ``n`` frames (all None: none in the trial).
+
+    ``contact2`` (n,) bool; ``finger2_uv_mm`` (n, 2) float64, finite in the frames with the second
+    finger on the skin and NaN in the others; ``force2`` (n,) float64, >= 0 or NaN (unknown), 0 or
+    NaN without the finger; ``surface`` the face it presses (given exactly when the arrays are).
+    Raises an :class:`EctskinError` naming ``src``, the field and the first bad frame.
+    """
+    given = {
+        k: v is not None for k, v in zip(SECOND_FINGER_FIELDS, (contact2, finger2_uv_mm, force2))
+    }
+    if not any(given.values()):
+        if surface is not None:
+            raise EctskinError(
+                f"{src}: finger2_surface is {surface!r} but the trial has no second finger "
+                f"({', '.join(SECOND_FINGER_FIELDS)} are None)"
+            )
+        return None, None, None
+    if not all(given.values()):
+        missing = [k for k, v in given.items() if not v]
+        raise EctskinError(
+            f"{src}: a second finger needs all of {', '.join(SECOND_FINGER_FIELDS)}; "
+            f"{', '.join(missing)} missing (None)"
+        )
+    if surface is None:
+        raise EctskinError(f"{src}: finger2_surface is None; a second finger needs its face")
+    contact2 = _bool_frames("contact2", contact2, n, src)
+    finger2_uv_mm = check_array("finger2_uv_mm", finger2_uv_mm, (n, 2), source=src)
+    force2 = check_array("force2", force2, (n,), source=src)
+    finite = np.isfinite(finger2_uv_mm).all(axis=1)
+    nan = np.isnan(finger2_uv_mm).all(axis=1)
+    bad = np.where(contact2, ~finite, ~nan)
+    if bad.any():
+        k = int(np.argmax(bad))
+        want = "two finite numbers (mm)" if contact2[k] else "two NaN (no second finger)"
+        raise EctskinError(
+            f"{src}: finger2_uv_mm[{k}] is {finger2_uv_mm[k].tolist()} with contact2 "
+            f"{bool(contact2[k])}, expected {want}"
+        )
+    known = ~np.isnan(force2)
+    bad = known & ~(np.isfinite(force2) & (force2 >= 0) & (contact2 | (force2 == 0)))
+    if bad.any():
+        k = int(np.argmax(bad))
+        want = "a force >= 0 N or NaN" if contact2[k] else "0 or NaN (no second finger)"
+        raise EctskinError(
+            f"{src}: force2[{k}] is {force2[k]} with contact2 {bool(contact2[k])}, expected {want}"
+        )
+    return contact2, finger2_uv_mm, force2
+
+
 @dataclass
 class Trial:
     """One trial of frames with its labels; validated on construction."""
@@ -143,6 +206,10 @@ class Trial:
     finger_uv_mm: np.ndarray | None = None
     finger_height_mm: np.ndarray | None = None
     finger_surface: str | None = None
+    contact2: np.ndarray | None = None
+    finger2_uv_mm: np.ndarray | None = None
+    force2: np.ndarray | None = None
+    finger2_surface: str | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -161,6 +228,11 @@ class Trial:
         )
         if self.finger_surface is not None:
             check_option("finger_surface", self.finger_surface, SURFACES, source=src)
+        self.contact2, self.finger2_uv_mm, self.force2 = check_second_finger(
+            src, n, self.contact2, self.finger2_uv_mm, self.force2, self.finger2_surface
+        )
+        if self.finger2_surface is not None:
+            check_option("finger2_surface", self.finger2_surface, SURFACES, source=src)
         self.inflation = tuple(float(v) for v in self.inflation)
         self.region = int(self.region)
         if n and np.any(np.diff(self.timestamps) <= 0):
@@ -185,6 +257,19 @@ class Trial:
     @property
     def has_occlusion(self) -> bool:
         return self.markers is not None and bool(np.isnan(self.markers).any())
+
+    @property
+    def has_second_finger(self) -> bool:
+        """True when the trial carries a second finger's ground truth."""
+        return self.contact2 is not None
+
+    @property
+    def n_contacts(self) -> np.ndarray | None:
+        """(n_frames,) int: fingers on the skin per frame (0, 1 or 2); None without ``contact``."""
+        if self.contact is None:
+            return None
+        n = self.contact.astype(np.int64)
+        return n + self.contact2 if self.contact2 is not None else n
 
     @property
     def has_ground_truth(self) -> bool:

@@ -17,6 +17,13 @@ as in the paper. Its
   drawn per trial (assumed: up to 0.3, inside skin-on-silicone friction of μ ≈ 0.5-1);
 * contact patch grows with the force (Hertz; :class:`~ectskin.twin.sensor.Finger`).
 
+**A second finger** (``Protocol.second_finger``, :func:`second_finger_path`) presses at one
+point of another region with the same force model (smooth walk, tremor), roll and slide and
+off-axis push as the first, drawn independently. It lands after a delay drawn uniformly in
+10-40 % of the trial and leaves at 60-90 % of it (assumed), so a trial with it holds one- and
+two-contact frames. It arrives and leaves between frames (no approach or hover of its own); in
+the frames without it, it is away from the body: no contact, force 0, point and height NaN.
+
 Options (the contact models need them): ``approach`` (the trial begins with the finger coming
 down from ``approach_height_mm`` and ends with it retreating), ``hover`` (periods above the skin
 at 1 to ``hover_max_mm`` instead of contact) and ``lifts`` (lift off to a few centimetres and
@@ -139,6 +146,30 @@ def finger_path(
     height = np.where(contact, 0.0, np.maximum(height, 0.5))
     angle = rng.uniform(0, 2 * np.pi)
     ratio = rng.uniform(0.0, protocol.shear_ratio)
+    shear = force[:, None] * ratio * np.array([np.cos(angle), np.sin(angle)])[None, :]
+    return FingerPath(contact, uv, force, height, shear)
+
+
+def second_finger_path(n: int, fps: float, aimed_uv, lo_uv, hi_uv, protocol, rng) -> FingerPath:
+    """The second finger over one trial: aimed at ``aimed_uv`` (2,), kept in [lo, hi], on the skin
+    from a random landing frame to a random leaving frame (module docstring), away otherwise."""
+    f_lo, f_hi = protocol.force_range_n
+    force = smooth_walk(n, fps, protocol.force_knot_s, f_lo, f_hi, rng)
+    force = force * (1.0 + protocol.tremor_rel * tremor(n, fps, protocol.tremor_hz, rng))
+    force = np.maximum(force, 0.05 * f_lo)
+    uv = np.broadcast_to(np.asarray(aimed_uv, dtype=np.float64), (n, 2)).copy()
+    if protocol.slide_mm > 0:
+        uv = uv + ou_walk(n, fps, protocol.slide_mm, protocol.slide_tau_s, rng)
+    uv = np.clip(uv, lo_uv, hi_uv)
+    land = max(1, int(rng.uniform(0.1, 0.4) * n))
+    leave = min(n - 1, max(land + 1, int(rng.uniform(0.6, 0.9) * n)))
+    contact = np.zeros(n, dtype=bool)
+    contact[land:leave] = True
+    angle = rng.uniform(0, 2 * np.pi)
+    ratio = rng.uniform(0.0, protocol.shear_ratio)
+    force = np.where(contact, force, 0.0)
+    uv[~contact] = np.nan
+    height = np.where(contact, 0.0, np.nan)
     shear = force[:, None] * ratio * np.array([np.cos(angle), np.sin(angle)])[None, :]
     return FingerPath(contact, uv, force, height, shear)
 

@@ -20,8 +20,9 @@ The deformation is composed of four parts (each documented where it is computed)
    volume fills the two face bulges (2 · h · A · n/(2(n + 1)) for this shape, A the chamber
    footprint) and the compliance of the rest of the chamber (``wall_compliance`` · pressure),
    with a membrane pressure that stiffens with stretch, P(h) = k_f · h · (1 + (h/h_s)²).
-3. **Dimple** under the finger: a Gaussian indentation of depth F / k_d, k_d rising with the local
-   chamber pressure.
+3. **Dimple** under each finger: a Gaussian indentation of depth F / k_d, k_d rising with the local
+   chamber pressure; the dimples of several fingers on one face add (superposition, small
+   indentations).
 4. **Bending and twist** by the finger and the experimenter's hand (manual handling): the body
    is a clamped Kirchhoff rod (:mod:`ectskin.twin.rod`) with section stiffnesses EI_x, EI_y and
    GJ from a silicone modulus and the chambered cross-section (hollow over each chamber's span,
@@ -30,6 +31,12 @@ The deformation is composed of four parts (each documented where it is computed)
    hand's push at another material point; off-centre and off-axis loads twist the body and bend
    it both ways, with large rotations. A face point at section offset (x, y') moves to
    r(s) + R(s)·(x, y', 0).
+
+Several fingers: wherever a ``touch`` is taken, it may be one :class:`Touch` (the forces are then
+one per frame, shape (F,)) or a tuple of them (forces (F, T), one column per touch, or (T,) for
+one frame). Each finger dents its face and loads the rod with its own normal force (and shear,
+``Handling.shear_n``); the single-touch path computes exactly what it computed before tuples were
+accepted.
 
 Units: mm, ml (= 1000 mm³), N, kPa (= 1e-3 N/mm²).
 """
@@ -97,12 +104,43 @@ class Touch:
     uv_mm: tuple[float, float]
 
 
+def touch_loads(force_n, touch) -> tuple[tuple[Touch, ...], np.ndarray]:
+    """The touches of ``touch`` and their normal forces as an (F, T) array (N).
+
+    ``touch`` None: no touch, ``force_n`` (F,) only counts the frames (T = 0). One
+    :class:`Touch`: ``force_n`` a scalar or (F,). A tuple of T touches: ``force_n`` (F, T), or
+    (T,) for one frame.
+    """
+    f = np.asarray(force_n, dtype=np.float64)
+    if touch is None or isinstance(touch, Touch):
+        f = np.atleast_1d(f)
+        if f.ndim != 1:
+            raise EctskinError(
+                f"touch force: one touch takes one force per frame (F,), got shape {f.shape}"
+            )
+        return (() if touch is None else (touch,)), f.reshape(-1, 1)[:, : int(touch is not None)]
+    touches = tuple(touch)
+    if not touches or not all(isinstance(t, Touch) for t in touches):
+        raise EctskinError(
+            f"touch must be None, a Touch or a non-empty tuple of Touch, got {touch!r:.80}"
+        )
+    if f.ndim == 1:
+        f = f[None]
+    if f.ndim != 2 or f.shape[1] != len(touches):
+        raise EctskinError(
+            f"touch force: {len(touches)} touches take forces of shape (F, {len(touches)}) "
+            f"(one column per touch), got shape {np.shape(force_n)}"
+        )
+    return touches, f
+
+
 @dataclass(frozen=True)
 class Handling:
     """Loads beyond the finger's normal force, per frame (F frames): manual handling.
 
     ``shear_n`` (F, 2): the finger's tangential force on its face along the face's (x, z) axes,
-    N (the finger pushes off-axis). ``push`` and ``push_force_n`` (F, 3): where the
+    N (the finger pushes off-axis); with several touches (F, 2) is the first finger's and
+    (F, T, 2) gives one per touch. ``push`` and ``push_force_n`` (F, 3): where the
     experimenter's hand pushes (a surface point) and its force in world axes, N.
     """
 
@@ -291,41 +329,52 @@ class Manipulator:
             return s_mm, ((1.0 if point.surface == "right" else -1.0) * c.width_mm / 2, float(u))
         raise EctskinError(f"unknown surface {point.surface!r}: expected front, back, right or left")
 
-    def pose(self, force_n, touch: Touch | None, inflation_ml, handling: Handling | None = None):
+    def pose(
+        self,
+        force_n,
+        touch: Touch | tuple[Touch, ...] | None,
+        inflation_ml,
+        handling: Handling | None = None,
+    ):
         """The deformed axis for each frame.
 
         Returns ``(zs, r, R)``: the stretched rest grid (n_z,), the axis (F, n_z, 3) and the
-        section frames (F, n_z, 3, 3). The finger presses along the face's inward normal (front
-        −y, back +y) with ``force_n`` and pushes along the face with ``handling.shear_n``; the
-        hand pushes at ``handling.push`` with ``handling.push_force_n``.
+        section frames (F, n_z, 3, 3). Each finger presses along its face's inward normal (front
+        −y, back +y) with its ``force_n`` (see :func:`touch_loads` for the shapes) and pushes
+        along the face with ``handling.shear_n``; the hand pushes at ``handling.push`` with
+        ``handling.push_force_n``.
         """
+        touches, forces = touch_loads(force_n, touch)
+        n_f = forces.shape[0]
         force = np.atleast_1d(np.asarray(force_n, dtype=np.float64))
         key = _pose_key(force, touch, inflation_ml, handling)
         if key in self._poses:
             return self._poses[key]
         zs = self.axial_position(self._zgrid, inflation_ml)
         n_h = handling.n_frames() if handling is not None else None
-        if n_h is not None and n_h != force.size:
-            raise EctskinError(
-                f"handling gives {n_h} frames of loads but the finger force {force.size}"
-            )
+        if n_h is not None and n_h != n_f:
+            raise EctskinError(f"handling gives {n_h} frames of loads but the finger force {n_f}")
+        shear = None
+        if touches and handling is not None and handling.shear_n is not None:
+            shear = np.asarray(handling.shear_n, dtype=np.float64)
+            shear = shear.reshape(n_f, 2) if shear.ndim < 3 else shear.reshape(n_f, len(touches), 2)
         loads = []
-        if touch is not None:
-            s_t, off = self._load_point(touch, inflation_ml)
-            vec = np.zeros((force.size, 3))
-            if touch.surface in SIDE:
-                vec[:, 1] = -SIDE[touch.surface] * force
-            if handling is not None and handling.shear_n is not None:
-                shear = np.asarray(handling.shear_n, dtype=np.float64).reshape(force.size, 2)
-                vec[:, 0] += shear[:, 0]
-                vec[:, 2] += shear[:, 1]
+        for k, t in enumerate(touches):
+            s_t, off = self._load_point(t, inflation_ml)
+            vec = np.zeros((n_f, 3))
+            if t.surface in SIDE:
+                vec[:, 1] = -SIDE[t.surface] * forces[:, k]
+            if shear is not None and (shear.ndim == 3 or k == 0):
+                one = shear if shear.ndim == 2 else shear[:, k]
+                vec[:, 0] += one[:, 0]
+                vec[:, 2] += one[:, 1]
             loads.append(PointLoad(s_t, off, vec))
         if handling is not None and handling.push is not None:
             s_h, off = self._load_point(handling.push, inflation_ml)
-            push = np.asarray(handling.push_force_n, dtype=np.float64).reshape(force.size, 3)
+            push = np.asarray(handling.push_force_n, dtype=np.float64).reshape(n_f, 3)
             loads.append(PointLoad(s_h, off, push))
         stiffness = self.section_stiffness(self._zgrid, inflation_ml)
-        r, rot = solve_rod(zs, stiffness, loads, force.size, tol_mm=self.config.rod_tol_mm)
+        r, rot = solve_rod(zs, stiffness, loads, n_f, tol_mm=self.config.rod_tol_mm)
         if len(self._poses) >= 8:
             self._poses.pop(next(iter(self._poses)))
         self._poses[key] = (zs, r, rot)
@@ -345,7 +394,7 @@ class Manipulator:
         surface: str,
         uv_mm: np.ndarray,
         inflation_ml,
-        touch: Touch | None = None,
+        touch: Touch | tuple[Touch, ...] | None = None,
         force_n=0.0,
         handling: Handling | None = None,
     ) -> np.ndarray:
@@ -356,8 +405,8 @@ class Manipulator:
         surface : "front" | "back" | "right" | "left"
         uv_mm : (n, 2) rest surface coordinates.
         inflation_ml : (n_chambers,) chamber volumes.
-        touch : the finger's contact, or None.
-        force_n : scalar or (F,) touch force per frame.
+        touch : the finger's contact, a tuple of fingers' contacts, or None.
+        force_n : scalar or (F,) touch force per frame; (F, T) for a tuple of T touches.
         handling : the finger's shear and the hand's push per frame (F rows), or None.
 
         Returns
@@ -367,30 +416,33 @@ class Manipulator:
         c = self.config
         p = self.check_inflation(inflation_ml)
         uv = np.asarray(uv_mm, dtype=np.float64).reshape(-1, 2)
-        force = np.atleast_1d(np.asarray(force_n, dtype=np.float64))
+        touches, forces = touch_loads(force_n, touch)
+        n_f = forces.shape[0]
         heights = self.bulge_height_mm(p)
         if surface in SIDE:
             side = SIDE[surface]
             x = uv[:, 0]
             z = uv[:, 1] - self._face_pull_in(x, uv[:, 1], heights)
             offset = c.thickness_mm / 2 + self.bulge_mm(x, z, heights)  # (n,)
-            offset = np.broadcast_to(offset, (force.size, x.size)).copy()
-            if touch is not None and touch.surface == surface:
-                depth = self.dimple_depth_mm(force, touch, p)  # (F,)
-                r2 = (x - touch.uv_mm[0]) ** 2 + (z - touch.uv_mm[1]) ** 2
+            offset = np.broadcast_to(offset, (n_f, x.size)).copy()
+            for k, t in enumerate(touches):  # each finger's dimple on this face
+                if t.surface != surface:
+                    continue
+                depth = self.dimple_depth_mm(forces[:, k], t, p)  # (F,)
+                r2 = (x - t.uv_mm[0]) ** 2 + (z - t.uv_mm[1]) ** 2
                 offset -= depth[:, None] * np.exp(-r2 / (2 * c.dimple_sigma_mm**2))[None, :]
             yprime = side * offset
             xs = np.broadcast_to(x, yprime.shape)
         elif surface in ("right", "left"):
             x0 = c.width_mm / 2 * (1.0 if surface == "right" else -1.0)
-            yprime = np.broadcast_to(uv[:, 0], (force.size, uv.shape[0]))
+            yprime = np.broadcast_to(uv[:, 0], (n_f, uv.shape[0]))
             z = uv[:, 1]
             xs = np.full(yprime.shape, x0)
         else:
             raise EctskinError(
                 f"unknown surface {surface!r}: expected front, back, right or left"
             )
-        zs, r, rot = self.pose(force, touch, p, handling)
+        zs, r, rot = self.pose(force_n, touch, p, handling)
         zq = self.axial_position(z, p)
         # the axis and the section frame at each point's stretched axial position (per frame)
         j = np.clip(np.searchsorted(zs, zq) - 1, 0, zs.size - 2)

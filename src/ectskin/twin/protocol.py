@@ -5,6 +5,19 @@ contact, then 6 trials of 30 s touching one region (3 front, 3 back) with a forc
 the trial; over all states every region is touched at least once. 189 trials × 900 frames.
 Every level, count, duration, noise figure and the seed is a parameter, so unseen inflation levels
 (say 5 and 15 ml) or other fingers can be simulated.
+
+**A second finger** (option ``second_finger``, the fraction of touch trials drawn from the seed
+in which it also presses; default 0, none). Where to: a region other than the first finger's,
+on the same face or the other one (either, 50/50, then the other if the first choice has no
+room), placed like the first finger (``touch_placement``). On the same face its aimed point is at
+least :func:`finger_separation_mm` from each of the first finger's aimed points: a finger's width
+(2 × ``finger_radius_mm``, so the two fingertips never overlap) plus 4 × ``slide_mm`` for the
+pads' roll and slide (assumed); on the other face the body lies between them and any point
+goes. It presses at one point (no dwells) and, unlike the first finger, not for the whole trial:
+it lands after a random delay and leaves before the end (:func:`ectskin.twin.human.second_finger_path`),
+so a two-finger trial holds frames with one and with two contacts. The second finger is drawn
+from its own random stream, so the option never changes the first finger, the hand or the
+trials without a second finger: at 0 every result is what it was without the option.
 """
 
 from __future__ import annotations
@@ -63,6 +76,9 @@ class Protocol:
     lifts: bool = False  # lift the finger now and then (lift and re-press), per-frame labels
     finger_radius_mm: float = 8.0  # (assumed)
     force_nodes: int = 5  # MoM solves per touch trial (Chebyshev nodes in force)
+    # fraction of touch trials (drawn from the seed) in which a second finger also presses a
+    # different region for part of the trial (see the module docstring); 0 = never
+    second_finger: float = 0.0
     readout: ReadoutConfig = field(default_factory=ReadoutConfig)
     mocap: MocapConfig = field(default_factory=MocapConfig)
 
@@ -117,6 +133,12 @@ class Protocol:
             raise EctskinError(
                 f"protocol: finger_radius_mm must be a fingertip's radius, 2 to 30 mm, got "
                 f"{self.finger_radius_mm!r}"
+            )
+        x = self.second_finger
+        if isinstance(x, bool) or not isinstance(x, int | float) or not 0.0 <= x <= 1.0:
+            raise EctskinError(
+                f"protocol: second_finger must be a fraction of the touch trials, a number from "
+                f"0 to 1, got {x!r}"
             )
         if self.force_nodes < 2:
             raise EctskinError(f"protocol: force_nodes must be >= 2, got {self.force_nodes}")
@@ -174,6 +196,11 @@ class TrialPlan:
     start_s: float  # start on the experiment clock
     marker_delay_frames: int
     occluded: bool
+    # the second finger (Protocol.second_finger), None/0 without one: its face, region and aimed
+    # point (u, v) in mm
+    second_surface: str | None = None
+    second_region: int = 0
+    second_uv_mm: tuple[float, float] | None = None
 
 
 def region_bounds(region, margin: float) -> tuple[np.ndarray, np.ndarray]:
@@ -182,6 +209,53 @@ def region_bounds(region, margin: float) -> tuple[np.ndarray, np.ndarray]:
     lo = np.array([region.u_mm[0] + margin * du, region.v_mm[0] + margin * dv])
     hi = np.array([region.u_mm[1] - margin * du, region.v_mm[1] - margin * dv])
     return lo, hi
+
+
+def finger_separation_mm(protocol: Protocol) -> float:
+    """Least distance (mm) between the two fingers' aimed points on one face: a finger's width
+    plus room for both pads' roll and slide (4 × ``slide_mm``, assumed)."""
+    return 2.0 * protocol.finger_radius_mm + 4.0 * protocol.slide_mm
+
+
+def _placements(reg, protocol: Protocol, rng, n: int) -> np.ndarray:
+    """(n, 2) points where the experimenter lands in region ``reg`` (``touch_placement``)."""
+    lo, hi = region_bounds(reg, protocol.touch_margin)
+    if protocol.touch_placement == "uniform":
+        return rng.uniform(lo, hi, size=(n, 2))
+    pts = np.asarray(reg.centre_mm) + rng.normal(0.0, protocol.touch_scatter_mm, (n, 2))
+    return np.clip(pts, lo, hi)
+
+
+def second_placement(
+    protocol: Protocol,
+    layout: SensorLayout,
+    first_surface: str,
+    first_region: int,
+    first_uv: np.ndarray,
+    rng,
+    tries: int = 50,
+) -> tuple[str, int, tuple[float, float]]:
+    """Face, region and aimed point (u, v) of a second finger (the rule of the module docstring).
+
+    ``first_uv`` (D, 2): the first finger's aimed points. Raises an :class:`EctskinError` if no
+    region of ``layout`` leaves room for it.
+    """
+    other = "back" if first_surface == "front" else "front"
+    faces = (first_surface, other) if rng.random() < 0.5 else (other, first_surface)
+    gap = finger_separation_mm(protocol)
+    for face in faces:
+        regions = [r for r in layout.regions if r.surface == face and r.id != first_region]
+        if not regions:
+            continue
+        for _ in range(tries):
+            reg = regions[int(rng.integers(len(regions)))]
+            uv = _placements(reg, protocol, rng, 1)[0]
+            if face != first_surface or np.min(np.linalg.norm(first_uv - uv, axis=1)) >= gap:
+                return face, reg.id, (float(uv[0]), float(uv[1]))
+    raise EctskinError(
+        f"layout {layout.name!r}: no region leaves room for a second finger {gap:.1f} mm from the "
+        f"first (region {first_region} on the {first_surface} face); set second_finger=0"
+    )
 
 
 def plan_trials(protocol: Protocol, layout: SensorLayout) -> list[TrialPlan]:
@@ -207,6 +281,8 @@ def plan_trials(protocol: Protocol, layout: SensorLayout) -> list[TrialPlan]:
     n_occl = int(round(n_touch * protocol.mocap.occluded_fraction))
     occluded = set(rng.choice(n_touch, size=n_occl, replace=False).tolist()) if n_touch else set()
 
+    # the second finger draws from its own stream: the option leaves every other draw unchanged
+    rng2 = np.random.default_rng([protocol.seed, 0xE5, 2]) if protocol.second_finger > 0 else None
     plans: list[TrialPlan] = []
     counters = {f: 0 for f in faces}
     touch_idx = 0
@@ -214,22 +290,22 @@ def plan_trials(protocol: Protocol, layout: SensorLayout) -> list[TrialPlan]:
         kinds = (["no_contact"] if protocol.no_contact_trial else []) + ["touch"] * protocol.touch_trials
         for k, kind in enumerate(kinds):
             region, surface, uv, occ = 0, None, None, False
+            second: dict = {}
             if kind == "touch":
                 j = k - int(protocol.no_contact_trial)
                 face = faces[j % 2] if by_face[faces[j % 2]] else faces[1 - j % 2]
                 reg = seqs[face][counters[face] % len(seqs[face])]
                 counters[face] += 1
-                lo, hi = region_bounds(reg, protocol.touch_margin)
-                if protocol.touch_placement == "uniform":
-                    pts = rng.uniform(lo, hi, size=(protocol.touch_dwells, 2))
-                else:
-                    centre = np.asarray(reg.centre_mm)
-                    pts = centre + rng.normal(0.0, protocol.touch_scatter_mm, (protocol.touch_dwells, 2))
-                    pts = np.clip(pts, lo, hi)
+                pts = _placements(reg, protocol, rng, protocol.touch_dwells)
                 uv = tuple((float(a), float(b)) for a, b in pts)
                 region, surface = reg.id, face
                 occ = touch_idx in occluded
                 touch_idx += 1
+                if rng2 is not None and rng2.random() < protocol.second_finger:
+                    face2, reg2, uv2 = second_placement(
+                        protocol, layout, face, reg.id, np.asarray(uv), rng2
+                    )
+                    second = {"second_surface": face2, "second_region": reg2, "second_uv_mm": uv2}
             index = len(plans)
             plans.append(
                 TrialPlan(
@@ -244,6 +320,7 @@ def plan_trials(protocol: Protocol, layout: SensorLayout) -> list[TrialPlan]:
                     start_s=index * protocol.duration_s,
                     marker_delay_frames=int(rng.integers(0, protocol.mocap.max_delay_frames + 1)),
                     occluded=occ,
+                    **second,
                 )
             )
     return plans

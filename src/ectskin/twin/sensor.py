@@ -7,6 +7,13 @@ deformation, adds the grounded finger (fingertip hemisphere + shaft cylinder) an
 method of moments (:mod:`ectskin.electrostatics`). The ECT readout of pair (i, j) is the mutual
 capacitance with electrode i excited and every other conductor, the finger included, at 0 V:
 C_ij = −K_ij (paper Eq. 1).
+
+Two (or more) fingers: ``touch`` may be a tuple of :class:`~ectskin.twin.mechanics.Touch` with
+forces (F, T) (:func:`~ectskin.twin.mechanics.touch_loads`). Every fingertip is grounded and they
+are **one conductor**: the fingers belong to one hand and one body, which connects them (the
+body's resistance is negligible at the readout's frequencies, and its capacitance to the
+surroundings is far larger than the sensor's), so they share one potential (0 V, like the other
+electrodes) and one conductor index (``n_electrodes``).
 """
 
 from __future__ import annotations
@@ -27,7 +34,7 @@ from ectskin.electrostatics import (
 )
 from ectskin.electrostatics.meshing import orthonormal_frame, rectangle_quads, strip_quads
 from ectskin.layout import SensorLayout
-from ectskin.twin.mechanics import Handling, Manipulator, Touch
+from ectskin.twin.mechanics import Handling, Manipulator, Touch, touch_loads
 
 log = logging.getLogger(__name__)
 
@@ -199,17 +206,19 @@ class SensorModel:
 
     # ------------------------------------------------------------------ geometry
     def electrode_panels(
-        self, inflation_ml, touch: Touch | None, forces, handling: Handling | None = None
+        self, inflation_ml, touch: Touch | tuple[Touch, ...] | None, forces,
+        handling: Handling | None = None,
     ) -> list[Panels]:
-        """Deformed electrode panels, one :class:`Panels` per force value."""
+        """Deformed electrode panels, one :class:`Panels` per frame (row of ``forces``)."""
         forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
-        per_force: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in forces]
+        n_f = touch_loads(forces, touch)[1].shape[0]
+        per_force: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(n_f)]
         for surface, (quads, cond) in self._rest.items():
             xyz = self.manipulator.deform(
                 surface, quads.reshape(-1, 2), inflation_ml, touch, forces, handling
             )
-            xyz = xyz.reshape(forces.size, len(quads), 4, 3)
-            for f in range(forces.size):
+            xyz = xyz.reshape(n_f, len(quads), 4, 3)
+            for f in range(n_f):
                 per_force[f].append((xyz[f], cond))
         n_cond = self.n_electrodes + 1  # + finger (conductor n_electrodes), absent if no touch
         return [
@@ -222,7 +231,7 @@ class SensorModel:
     def finger_panels(
         self,
         inflation_ml,
-        touch: Touch,
+        touch: Touch | tuple[Touch, ...],
         forces,
         handling: Handling | None = None,
         *,
@@ -236,18 +245,34 @@ class SensorModel:
         indentation δ = (9F² / (16 R E*²))^(1/3) (:attr:`Finger.pulp_modulus_mpa`), so the
         contact patch grows with force. Above the skin (``heights_mm`` > 0, force 0) the round
         fingertip hovers that far above the skin's surface.
+
+        With a tuple of T touches (``forces`` and ``heights_mm`` (F, T)) each frame's panels are
+        every finger's, all on the one finger conductor (see the module docstring), each placed
+        on the skin as deformed by all of them.
         """
         forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
-        heights = (
-            np.zeros(forces.size)
-            if heights_mm is None
-            else np.broadcast_to(np.asarray(heights_mm, dtype=np.float64), forces.shape)
-        )
+        touches, per_touch = touch_loads(forces, touch)
+        heights = _heights(heights_mm, per_touch.shape)
+        fingers = [
+            self._one_finger(
+                inflation_ml, touch, t, forces, per_touch[:, k], heights[:, k], handling, sphere_n
+            )
+            for k, t in enumerate(touches)
+        ]
+        if len(fingers) == 1:
+            return fingers[0]
+        return [Panels.concatenate(parts) for parts in zip(*fingers)]
+
+    def _one_finger(
+        self, inflation_ml, touch, one: Touch, forces, force_one, heights_one, handling, sphere_n
+    ) -> list[Panels]:
+        """Panels of the finger at ``one`` (forces ``force_one`` (F,), heights (F,)) per frame,
+        on the skin deformed by all of ``touch`` (forces ``forces``)."""
         fg, d = self.finger, self.discretisation
-        uv = np.asarray([touch.uv_mm])
-        pts = self.manipulator.deform(touch.surface, uv, inflation_ml, touch, forces, handling)[:, 0]
+        uv = np.asarray([one.uv_mm])
+        pts = self.manipulator.deform(one.surface, uv, inflation_ml, touch, forces, handling)[:, 0]
         nrm = self.manipulator.surface_normal(
-            touch.surface, uv, inflation_ml, touch, forces, handling
+            one.surface, uv, inflation_ml, touch, forces, handling
         )[:, 0]
         out = []
         cond = self.n_electrodes
@@ -258,7 +283,7 @@ class SensorModel:
         # of ~0.1 % in the readout)
         unit = sphere_panels(np.zeros(3), fg.radius_mm, sphere_n or d.finger_sphere_n, cond)
         keep = unit.centres[:, 2] < -1e-6 * fg.radius_mm
-        for p, n, force, height in zip(pts, nrm, forces, heights):
+        for p, n, force, height in zip(pts, nrm, force_one, heights_one):
             depth = fg.indentation_mm(force) if height <= 0 else 0.0
             centre = p + n * (fg.radius_mm + fg.skin_cover_mm + max(height, 0.0) - depth)
             e1, e2 = orthonormal_frame(n)
@@ -282,7 +307,8 @@ class SensorModel:
         return out
 
     def cavity_cells(
-        self, inflation_ml, touch: Touch | None, forces, handling: Handling | None = None
+        self, inflation_ml, touch: Touch | tuple[Touch, ...] | None, forces,
+        handling: Handling | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Centres (F, M, 3) mm and volumes (F, M) mm³ of the chamber cavities' sample cells.
 
@@ -292,6 +318,7 @@ class SensorModel:
         nodes (the footprint with the midpoint rule).
         """
         forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
+        n_f = touch_loads(forces, touch)[1].shape[0]
         wall = self.manipulator.config.chamber_wall_mm
         n_t = self.discretisation.cavity_layers
         uv, area = self._cavity_uv
@@ -306,8 +333,8 @@ class SensorModel:
         pts = front[None] + frac[..., None] * span[None]  # (n_t, F, n, 3)
         vol = area * w[:, None, None] * inner[None]  # (n_t, F, n)
         return (
-            pts.transpose(1, 0, 2, 3).reshape(forces.size, -1, 3),
-            vol.transpose(1, 0, 2).reshape(forces.size, -1),
+            pts.transpose(1, 0, 2, 3).reshape(n_f, -1, 3),
+            vol.transpose(1, 0, 2).reshape(n_f, -1),
         )
 
     @property
@@ -329,7 +356,7 @@ class SensorModel:
     def capacitance(
         self,
         inflation_ml,
-        touch: Touch | None = None,
+        touch: Touch | tuple[Touch, ...] | None = None,
         forces=0.0,
         handling: Handling | None = None,
         *,
@@ -343,18 +370,27 @@ class SensorModel:
         ``handling`` loads. Without a touch and handling, ``forces`` only sets how many
         (identical) rows are returned. ``with_finger=False`` keeps the loads' mechanics (bending,
         dimple) but leaves the finger out of the electrostatics: the deformation-only part.
+
+        Several fingers: ``touch`` a tuple of T touches, ``forces`` and ``heights_mm`` (F, T)
+        (one row per frame); the fingers are one grounded conductor (module docstring).
         """
         forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
-        n_rows = forces.size
+        per_touch = touch_loads(forces, touch)[1]
+        n_rows = per_touch.shape[0]
+        if not (touch is None or isinstance(touch, Touch)):
+            forces = per_touch  # (F, T): one row per frame
+            if heights_mm is not None:
+                heights_mm = _heights(heights_mm, forces.shape)
         static = touch is None and handling is None
         if static:
             forces = forces[:1]  # one solve: nothing changes from row to row
+        n_f = 1 if static else n_rows
         if self._with_cavities:
             pts, vols = self.cavity_cells(inflation_ml, touch, forces, handling)
         else:
-            pts, vols = [None] * forces.size, [None] * forces.size
+            pts, vols = [None] * n_f, [None] * n_f
         electrodes = self.electrode_panels(inflation_ml, touch, forces, handling)
-        out = np.empty((forces.size, len(self._pairs)))
+        out = np.empty((n_f, len(self._pairs)))
         if touch is None or not with_finger:
             for f, pe in enumerate(electrodes):
                 out[f] = self._readout(_without_finger(pe, self.n_electrodes), (pts[f], vols[f]))
@@ -381,11 +417,13 @@ class SensorModel:
         return out
 
     def marker_positions(
-        self, inflation_ml, touch: Touch | None = None, forces=0.0, handling: Handling | None = None
+        self, inflation_ml, touch: Touch | tuple[Touch, ...] | None = None, forces=0.0,
+        handling: Handling | None = None,
     ) -> np.ndarray:
-        """(F, n_markers, 3) marker positions in mm for each force value."""
+        """(F, n_markers, 3) marker positions in mm for each frame (row of ``forces``)."""
         forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
-        out = np.empty((forces.size, self.layout.n_markers, 3))
+        n_f = touch_loads(forces, touch)[1].shape[0]
+        out = np.empty((n_f, self.layout.n_markers, 3))
         by_surface: dict[str, list[int]] = {}
         for k, m in enumerate(self.layout.markers):
             by_surface.setdefault(m.surface, []).append(k)
@@ -421,6 +459,23 @@ def _cavity_grid(c, cell_mm: float) -> tuple[np.ndarray, np.ndarray]:
         X, Z = np.meshgrid(xs, zs)
         cells.append(np.c_[X.ravel(), Z.ravel()])
     return np.concatenate(cells), hx * hz
+
+
+def _heights(heights_mm, shape: tuple[int, int]) -> np.ndarray:
+    """Fingertip heights (F, T) in mm from None (all in contact), a scalar, (F,) (one per frame,
+    every finger) or (F, T)."""
+    if heights_mm is None:
+        return np.zeros(shape)
+    h = np.asarray(heights_mm, dtype=np.float64)
+    if h.ndim == 1 and h.size == shape[0]:
+        h = h[:, None]
+    try:
+        return np.broadcast_to(h, shape)
+    except ValueError:
+        raise EctskinError(
+            f"heights_mm: expected a scalar, (F,) or (F, T) = {shape} fingertip heights (mm), "
+            f"got shape {h.shape}"
+        ) from None
 
 
 def _handling_rows(handling: Handling, f: int) -> Handling:

@@ -11,7 +11,11 @@ What is computed once, per trial and per frame:
   motion-capture noise models.
 
 Each trial draws from its own random stream ``(seed, index)``, so the result does not depend on
-the number of workers.
+the number of workers; a second finger (``Protocol.second_finger``) from its own,
+``(seed, index, 2)``, and :class:`SecondFingerResponse` adds its effect to :class:`TouchResponse`.
+
+Size: the per-trial readout models (one finger, a second finger) and the parallel driver that
+runs them belong together: the driver's workers build exactly these models.
 """
 
 from __future__ import annotations
@@ -31,9 +35,10 @@ from numpy.polynomial import chebyshev
 from threadpoolctl import threadpool_limits
 
 from ectskin import __version__
+from ectskin._check import EctskinError
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import SensorLayout, default_layout
-from ectskin.twin.human import finger_path, hand_push
+from ectskin.twin.human import finger_path, hand_push, second_finger_path
 from ectskin.twin.mechanics import Handling, Manipulator, ManipulatorConfig, Touch
 from ectskin.twin.protocol import Protocol, TrialPlan, plan_trials, region_bounds
 from ectskin.twin.readout import mocap, readout
@@ -112,6 +117,8 @@ class TouchResponse:
         forces = f_mid if on.any() else np.zeros(1)
         if centre is None:
             centre = self._solve(forces, heights=heights)[0]
+        # the reference state the other terms are taken at (the second finger's too)
+        self.ref_forces, self.ref_heights, self.centre = forces, heights, centre
         d = self.slide_step_mm
         stencil = np.stack(
             [self._solve(forces, du=du, heights=heights)[0] for du in ((d, 0), (-d, 0), (0, d), (0, -d), (d, d))]
@@ -133,19 +140,28 @@ class TouchResponse:
             return None
         return np.asarray(handling.push_force_n) @ self.push_dir
 
-    def _handling(self, forces, m):
+    def _handling(self, forces, m, second=None):
         forces = np.atleast_1d(forces)
         shear = forces[:, None] * self.shear_per_n[None, :]
+        if second is not None:  # (F, 2 fingers, 2)
+            shear = np.stack([shear, second[1][:, None] * second[2][None, :]], axis=1)
         push = None
         if self.push_point is not None:
             push = np.repeat((m * self.push_dir)[None, :], forces.size, axis=0)
         return Handling(shear_n=shear, push=self.push_point, push_force_n=push)
 
-    def _solve(self, forces, *, du=(0.0, 0.0), dm=0.0, heights=None):
-        self.n_solves += np.size(forces)
+    def _solve(self, forces, *, du=(0.0, 0.0), dm=0.0, heights=None, second=None):
+        """MoM solves at ``forces`` (K,) of this finger at its mean point + ``du``; ``second``:
+        (Touch, forces (K,), shear per N (2,)) of a second finger pressing as well."""
+        forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
+        self.n_solves += forces.size
         touch = Touch(self.surface, (float(self.uv0[0] + du[0]), float(self.uv0[1] + du[1])))
-        handling = self._handling(forces, self.m0 + dm)
-        return self.sensor.capacitance(self.p, touch, forces, handling, heights_mm=heights)
+        handling = self._handling(forces, self.m0 + dm, second)
+        if second is None:
+            return self.sensor.capacitance(self.p, touch, forces, handling, heights_mm=heights)
+        both = np.column_stack([forces, second[1]])
+        h = None if heights is None else np.column_stack([heights, np.zeros(forces.size)])
+        return self.sensor.capacitance(self.p, (touch, second[0]), both, handling, heights_mm=h)
 
     def __call__(self, path, handling) -> np.ndarray:
         """(n, n_pairs) readout of every frame of ``path``."""
@@ -173,6 +189,99 @@ class TouchResponse:
         if self.h_slope is not None and mags is not None:
             out += self.h_slope * (mags - self.m0)[:, None]
         return out
+
+
+class SecondFingerResponse:
+    """What a second finger adds to a :class:`TouchResponse`, in the frames where it presses.
+
+    Taken around the first model's reference state (its middle force, or its lowest height if
+    the first finger never lands) and the second finger's mean point ū₂ and middle force F̄₂:
+
+    * Δ(F₁): the change the second finger at (ū₂, F̄₂) makes, as a Chebyshev interpolant over the
+      first finger's force nodes (``force_nodes`` solves with both fingers, the single-finger
+      values at the same nodes already known): the two fingers' coupling through the body and
+      the field, as the first finger's force varies. Frames where the first finger is off the
+      skin take Δ at the reference state;
+    * B(F₂) − B(F̄₂): the second finger's own force, a Chebyshev interpolant over
+      ``second_nodes`` forces at the reference state (the middle node is shared, so
+      ``second_nodes`` − 1 solves);
+    * a slope in the second finger's point (u₂, v₂) − ū₂: forward differences, ``slide_step_mm``
+      apart (2 solves; the pad rolls and slides a millimetre or so).
+
+    The first finger's point and the hand's push enter through the first model, unchanged by the
+    second finger. The model's error against direct solves is bounded in the tests.
+    """
+
+    second_nodes = 3
+    slide_step_mm = 1.0
+
+    def __init__(self, first: TouchResponse, path1, surface2: str, path2):
+        self.first = first
+        on2 = path2.contact
+        if not on2.any():
+            raise EctskinError("second finger: its path never touches the skin")
+        n0 = first.n_solves
+        self.shear2 = (path2.shear_n[on2] / path2.force_n[on2, None]).mean(axis=0)
+        self.uv2 = path2.uv_mm[on2].mean(axis=0)
+        self.surface2 = surface2
+        self.f2_lo, self.f2_hi = float(path2.force_n[on2].min()), float(path2.force_n[on2].max())
+        k2 = self.second_nodes | 1
+        self.f2_nodes = chebyshev_nodes(self.f2_lo, self.f2_hi, k2)
+        f2_mid = self.f2_nodes[k2 // 2]
+        ref_f, ref_h = first.ref_forces, first.ref_heights
+        self.on1 = path1.contact.any()
+        if self.on1:  # the coupling over the first finger's force nodes
+            both = self._solve(first.f_nodes, np.full(first.f_nodes.size, f2_mid))
+            self.delta_nodes = both - first.c_nodes
+            ref_two = both[first.f_nodes.size // 2]
+        else:
+            ref_two = self._solve(ref_f, [f2_mid], heights=ref_h)[0]
+        self.delta_ref = ref_two - first.centre
+        others = np.delete(self.f2_nodes, k2 // 2)
+        c2 = self._solve(np.repeat(ref_f, others.size), others, heights=_rep(ref_h, others.size))
+        self.c2_nodes = np.insert(c2, k2 // 2, ref_two, axis=0)
+        d = self.slide_step_mm
+        steps = self._solve(
+            np.repeat(ref_f, 2), [f2_mid] * 2, heights=_rep(ref_h, 2), du2=((d, 0.0), (0.0, d))
+        )
+        self.g2 = (steps - ref_two) / d  # (2, P): d C / d u2, d C / d v2
+        self.ref_two = ref_two
+        self.n_solves = first.n_solves - n0
+
+    def _solve(self, forces1, forces2, *, heights=None, du2=None):
+        forces2 = np.asarray(forces2, dtype=np.float64)
+        if du2 is None:
+            t2 = Touch(self.surface2, (float(self.uv2[0]), float(self.uv2[1])))
+            return self.first._solve(forces1, heights=heights, second=(t2, forces2, self.shear2))
+        rows = []
+        for k, (du, dv) in enumerate(du2):  # one solve per displaced point
+            t2 = Touch(self.surface2, (float(self.uv2[0] + du), float(self.uv2[1] + dv)))
+            one = None if heights is None else heights[k : k + 1]
+            second = (t2, forces2[k : k + 1], self.shear2)
+            rows.append(
+                self.first._solve(np.atleast_1d(forces1)[k : k + 1], heights=one, second=second)[0]
+            )
+        return np.stack(rows)
+
+    def __call__(self, path1, path2) -> np.ndarray:
+        """(n, n_pairs) change of the readout the second finger makes (0 where it is away)."""
+        out = np.zeros((path2.force_n.size, self.ref_two.size))
+        on2 = path2.contact
+        on = on2 & path1.contact if self.on1 else np.zeros_like(on2)
+        f = self.first
+        if on.any():
+            out[on] = _cheb_fit(f.f_lo, f.f_hi, f.f_nodes, self.delta_nodes, path1.force_n[on])
+        off = on2 & ~on
+        out[off] = self.delta_ref
+        b = _cheb_fit(self.f2_lo, self.f2_hi, self.f2_nodes, self.c2_nodes, path2.force_n[on2])
+        du = path2.uv_mm[on2] - self.uv2
+        out[on2] += b - self.ref_two + du @ self.g2
+        return out
+
+
+def _rep(heights, n: int):
+    """``heights`` (1,) repeated n times (None stays None)."""
+    return None if heights is None else np.repeat(heights, n)
 
 
 def simulate_trial(
@@ -205,9 +314,31 @@ def simulate_trial(
         handling = Handling(path.shear_n, hand.push, hand.push_force_n)
         response = TouchResponse(sensor, p, plan.surface, path, hand, push_dir, protocol)
         c_true = response(path, hand)
-        n_solves = response.n_solves
         touch = Touch(plan.surface, tuple(path.uv_mm.mean(axis=0)))
-        markers_true = sensor.marker_positions(p, touch, path.force_n, handling)
+        path2 = None
+        if plan.second_surface is not None:
+            path2 = _second_path(plan, protocol, sensor, n, fps)
+        if path2 is not None and path2.contact.any():  # a second finger presses for a while
+            c_true = c_true + SecondFingerResponse(response, path, plan.second_surface, path2)(
+                path, path2
+            )
+            uv2 = tuple(path2.uv_mm[path2.contact].mean(axis=0))
+            touch = (touch, Touch(plan.second_surface, uv2))
+            forces = np.column_stack([path.force_n, path2.force_n])
+            handling = Handling(
+                np.stack([path.shear_n, path2.shear_n], axis=1), hand.push, hand.push_force_n
+            )
+            markers_true = sensor.marker_positions(p, touch, forces, handling)
+        else:
+            markers_true = sensor.marker_positions(p, touch, path.force_n, handling)
+        if path2 is not None:  # (a trial of a few frames may end before it lands)
+            truth.update(
+                contact2=path2.contact,
+                finger2_uv_mm=path2.uv_mm,
+                force2=path2.force_n,
+                finger2_surface=plan.second_surface,
+            )
+        n_solves = response.n_solves
         labels[path.contact] = plan.region
         truth.update(
             contact=path.contact,
@@ -231,6 +362,12 @@ def simulate_trial(
         "start_s": plan.start_s,
         "mom_solves": n_solves,
     }
+    if plan.second_surface is not None:
+        meta["second_finger"] = {
+            "surface": plan.second_surface,
+            "region": plan.second_region,
+            "touch_uv_mm": list(plan.second_uv_mm),
+        }
     return Trial(
         name=plan.name,
         capacitance=cap,
@@ -244,8 +381,19 @@ def simulate_trial(
         finger_uv_mm=truth["finger_uv_mm"],
         finger_height_mm=truth["finger_height_mm"],
         finger_surface=plan.surface,
+        contact2=truth.get("contact2"),
+        finger2_uv_mm=truth.get("finger2_uv_mm"),
+        force2=truth.get("force2"),
+        finger2_surface=truth.get("finger2_surface"),
         meta=meta,
     )
+
+
+def _second_path(plan: TrialPlan, protocol: Protocol, sensor: SensorModel, n: int, fps: float):
+    """The second finger's path, from its own random stream (the trial's other draws stay)."""
+    rng = np.random.default_rng([protocol.seed, 1, plan.index, 2])
+    lo, hi = region_bounds(sensor.layout.region(plan.second_region), protocol.touch_margin)
+    return second_finger_path(n, fps, np.asarray(plan.second_uv_mm), lo, hi, protocol, rng)
 
 
 # ---------------------------------------------------------------- parallel driver

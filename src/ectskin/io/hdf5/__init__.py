@@ -1,7 +1,8 @@
 """HDF5 recordings: one file per experiment holding the layout and every trial.
 
-The schema (``format = "ectskin.recording"``, ``format_version = 2``; version 1 files, which
-predate the finger ground truth, are still read) is documented in
+The schema (``format = "ectskin.recording"``, ``format_version = 3``; version 1 files, which
+predate the finger ground truth, and version 2 files, which predate the second finger, are still
+read) is documented in
 ``docs/recording-format.md``. In short, all frames of all trials are stored back to back in one set
 of resizable datasets under ``/frames`` and a trial index under ``/trials`` says where each trial
 starts; ``/committed`` records how many frames, trials and events are part of the recording::
@@ -18,8 +19,10 @@ starts; ``/committed`` records how many frames, trials and events are part of th
     /frames/contact      (n_frames,) bool                       [if any trial has it; v2]
     /frames/finger_uv_mm (n_frames, 2) float64, mm              [if any trial has it; v2]
     /frames/finger_height_mm  (n_frames,) float64, mm           [if any trial has it; v2]
+    /frames/contact2, force2 (n_frames,), finger2_uv_mm (n_frames, 2)  [a second finger; v3]
     /trials/{name, start, region, inflation_ml, has_markers, has_force, meta_json,
-             has_contact, has_finger_uv_mm, has_finger_height_mm, finger_surface [v2]}  (n_trials,)
+             has_contact, has_finger_uv_mm, has_finger_height_mm, finger_surface [v2],
+             has_contact2, has_finger2_uv_mm, has_force2, finger2_surface [v3]}  (n_trials,)
     /events/{t_s, trial, text}                                                     (n_events,)
 
 Why one set of datasets rather than a group per trial: the live :class:`RecordingWriter` uses

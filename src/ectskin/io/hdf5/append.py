@@ -278,19 +278,24 @@ class RecordingWriter:
         inflation: Sequence[float] = (),
         region: int = 0,
         finger_surface: str | None = None,
+        finger2_surface: str | None = None,
         meta: dict[str, Any] | None = None,
     ) -> None:
         """Start a new trial; the frames appended from now on belong to it.
 
         ``inflation``: chamber volumes p in ml; ``region``: touched region (0 = none);
         ``finger_surface``: the face the finger is on or over ("front", "back", ...; None =
-        unknown), the surface of the trial's ``finger_uv_mm``.
+        unknown), the surface of the trial's ``finger_uv_mm``; ``finger2_surface``: the face a
+        second finger presses (None = no second finger; then no append gives ``contact2``,
+        ``finger2_uv_mm`` or ``force2``, else every append does).
         """
         with self._lock:
             self._check_open()
             infl = self._check_trial(name, inflation, region)
-            if finger_surface is not None:
-                check_option("finger_surface", finger_surface, SURFACES, f"trial {name!r}")
+            faces = {"finger_surface": finger_surface, "finger2_surface": finger2_surface}
+            for what, face in faces.items():
+                if face is not None:
+                    check_option(what, face, SURFACES, f"trial {name!r}")
             row = {
                 "name": name,
                 "start": self.n_frames,
@@ -298,6 +303,7 @@ class RecordingWriter:
                 "inflation_ml": infl,
                 **{f"has_{k}": None for k in OPTIONAL_FRAMES},  # decided by the first append
                 "finger_surface": finger_surface or "",
+                "finger2_surface": finger2_surface or "",
                 "meta_json": to_json(f"trial {name!r}: meta", meta),
             }
             self._names.append(name)
@@ -342,6 +348,9 @@ class RecordingWriter:
         contact: Any = None,
         finger_uv_mm: Any = None,
         finger_height_mm: Any = None,
+        contact2: Any = None,
+        finger2_uv_mm: Any = None,
+        force2: Any = None,
     ) -> None:
         """Append frames to the current trial.
 
@@ -353,6 +362,9 @@ class RecordingWriter:
         contact: (n,) or a scalar bool, the finger is on the skin.
         finger_uv_mm: (n, 2) or (2,), mm, the skin point under the fingertip; NaN = no finger.
         finger_height_mm: (n,) or a scalar, mm above the skin (0 in contact); NaN = no finger.
+        contact2, finger2_uv_mm, force2: a second finger's, as the first's (NaN point where it
+        is not on the skin); all three with every append of a trial started with a
+        ``finger2_surface``, else none.
 
         The first append of a trial decides which of markers, force, contact, finger_uv_mm and
         finger_height_mm the trial carries; an append of 0 frames only declares that (for a trial
@@ -369,9 +381,19 @@ class RecordingWriter:
                 "contact": contact,
                 "finger_uv_mm": finger_uv_mm,
                 "finger_height_mm": finger_height_mm,
+                "contact2": contact2,
+                "finger2_uv_mm": finger2_uv_mm,
+                "force2": force2,
             }
             frames = check_frames(
-                self.layout, src, self._cur_last_t, capacitance, timestamps, labels, given
+                self.layout,
+                src,
+                self._cur_last_t,
+                capacitance,
+                timestamps,
+                labels,
+                given,
+                self._cur["finger2_surface"] or None,
             )
             self._check_flags(src, {k: frames[k] is not None for k in OPTIONAL_FRAMES})
             n = frames["capacitance"].shape[0]

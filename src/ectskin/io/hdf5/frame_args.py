@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError, check_array
-from ectskin.io.recording import check_ground_truth
+from ectskin.io.recording import check_ground_truth, check_second_finger
 from ectskin.layout import SensorLayout
 
 
@@ -48,12 +48,14 @@ def check_frames(
     timestamps: Any,
     labels: Any,
     optional: dict[str, Any],
+    finger2_surface: str | None = None,
 ) -> dict[str, np.ndarray | None]:
     """The arguments of ``RecordingWriter.append`` as checked arrays by ``/frames`` dataset.
 
     ``optional`` maps each of :data:`~ectskin.io.hdf5.schema.OPTIONAL_FRAMES` to its argument
     (None = not given, returned as None). ``last_t``: the trial's last timestamp so far, s
-    (-inf before its first frame). Errors name ``src``.
+    (-inf before its first frame). ``finger2_surface``: the trial's second finger's face (None:
+    no second finger), checked with the second finger's arrays. Errors name ``src``.
     """
     L = layout
     cap = _frames_arg("capacitance", capacitance, (L.n_pairs,), None, src)
@@ -76,6 +78,8 @@ def check_frames(
         "force": (),
         "finger_uv_mm": (2,),
         "finger_height_mm": (),
+        "finger2_uv_mm": (2,),
+        "force2": (),
     }
     for key, tail in tails.items():  # (n, *tail), one frame, or a scalar for all (tail ())
         value = optional[key]
@@ -87,6 +91,12 @@ def check_frames(
         contact = np.full(n, contact)
     out["contact"], out["finger_uv_mm"], out["finger_height_mm"] = check_ground_truth(
         src, n, contact, out["finger_uv_mm"], out["finger_height_mm"]
+    )
+    contact2 = optional["contact2"]
+    if contact2 is not None and np.ndim(contact2) == 0:
+        contact2 = np.full(n, contact2)
+    out["contact2"], out["finger2_uv_mm"], out["force2"] = check_second_finger(
+        src, n, contact2, out["finger2_uv_mm"], out["force2"], finger2_surface
     )
     prev = np.concatenate([[last_t], ts])
     if n and np.any(np.diff(prev) <= 0):

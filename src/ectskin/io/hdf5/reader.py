@@ -8,7 +8,8 @@ can still be reported against it (:func:`ectskin.io.hdf5.read.guarded`).
 
 Files of every version up to :data:`~ectskin.io.hdf5.schema.FORMAT_VERSION` are read: a version-1
 file has no finger ground truth, so its trials come back with ``contact``, ``finger_uv_mm``,
-``finger_height_mm`` and ``finger_surface`` None.
+``finger_height_mm`` and ``finger_surface`` None; version 1 and 2 files have no second finger
+(``contact2``, ``finger2_uv_mm``, ``force2`` and ``finger2_surface`` None).
 """
 
 from __future__ import annotations
@@ -176,6 +177,7 @@ class FileReader:
                 "inflation": cols["inflation"][k],
                 **{f"has_{d}": bool(cols[f"has_{d}"][k]) for d in OPTIONAL_FRAMES},
                 "finger_surface": cols["finger_surface"][k],
+                "finger2_surface": cols["finger2_surface"][k],
                 "meta": cols["meta"][k],
             }
             for k in range(n_trials)
@@ -204,8 +206,9 @@ class FileReader:
                 self._check_kind(tds[k], "biu", "a boolean")
         self._check_strings(tds["name"])
         self._check_strings(tds["meta_json"])
-        if "finger_surface" in tds:
-            self._check_strings(tds["finger_surface"])
+        for k in ("finger_surface", "finger2_surface"):
+            if k in tds:
+                self._check_strings(tds[k])
         if h5py.check_vlen_dtype(tds["inflation_ml"].dtype) is None:
             raise self.fail(
                 f"/trials/inflation_ml has dtype {tds['inflation_ml'].dtype}, expected variable-"
@@ -230,6 +233,9 @@ class FileReader:
             "contact": ((), "(n_frames,)", "biu"),
             "finger_uv_mm": ((2,), "(n_frames, 2)", "f"),
             "finger_height_mm": ((), "(n_frames,)", "f"),
+            "contact2": ((), "(n_frames,)", "biu"),
+            "finger2_uv_mm": ((2,), "(n_frames, 2)", "f"),
+            "force2": ((), "(n_frames,)", "f"),
         }
         kind_names = {"f": "a float", "iu": "an integer", "biu": "a boolean"}
         for k, ds in fds.items():
@@ -249,7 +255,7 @@ class FileReader:
             "start": np.asarray(tds["start"][:n_trials], dtype=np.int64),
             "region": np.asarray(tds["region"][:n_trials], dtype=np.int64),
             "inflation": [tuple(float(v) for v in row) for row in tds["inflation_ml"][:n_trials]],
-            **{  # a version-1 file has no ground-truth columns: all False
+            **{  # a version-1 (2) file has no (second finger's) ground-truth columns: all False
                 f"has_{k}": (
                     np.asarray(tds[f"has_{k}"][:n_trials]).astype(bool)
                     if f"has_{k}" in tds
@@ -258,6 +264,7 @@ class FileReader:
                 for k in OPTIONAL_FRAMES
             },
             "finger_surface": self._finger_surfaces(tds, names),
+            "finger2_surface": self._finger_surfaces(tds, names, "finger2_surface"),
             "meta": [],
         }
         for k, text in enumerate(tds["meta_json"].asstr()[:n_trials]):
@@ -279,16 +286,18 @@ class FileReader:
             seen.add(name)
         return cols
 
-    def _finger_surfaces(self, tds: dict, names: list[str]) -> list[str | None]:
-        """``/trials/finger_surface`` as surface names ('' → None); None for a version-1 file."""
-        if "finger_surface" not in tds:
+    def _finger_surfaces(
+        self, tds: dict, names: list[str], column: str = "finger_surface"
+    ) -> list[str | None]:
+        """``/trials/<column>`` as surface names ('' → None); None for a file without it."""
+        if column not in tds:
             return [None] * len(names)
         out = []
-        for k, s in enumerate(tds["finger_surface"].asstr()[: len(names)]):
+        for k, s in enumerate(tds[column].asstr()[: len(names)]):
             s = str(s)
             if s and s not in SURFACES:
                 raise self.fail(
-                    f"/trials/finger_surface[{k}] (trial {names[k]!r}) is {s!r}, expected '' "
+                    f"/trials/{column}[{k}] (trial {names[k]!r}) is {s!r}, expected '' "
                     f"(none) or one of {', '.join(SURFACES)}"
                 )
             out.append(s or None)
@@ -402,7 +411,7 @@ class FileReader:
                 else np.zeros((e - s, 0, 3))
             )
         optional = {  # force and the finger ground truth
-            k: self._read(fds[k], s, e, np.bool_ if k == "contact" else np.float64)
+            k: self._read(fds[k], s, e, np.bool_ if k in ("contact", "contact2") else np.float64)
             if row[f"has_{k}"]
             else None
             for k in OPTIONAL_FRAMES
@@ -419,6 +428,7 @@ class FileReader:
                 markers=mk,
                 **optional,
                 finger_surface=row["finger_surface"],
+                finger2_surface=row["finger2_surface"],
                 meta=row["meta"],
             )
         except EctskinError as exc:

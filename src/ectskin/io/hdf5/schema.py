@@ -25,13 +25,16 @@ import numpy as np
 
 from ectskin import __version__
 from ectskin._check import EctskinError, check_type
-from ectskin.io.recording import GROUND_TRUTH_FIELDS, check_name
+from ectskin.io.recording import GROUND_TRUTH_FIELDS, SECOND_FINGER_FIELDS, check_name
 from ectskin.layout import SensorLayout
 
 FORMAT = "ectskin.recording"
 #: The version written. 1: the first; 2: adds the finger ground truth (``/frames/contact``,
-#: ``finger_uv_mm``, ``finger_height_mm`` and their ``/trials`` columns). Versions 1 and 2 read.
-FORMAT_VERSION = 2
+#: ``finger_uv_mm``, ``finger_height_mm`` and their ``/trials`` columns); 3: adds a second finger
+#: (``/frames/contact2``, ``finger2_uv_mm``, ``force2``, their ``has_`` columns and
+#: ``/trials/finger2_surface``): a version-2 reader would skip them and read a two-finger trial as
+#: a one-finger one, so it must refuse the file instead. Versions 1 to 3 read.
+FORMAT_VERSION = 3
 
 #: Key of ``Recording.meta`` that holds the events table (list of ``{"t_s", "trial", "text"}``).
 EVENTS_KEY = "events"
@@ -39,8 +42,9 @@ EVENTS_KEY = "events"
 STR = h5py.string_dtype("utf-8")
 VLEN_F8 = h5py.vlen_dtype(np.float64)
 #: Optional ``/frames`` datasets (present when some trial has them), each flagged per trial by
-#: the ``/trials`` column ``has_<name>``; the finger ground truth exists from version 2 on.
-OPTIONAL_FRAMES = ("markers", "force", *GROUND_TRUTH_FIELDS)
+#: the ``/trials`` column ``has_<name>``; the finger ground truth exists from version 2 on, the
+#: second finger's from version 3 on.
+OPTIONAL_FRAMES = ("markers", "force", *GROUND_TRUTH_FIELDS, *SECOND_FINGER_FIELDS)
 #: ``/trials`` columns of each format version.
 TRIAL_FIELDS_OF_VERSION = {
     1: ("name", "start", "region", "inflation_ml", "has_markers", "has_force", "meta_json"),
@@ -53,6 +57,19 @@ TRIAL_FIELDS_OF_VERSION = {
         "has_force",
         *(f"has_{k}" for k in GROUND_TRUTH_FIELDS),
         "finger_surface",
+        "meta_json",
+    ),
+    3: (
+        "name",
+        "start",
+        "region",
+        "inflation_ml",
+        "has_markers",
+        "has_force",
+        *(f"has_{k}" for k in GROUND_TRUTH_FIELDS),
+        "finger_surface",
+        *(f"has_{k}" for k in SECOND_FINGER_FIELDS),
+        "finger2_surface",
         "meta_json",
     ),
 }
@@ -157,6 +174,9 @@ def frame_specs(
         "contact": ((), np.bool_, False, "bool (True = the finger is on the skin)"),
         "finger_uv_mm": ((2,), np.float64, np.nan, "mm (surface coordinates u, v)"),
         "finger_height_mm": ((), np.float64, np.nan, "mm (above the skin)"),
+        "contact2": ((), np.bool_, False, "bool (True = a second finger is on the skin)"),
+        "finger2_uv_mm": ((2,), np.float64, np.nan, "mm (surface coordinates u, v)"),
+        "force2": ((), np.float64, np.nan, "N"),
     }
     unknown = set(optional) - set(OPTIONAL_FRAMES)
     if unknown:
@@ -220,12 +240,14 @@ def create_tables(f: h5py.File, n_trials: int, n_events: int) -> tuple[dict, dic
             "inflation_ml": VLEN_F8,
             **{f"has_{k}": np.bool_ for k in OPTIONAL_FRAMES},
             "finger_surface": STR,
+            "finger2_surface": STR,
             "meta_json": STR,
         },
         n_trials,
     )
     tds["start"].attrs["unit"] = "frame index into /frames"
     tds["finger_surface"].attrs["unit"] = "surface name, '' = none"
+    tds["finger2_surface"].attrs["unit"] = "surface name of the second finger, '' = none"
     tds["inflation_ml"].attrs["unit"] = "ml"
     eds = _create_table(f, "events", {"t_s": np.float64, "trial": np.int32, "text": STR}, n_events)
     eds["t_s"].attrs["unit"] = "s"

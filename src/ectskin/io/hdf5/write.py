@@ -157,6 +157,7 @@ def _write_trial_table(tds: dict, trials: Sequence[Trial], starts: np.ndarray) -
     for k in OPTIONAL_FRAMES:
         tds[f"has_{k}"][:] = np.array([getattr(t, k) is not None for t in trials])
     tds["finger_surface"][:] = np.array([t.finger_surface or "" for t in trials], dtype=object)
+    tds["finger2_surface"][:] = np.array([t.finger2_surface or "" for t in trials], dtype=object)
     tds["meta_json"][:] = np.array([_trial_meta_json(t) for t in trials], dtype=object)
 
 
