@@ -20,6 +20,7 @@ EXAMPLES = """\
   ectskin simulate -o quick.h5 --levels 0,20 --touch-trials 2 --duration 5
   ectskin simulate -o twin.h5 --overwrite --workers 2  # replace an earlier twin.h5
   ectskin simulate -o two.h5 --second-finger 0.3       # 30 % of touch trials: two fingers
+  ectskin simulate -o c.h5 --placement uniform --dwells 3 --lifts --hover  # contact training data
 """
 log = logging.getLogger(__name__)
 
@@ -27,22 +28,45 @@ log = logging.getLogger(__name__)
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_out(p, help="HDF5 recording to write", positional=True)
     add_overwrite(p, help="replace OUT if it exists (default: refuse)")
-    p.add_argument("--levels", default="0,10,20", help="inflation levels per chamber, ml (default 0,10,20)")
+    p.add_argument(
+        "--levels", default="0,10,20", help="inflation levels per chamber, ml (default 0,10,20)"
+    )
     p.add_argument("--touch-trials", type=int, default=6, help="touch trials per state (default 6)")
     p.add_argument("--duration", type=float, default=30.0, help="trial duration, s (default 30)")
     p.add_argument("--fps", type=float, default=30.0, help="frame rate, Hz (default 30)")
-    p.add_argument("--finger-radius", type=float, default=8.0, help="fingertip radius, mm (default 8)")
     p.add_argument(
-        "--snr-db", type=float, default=66.0,
+        "--finger-radius", type=float, default=8.0, help="fingertip radius, mm (default 8)"
+    )
+    p.add_argument(
+        "--snr-db",
+        type=float,
+        default=66.0,
         help="the readout's frame-to-frame gain noise as an SNR, dB (default 66; see twin/readout.py)",
     )
-    p.add_argument("--lifts", action="store_true", help="lift the finger now and then (per-frame labels)")
+    p.add_argument(
+        "--lifts", action="store_true", help="lift the finger now and then (per-frame labels)"
+    )
+    p.add_argument(
+        "--placement",
+        choices=("aimed", "uniform"),
+        default="aimed",
+        help="where the finger lands in its region: its centre with the experimenter's scatter "
+        "(aimed, the paper's marked sub-regions) or anywhere in it (uniform; contact models)",
+    )
+    p.add_argument(
+        "--dwells",
+        type=int,
+        default=1,
+        help="finger placements per touch trial: it moves to a new point D-1 times (default 1)",
+    )
     p.add_argument("--hover", action="store_true", help="the finger hovers above the skin at times")
     p.add_argument(
         "--approach", action="store_true", help="each touch starts with the finger coming down"
     )
     p.add_argument(
-        "--push-max", type=float, default=2.0,
+        "--push-max",
+        type=float,
+        default=2.0,
         help="the experimenter's hand pushes the body with up to this force, N (0: no hand)",
     )
     p.add_argument(
@@ -54,7 +78,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--layout", help="layout JSON file (default: the paper's layout)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=None, help="parallel processes (default: all cores)")
+    p.add_argument(
+        "--workers", type=int, default=None, help="parallel processes (default: all cores)"
+    )
     p.add_argument("--no-progress", action="store_true")
 
 
@@ -73,6 +99,8 @@ def run(args: argparse.Namespace) -> int:
         frame_rate_hz=args.fps,
         finger_radius_mm=args.finger_radius,
         lifts=args.lifts,
+        touch_placement=args.placement,
+        touch_dwells=args.dwells,
         hover=args.hover,
         approach=args.approach,
         push_max_n=args.push_max,
@@ -93,6 +121,10 @@ def run(args: argparse.Namespace) -> int:
     write_recording(rec, out, overwrite=args.overwrite)
     log.info(
         "%d trials, %d frames in %.1f s (%.0f frames/s) -> %s",
-        rec.n_trials, rec.n_frames, dt, rec.n_frames / dt, out,
+        rec.n_trials,
+        rec.n_frames,
+        dt,
+        rec.n_frames / dt,
+        out,
     )
     return 0

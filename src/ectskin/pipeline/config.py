@@ -197,7 +197,7 @@ class ReproduceConfig:
             lifts=True,
             hover=True,
             approach=True,
-            **({"second_finger": 0.3} if hasattr(base, "second_finger") else {}),
+            second_finger=0.3,
         )
 
     def simulation_protocol(self) -> Protocol | None:

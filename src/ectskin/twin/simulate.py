@@ -28,7 +28,8 @@ import sys
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict
+from dataclasses import asdict, fields, replace
+from typing import Any
 
 import numpy as np
 from numpy.polynomial import chebyshev
@@ -311,26 +312,22 @@ def simulate_trial(
         if hand.push_force_n is not None:
             norms = np.linalg.norm(hand.push_force_n, axis=1)
             push_dir = hand.push_force_n[int(np.argmax(norms))] / max(norms.max(), 1e-12)
-        handling = Handling(path.shear_n, hand.push, hand.push_force_n)
-        response = TouchResponse(sensor, p, plan.surface, path, hand, push_dir, protocol)
-        c_true = response(path, hand)
-        touch = Touch(plan.surface, tuple(path.uv_mm.mean(axis=0)))
         path2 = None
         if plan.second_surface is not None:
             path2 = _second_path(plan, protocol, sensor, n, fps)
-        if path2 is not None and path2.contact.any():  # a second finger presses for a while
-            c_true = c_true + SecondFingerResponse(response, path, plan.second_surface, path2)(
-                path, path2
+        c_true = np.empty((n, sensor.layout.n_pairs))
+        markers_true = np.empty((n, n_markers, 3))
+        n_solves = 0
+        # one readout model per dwell: the finger moves to a new point for each equal share of
+        # the trial (finger_path), and each model is accurate around its own point
+        for rows in np.array_split(np.arange(n), len(plan.touch_uv_mm)):
+            seg = _rows(path, rows)
+            seg_hand = _rows(hand, rows)
+            seg2 = _rows(path2, rows) if path2 is not None else None
+            c_true[rows], markers_true[rows], solves = _touch_segment(
+                sensor, p, plan, protocol, seg, seg_hand, seg2, push_dir
             )
-            uv2 = tuple(path2.uv_mm[path2.contact].mean(axis=0))
-            touch = (touch, Touch(plan.second_surface, uv2))
-            forces = np.column_stack([path.force_n, path2.force_n])
-            handling = Handling(
-                np.stack([path.shear_n, path2.shear_n], axis=1), hand.push, hand.push_force_n
-            )
-            markers_true = sensor.marker_positions(p, touch, forces, handling)
-        else:
-            markers_true = sensor.marker_positions(p, touch, path.force_n, handling)
+            n_solves += solves
         if path2 is not None:  # (a trial of a few frames may end before it lands)
             truth.update(
                 contact2=path2.contact,
@@ -338,7 +335,6 @@ def simulate_trial(
                 force2=path2.force_n,
                 finger2_surface=plan.second_surface,
             )
-        n_solves = response.n_solves
         labels[path.contact] = plan.region
         truth.update(
             contact=path.contact,
@@ -387,6 +383,41 @@ def simulate_trial(
         finger2_surface=truth.get("finger2_surface"),
         meta=meta,
     )
+
+
+def _rows(obj: Any, rows: np.ndarray) -> Any:
+    """``obj`` (a FingerPath or a Handling) with its per-frame arrays cut to ``rows``."""
+    changes = {}
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if isinstance(v, np.ndarray) and v.ndim >= 1 and f.name != "push":
+            changes[f.name] = v[rows]
+    return replace(obj, **changes)
+
+
+def _touch_segment(sensor, p, plan, protocol, path, hand, path2, push_dir):
+    """Readout (n, P), true markers (n, M, 3) and MoM solves of the frames of one dwell."""
+    handling = Handling(path.shear_n, hand.push, hand.push_force_n)
+    response = TouchResponse(sensor, p, plan.surface, path, hand, push_dir, protocol)
+    c_true = response(path, hand)
+    on = path.contact
+    one_dwell = len(plan.touch_uv_mm) == 1  # (then every frame, as before dwells had models)
+    touch = Touch(
+        plan.surface, tuple((path.uv_mm if one_dwell or not on.any() else path.uv_mm[on]).mean(0))
+    )
+    solves = response.n_solves
+    if path2 is not None and path2.contact.any():  # a second finger presses for a while
+        second = SecondFingerResponse(response, path, plan.second_surface, path2)
+        c_true = c_true + second(path, path2)
+        solves = response.n_solves
+        uv2 = tuple(path2.uv_mm[path2.contact].mean(axis=0))
+        touch = (touch, Touch(plan.second_surface, uv2))
+        forces = np.column_stack([path.force_n, path2.force_n])
+        handling = Handling(
+            np.stack([path.shear_n, path2.shear_n], axis=1), hand.push, hand.push_force_n
+        )
+        return c_true, sensor.marker_positions(p, touch, forces, handling), solves
+    return c_true, sensor.marker_positions(p, touch, path.force_n, handling), solves
 
 
 def _second_path(plan: TrialPlan, protocol: Protocol, sensor: SensorModel, n: int, fps: float):
