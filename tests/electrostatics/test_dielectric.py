@@ -25,8 +25,10 @@ def _shell_capacitor(n: int, eps_shell: float):
     """Inner conductor sphere r=10 (1 V), outer r=30 (0 V), dielectric shell 15..22 mm."""
     a, r1, r2, b = 10.0, 15.0, 22.0, 30.0
     cond = Panels.concatenate(
-        [sphere_panels(np.zeros(3), a, n, 0, n_conductors=2),
-         sphere_panels(np.zeros(3), b, n, 1, n_conductors=2)]
+        [
+            sphere_panels(np.zeros(3), a, n, 0, n_conductors=2),
+            sphere_panels(np.zeros(3), b, n, 1, n_conductors=2),
+        ]
     )
     itf = Panels.concatenate(
         [sphere_panels(np.zeros(3), r1, n, 0), sphere_panels(np.zeros(3), r2, n, 1)]
@@ -37,8 +39,11 @@ def _shell_capacitor(n: int, eps_shell: float):
     outside_eps = np.where(inner, eps_shell, 1.0)
     em = np.where(outward, inside_eps, outside_eps)
     ep = np.where(outward, outside_eps, inside_eps)
-    analytic = 4 * np.pi * EPS0_PF_PER_MM / (
-        (1 / a - 1 / r1) + (1 / r1 - 1 / r2) / eps_shell + (1 / r2 - 1 / b)
+    analytic = (
+        4
+        * np.pi
+        * EPS0_PF_PER_MM
+        / ((1 / a - 1 / r1) + (1 / r1 - 1 / r2) / eps_shell + (1 / r2 - 1 / b))
     )
     return cond, itf, em, ep, analytic
 
@@ -73,8 +78,10 @@ def test_panel_field_far_is_point_charges_and_near_is_finite():
 def two_plates():
     eb = 2.0
     cond = Panels.concatenate(
-        [rectangle_panels((-6, 0, 0), (1, 0, 0), (0, 1, 0), 8, 8, 8, 8, 0, n_conductors=2),
-         rectangle_panels((6, 0, 0), (1, 0, 0), (0, 1, 0), 8, 8, 8, 8, 1, n_conductors=2)]
+        [
+            rectangle_panels((-6, 0, 0), (1, 0, 0), (0, 1, 0), 8, 8, 8, 8, 0, n_conductors=2),
+            rectangle_panels((6, 0, 0), (1, 0, 0), (0, 1, 0), 8, 8, 8, 8, 1, n_conductors=2),
+        ]
     )
     K, q = maxwell_capacitance(cond, eb, return_charges=True)
     return eb, cond, K, q

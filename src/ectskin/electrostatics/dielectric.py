@@ -121,9 +121,7 @@ def panel_field(
     """
     q = np.asarray(charges, dtype=np.float64)
     if q.ndim != 2 or q.shape[0] != panels.n_panels:
-        raise EctskinError(
-            f"charges must have shape ({panels.n_panels}, n_columns), got {q.shape}"
-        )
+        raise EctskinError(f"charges must have shape ({panels.n_panels}, n_columns), got {q.shape}")
     if not (np.isfinite(eps_r) and eps_r > 0):
         raise EctskinError(f"eps_r must be a positive finite number, got {eps_r!r}")
     r = check_array("points", points, (None, 3), finite=True)
@@ -184,7 +182,9 @@ def dielectric_capacitance(
             raise EctskinError(f"{name} must be Panels, got {type(p).__name__}")
     eps_b = float(eps_background)
     if not (np.isfinite(eps_b) and eps_b > 0):
-        raise EctskinError(f"eps_background must be a positive finite number, got {eps_background!r}")
+        raise EctskinError(
+            f"eps_background must be a positive finite number, got {eps_background!r}"
+        )
     nd = interfaces.n_panels
     em = np.broadcast_to(np.asarray(eps_minus, dtype=np.float64), (nd,))
     ep = np.broadcast_to(np.asarray(eps_plus, dtype=np.float64), (nd,))
@@ -257,7 +257,9 @@ def box_panels(centre, size, n: int) -> Panels:
     c0 = check_array("centre", centre, (3,), finite=True)
     s = np.broadcast_to(np.asarray(size, dtype=np.float64), (3,))
     if not np.all(np.isfinite(s) & (s > 0)) or int(n) < 1:
-        raise EctskinError(f"box_panels needs positive sizes and n >= 1, got size {size!r}, n {n!r}")
+        raise EctskinError(
+            f"box_panels needs positive sizes and n >= 1, got size {size!r}, n {n!r}"
+        )
     n = int(n)
     t = (np.arange(n) + 0.5) / n - 0.5  # cell centres on [-1/2, 1/2]
     centres, us, vs = [], [], []
@@ -277,7 +279,9 @@ def box_panels(centre, size, n: int) -> Panels:
             us.append(u)
             vs.append(v)
     m = 6 * n * n
-    return Panels(np.concatenate(centres), np.concatenate(us), np.concatenate(vs), np.zeros(m, int), 1)
+    return Panels(
+        np.concatenate(centres), np.concatenate(us), np.concatenate(vs), np.zeros(m, int), 1
+    )
 
 
 # ====================================================================== ECT Jacobian
@@ -321,9 +325,15 @@ def permittivity_jacobian(
     p = np.asarray(pairs)
     if p.ndim != 2 or p.shape[1] != 2 or p.dtype.kind not in "iu":
         raise EctskinError(f"pairs must be an (n_pairs, 2) integer array, got {p.shape} {p.dtype}")
-    e = np.arange(q.shape[1] if q.ndim == 2 else 0) if electrodes is None else np.asarray(electrodes)
+    e = (
+        np.arange(q.shape[1] if q.ndim == 2 else 0)
+        if electrodes is None
+        else np.asarray(electrodes)
+    )
     if p.size and (p.min() < 0 or p.max() >= e.size):
-        raise EctskinError(f"pairs must index the {e.size} electrodes, got values {p.min()}..{p.max()}")
+        raise EctskinError(
+            f"pairs must index the {e.size} electrodes, got values {p.min()}..{p.max()}"
+        )
     E = panel_field(panels, q[:, e] if q.ndim == 2 else q, points, eps_r, near_factor=near_factor)
     if vol.shape[0] != E.shape[0] or not np.all(np.isfinite(vol) & (vol >= 0)):
         raise EctskinError(
@@ -344,9 +354,7 @@ def panel_potential(
     """
     q = np.asarray(charges, dtype=np.float64)
     if q.ndim != 2 or q.shape[0] != panels.n_panels:
-        raise EctskinError(
-            f"charges must have shape ({panels.n_panels}, n_columns), got {q.shape}"
-        )
+        raise EctskinError(f"charges must have shape ({panels.n_panels}, n_columns), got {q.shape}")
     r = check_array("points", points, (None, 3), finite=True)
     out = np.empty((r.shape[0], q.shape[1]))
     block = max(1, 2_000_000 // max(panels.n_panels, 1))
@@ -365,8 +373,15 @@ def panel_potential(
 
 
 def conductor_jacobian(
-    panels: Panels, charges, points, pairs, electrodes=None, eps_r: float = 1.0,
-    *, radius_mm: float = 1.0, near_factor: float = NEAR_FACTOR,
+    panels: Panels,
+    charges,
+    points,
+    pairs,
+    electrodes=None,
+    eps_r: float = 1.0,
+    *,
+    radius_mm: float = 1.0,
+    near_factor: float = NEAR_FACTOR,
 ) -> np.ndarray:
     """(n_pairs, M) change of ``C_ij`` (pF) when a small grounded sphere sits at each point.
 

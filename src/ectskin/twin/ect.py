@@ -209,8 +209,9 @@ def sensitivity(
         nrm = man.surface_normal(face, uv, inflation_ml, None, [0.0], handling)[0]
         xyz[sel] = pts + grid.height[sel, None] * nrm
         step = np.array([[h, 0.0], [-h, 0.0], [0.0, h], [0.0, -h]])
-        d = man.deform(face, (uv[None] + step[:, None]).reshape(-1, 2), inflation_ml, None, [0.0],
-                       handling)[0].reshape(4, -1, 3)
+        d = man.deform(
+            face, (uv[None] + step[:, None]).reshape(-1, 2), inflation_ml, None, [0.0], handling
+        )[0].reshape(4, -1, 3)
         stretch = np.linalg.norm(np.cross(d[0] - d[1], d[2] - d[3]), axis=1) / (4 * h * h)
         vol[sel] = grid.pixel_area[grid.pixel[sel]] * stretch * grid.thickness[sel]
     pairs = sensor.layout.pairs
@@ -264,8 +265,13 @@ class EctImager:
         self.jacobian_s = time.perf_counter() - t0
         scale = self.sensitivity.readout if row_scale is None else row_scale
         self.reconstructor = Reconstructor.build(
-            self.sensitivity.jacobian, method, row_scale=scale, lam=lam, iterations=iterations,
-            relaxation=relaxation, response_sign=self.sensitivity.response_sign,
+            self.sensitivity.jacobian,
+            method,
+            row_scale=scale,
+            lam=lam,
+            iterations=iterations,
+            relaxation=relaxation,
+            response_sign=self.sensitivity.response_sign,
         )
         m = self.reconstructor.matrix
         self._pixel_matrix = (
@@ -368,14 +374,15 @@ def ect_image_metrics(
             raise EctskinError(f"trials {missing[:3]} are not in the recording")
     wanted = set(names if trials is None else trials)
     touch = [
-        t for t in rec.trials
+        t
+        for t in rec.trials
         if t.name in wanted and t.contact is not None and t.contact.any() and t.finger_surface
     ]
     if not touch:
         raise EctskinError("ect_image_metrics: no trial with contact frames to evaluate")
     sensor = sensor or SensorModel(rec.layout)
     grid = grid or ect_grid(rec.layout)
-    cfg = sensor.manipulator.config
+    w_mm, t_mm = sensor.manipulator.config.width_mm, sensor.manipulator.config.thickness_mm
     state_ref = _state_references(rec)
     fallback = None
     errors = {m: [] for m in methods}
@@ -397,9 +404,15 @@ def ect_image_metrics(
                 fallback = touch_reference(rec)
             log.info("no no-contact trial at %s ml: using the recording's touch reference", state)
         builders = {
-            m: Reconstructor.build(sens.jacobian, m, row_scale=ref if ref is not None else
-                                   sens.readout, lam=lam, iterations=iterations,
-                                   relaxation=relaxation, response_sign=sens.response_sign)
+            m: Reconstructor.build(
+                sens.jacobian,
+                m,
+                row_scale=ref if ref is not None else sens.readout,
+                lam=lam,
+                iterations=iterations,
+                relaxation=relaxation,
+                response_sign=sens.response_sign,
+            )
             for m in methods
         }
         L = layer_sum_matrix(grid.pixel, grid.n_pixels)
@@ -423,26 +436,31 @@ def ect_image_metrics(
                 for row, k in zip(img, idx):
                     f, uv, _ = locate(row, grid, localisation)
                     face = grid.faces[f]
-                    errors[m].append(
-                        float(on_skin_distance(face, uv, true_face, t.finger_uv_mm[k],
-                                               cfg.width_mm, cfg.thickness_mm))
-                    )
+                    d = on_skin_distance(face, uv, true_face, t.finger_uv_mm[k], w_mm, t_mm)
+                    errors[m].append(float(d))
                     face_ok[m].append(face == true_face)
-            if method in builders and len(examples) < n_examples and (
-                touch.index(t) % example_every == 0
+            if (
+                method in builders
+                and len(examples) < n_examples
+                and (touch.index(t) % example_every == 0)
             ):
                 k = idx[idx.size // 2]
                 r = builders[method]
-                row = (t.capacitance[k] - c0) @ pix_mats[method].T if pix_mats[method] is not None \
+                row = (
+                    (t.capacitance[k] - c0) @ pix_mats[method].T
+                    if pix_mats[method] is not None
                     else collapse_layers(r.image(t.capacitance[k] - c0), grid.pixel, grid.n_pixels)
+                )
                 f, uv, _ = locate(row, grid, localisation)
-                examples.append({
-                    "trial": t.name,
-                    "frame": int(k),
-                    "images": grid.face_images(row),
-                    "true": (true_face, *map(float, t.finger_uv_mm[k])),
-                    "pred": (grid.faces[f], float(uv[0]), float(uv[1])),
-                })
+                examples.append(
+                    {
+                        "trial": t.name,
+                        "frame": int(k),
+                        "images": grid.face_images(row),
+                        "true": (true_face, *map(float, t.finger_uv_mm[k])),
+                        "pred": (grid.faces[f], float(uv[0]), float(uv[1])),
+                    }
+                )
     out: dict = {}
     for m in methods:
         e = np.asarray(errors[m])
@@ -462,8 +480,13 @@ def ect_image_metrics(
     out["examples"] = examples
     out["grid"] = {"faces": list(grid.faces), "extents": [list(e) for e in grid.extents]}
     out["settings"] = {
-        "method": method, "localisation": localisation, "frame_step": frame_step, "lam": lam,
-        "iterations": iterations, "relaxation": relaxation, "pixel_mm": grid.pixel_mm,
+        "method": method,
+        "localisation": localisation,
+        "frame_step": frame_step,
+        "lam": lam,
+        "iterations": iterations,
+        "relaxation": relaxation,
+        "pixel_mm": grid.pixel_mm,
         "kind": kind,
     }
     return out

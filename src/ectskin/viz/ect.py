@@ -40,16 +40,28 @@ def plot_ect_images(
             ax = axes[r, c]
             u0, u1, v0, v1 = extents[c]
             im = ax.imshow(
-                ex["images"][face], origin="lower", extent=(u0, u1, v0, v1), cmap="viridis",
-                vmin=0.0, vmax=vmax, aspect="equal",
+                ex["images"][face],
+                origin="lower",
+                extent=(u0, u1, v0, v1),
+                cmap="viridis",
+                vmin=0.0,
+                vmax=vmax,
+                aspect="equal",
             )
             ax.add_patch(Rectangle((u0, v0), u1 - u0, v1 - v0, fill=False, color="0.3", lw=1))
             if ex["true"][0] == face:
-                ax.plot(ex["true"][1], ex["true"][2], "o", mfc="none", mec="w", ms=9, mew=2,
-                        label="true")
+                ax.plot(
+                    ex["true"][1],
+                    ex["true"][2],
+                    "o",
+                    mfc="none",
+                    mec="w",
+                    ms=9,
+                    mew=2,
+                    label="true",
+                )
             if ex["pred"][0] == face:
-                ax.plot(ex["pred"][1], ex["pred"][2], "x", color="k", ms=9, mew=2,
-                        label="located")
+                ax.plot(ex["pred"][1], ex["pred"][2], "x", color="k", ms=9, mew=2, label="located")
             ax.set_title(f"{ex.get('trial', '')} {face}".strip(), fontsize=8)
             ax.set_xlabel("u (mm)")
             if c == 0:
