@@ -31,6 +31,7 @@ BENCHMARKS = {
         ["--touch-epochs", "2", "--touch-frames", "5000", "--c2dt-steps", "3", "--calls", "50"],
     ),
     "bench_live": ("bench_live.py", [], ["--frames", "500", "--paced-seconds", "1"]),
+    "bench_ect": ("bench_ect.py", [], ["--states", "1", "--frames", "200"]),
 }
 
 

@@ -6,10 +6,21 @@
 * :mod:`~ectskin.electrostatics.mom` — potential coefficients with exact near-field integrals,
   the Maxwell capacitance matrix by Cholesky, the ECT pair readout ``C_ij = −K_ij``, and the
   first-order sensitivity of K to a permittivity change in a volume (``dielectric_sensitivity``).
+* :mod:`~ectskin.electrostatics.dielectric` — conductors with dielectric bodies (boundary
+  elements), near-exact panel fields, and per-voxel ECT Jacobians.
+* :mod:`~ectskin.electrostatics.reconstruct` — ECT images: LBP, Tikhonov, projected Landweber.
 
 Units: mm, pF, V, pC.
 """
 
+from ectskin.electrostatics.dielectric import (
+    box_panels,
+    conductor_jacobian,
+    dielectric_capacitance,
+    panel_field,
+    panel_potential,
+    permittivity_jacobian,
+)
 from ectskin.electrostatics.meshing import (
     STRIP_PANEL_LENGTH_MM,
     STRIP_PANELS_ACROSS,
@@ -38,8 +49,30 @@ from ectskin.electrostatics.mom import (
     two_terminal_capacitance,
 )
 from ectskin.electrostatics.panels import Panels
+from ectskin.electrostatics.reconstruct import (
+    METHODS,
+    Reconstructor,
+    centroid_location,
+    collapse_layers,
+    landweber,
+    normalise_sensitivity,
+    peak_location,
+)
 
 __all__ = [
+    "METHODS",
+    "Reconstructor",
+    "box_panels",
+    "centroid_location",
+    "collapse_layers",
+    "conductor_jacobian",
+    "dielectric_capacitance",
+    "landweber",
+    "normalise_sensitivity",
+    "panel_field",
+    "panel_potential",
+    "peak_location",
+    "permittivity_jacobian",
     "EPS0_PF_PER_MM",
     "NEAR_FACTOR",
     "STRIP_PANELS_ACROSS",

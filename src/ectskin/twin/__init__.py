@@ -4,6 +4,7 @@ mechanics (bulge, bending, dimple) ─► sensor (panels, method of moments) ─
 ─► protocol + simulate (the paper's experiment) ─► characterize (paper Fig. 3, 4), live (a source).
 """
 
+from ectskin.twin.ect import EctGrid, EctImager, ect_grid, ect_image_metrics, sensitivity
 from ectskin.twin.mechanics import Manipulator, ManipulatorConfig, Touch
 from ectskin.twin.protocol import Protocol, TrialPlan, plan_trials
 from ectskin.twin.readout import MocapConfig, ReadoutConfig
@@ -11,6 +12,11 @@ from ectskin.twin.sensor import Discretisation, Finger, SensorModel
 from ectskin.twin.simulate import simulate_experiment, simulate_trial
 
 __all__ = [
+    "EctGrid",
+    "EctImager",
+    "ect_grid",
+    "ect_image_metrics",
+    "sensitivity",
     "Discretisation",
     "Finger",
     "Manipulator",
