@@ -112,6 +112,7 @@ def localisation_metrics(
     state_names: Sequence[str] | None = None,
     true_uv: np.ndarray | None = None,
     face_extent: dict[str, Any] | None = None,
+    distance: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Error of one finger's predicted point over frames (rest points (n, 3), see
     :func:`rest_points`): ``loc_mm_mean`` / ``_median`` / ``_p90``, ``face_accuracy``,

@@ -15,22 +15,28 @@ trials carry finger ground truth; otherwise the contact steps are skipped with a
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from functools import partial
 from pathlib import Path
 from typing import Any
 
-from ectskin._files import read_json
-from ectskin.io import write_recording
+from ectskin._files import read_json, save_figure_atomic, write_json_atomic
+from ectskin.io import read_recording, write_recording
 from ectskin.learn.evaluate import evaluate_run
 from ectskin.learn.train import TrainConfig, train_from_recording
 from ectskin.pipeline.config import CONTACT_RUN, RUNS, ReproduceConfig
-from ectskin.pipeline.runner import StepRunner
+from ectskin.pipeline.runner import StepRunner, digest
 from ectskin.pipeline.steps import recording_digest, run_settings
 from ectskin.twin import simulate_experiment
+from ectskin.twin.ect import METHODS, ect_image_metrics
+from ectskin.viz import figure_file
+from ectskin.viz.ect import plot_ect_images
 
 log = logging.getLogger(__name__)
 
 CONTACT_FILE = "contact.h5"
+#: every this many frames in contact is imaged by the ECT step
+ECT_FRAME_STEP = 10
 
 
 def contact_data(runner: StepRunner, config: ReproduceConfig) -> tuple[Path, dict[str, Any]] | None:
@@ -103,3 +109,60 @@ def contact_run(
     eval_settings = {**settings, "baselines": config.baselines, **config.figure_settings}
     runner.step(f"evaluate_{name}", eval_settings, [run_dir / "metrics.json"], evaluate)
     return read_json(run_dir / "metrics.json", "contact run metrics")
+
+
+def ect_images(
+    runner: StepRunner, config: ReproduceConfig, data_path: Path, data_settings: dict[str, Any]
+) -> dict[str, Any]:
+    """Step "ect_images": training-free ECT images of the contact run's test trials
+    (:func:`ectskin.twin.ect.ect_image_metrics`, every 10th frame in contact) into
+    ``OUT_DIR/ect/metrics.json`` and a figure of a few touches beside the truth. Returns the
+    metrics (without the image arrays)."""
+    out_dir = runner.out / "ect"
+    split = read_json(runner.out / "runs" / CONTACT_RUN / "split.json", "contact run split")
+    test = list(split.get("test") or [])
+    settings = {"data": digest(data_settings), "test_trials": test, **config.figure_settings}
+
+    def make() -> None:
+        rec = read_recording(data_path)
+        result = ect_image_metrics(rec, trials=test, frame_step=ECT_FRAME_STEP)
+        examples = result.pop("examples")
+        grid = result["grid"]
+        out_dir.mkdir(parents=True, exist_ok=True)
+        if examples:
+            fig = plot_ect_images(examples, grid["faces"], grid["extents"])
+            save_figure_atomic(
+                fig, out_dir / figure_file("ect_images", config.figure_format), dpi=config.dpi
+            )
+        write_json_atomic(out_dir / "metrics.json", result)
+
+    runner.step("ect_images", settings, [out_dir], make)
+    return read_json(out_dir / "metrics.json", "ECT image metrics")
+
+
+def ect_block(result: Mapping[str, Any], contact: Mapping[str, Any] | None) -> dict[str, Any]:
+    """metrics.json's ``ect_image``: the default method's errors on top, every method beside
+    them, the learned contact model's error for comparison, and the timing."""
+    methods = {m: result[m] for m in METHODS if m in result}
+    best = result.get("settings", {}).get("method", "tikhonov")
+    top = methods.get(best, {})
+    learned = (contact or {}).get("contact", {}).get("loc_mm_mean")
+    timing = result.get("timing") or {}
+    jac = list((timing.get("jacobian_s") or {}).values())
+    return {
+        "method": best,
+        "loc_mm_mean": top.get("loc_mm_mean"),
+        "loc_mm_median": top.get("loc_mm_median"),
+        "loc_mm_p90": top.get("loc_mm_p90"),
+        "face_accuracy": top.get("face_accuracy"),
+        "methods": methods,
+        "learned_loc_mm_mean": learned,
+        "ratio_to_learned": (
+            top["loc_mm_mean"] / learned if learned and top.get("loc_mm_mean") is not None else None
+        ),
+        "timing": {
+            "jacobian_s_per_state": (sum(jac) / len(jac)) if jac else None,
+            "reconstruct_us_per_frame": timing.get("reconstruct_us_per_frame"),
+        },
+        "settings": result.get("settings"),
+    }

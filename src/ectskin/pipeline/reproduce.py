@@ -26,6 +26,7 @@ protocol is given, and both also train the TouchMLP with the ``robust`` profile 
 from __future__ import annotations
 
 import logging
+import shutil
 import time
 from typing import Any
 
@@ -33,11 +34,12 @@ from ectskin._check import EctskinError, check_type
 from ectskin._files import read_json, write_json_atomic
 from ectskin.learn.threads import torch_threads
 from ectskin.pipeline.config import ReproduceConfig
-from ectskin.pipeline.contact import contact_data, contact_run
+from ectskin.pipeline.contact import contact_data, contact_run, ect_block, ect_images
 from ectskin.pipeline.metrics import combine_metrics, copy_figures
 from ectskin.pipeline.runner import StepRunner
 from ectskin.pipeline.steps import characterise, evaluate_runs, simulate_or_load, train_runs
 from ectskin.report import write_report
+from ectskin.viz import figure_file
 
 log = logging.getLogger(__name__)
 
@@ -68,11 +70,12 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
         characterise(runner, config)
     train_runs(runner, config, data_path, data_settings, threads)
     results = evaluate_runs(runner, config, data_path, data_settings)
-    contact = None
+    contact = ect = None
     if config.contact:
         found = contact_data(runner, config)
         if found is not None:
             contact = contact_run(runner, config, *found, threads)
+            ect = ect_images(runner, config, *found)
 
     metrics = combine_metrics(
         results,
@@ -84,10 +87,20 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
         data_path=data_path,
         contact=contact,
     )
+    if ect is not None:
+        metrics["ect_image"] = ect_block(ect, contact)
     if config.command:
         metrics["command"] = config.command
     runs = config.run_names + (("contact",) if contact is not None else ())
     figures = copy_figures(out, runs, config.figure_format)
+    ect_figure = out / "ect" / figure_file("ect_images", config.figure_format)
+    if ect is not None and ect_figure.is_file():
+        dst = out / "figures" / ect_figure.name
+        shutil.copyfile(ect_figure, dst)
+        figures[
+            "ECT images (Tikhonov, no training) of test touches: true point (circle), located "
+            "peak (cross)"
+        ] = dst.relative_to(out).as_posix()
     metrics["figures"] = dict(figures)
     metrics["timings_s"]["total"] = time.perf_counter() - t_start
     write_json_atomic(out / "metrics.json", metrics)

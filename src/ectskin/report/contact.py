@@ -119,8 +119,9 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
                 "is trained and tested on the contact experiment (contact.h5: the paper's finger, "
                 "forces and handling; chambers at their lowest and highest level; touches "
                 "anywhere in the region, lifts, hover and a second finger), split by trial. "
-                "Errors are straight-line distances on the body at rest: a wrong face costs at "
-                "least the body's thickness. Baselines: "
+                "Errors are distances over the skin at rest: on one face the distance in (u, v); "
+                "a point on the wrong face is charged the way around the body's side edge (the "
+                "same rule as the ECT images below). Baselines: "
                 + ", ".join(baseline_name(b) for b in (c.get("baselines") or {}))
                 + " (the region classifier's region centre, k-nearest neighbours, ridge).",
             )

@@ -15,8 +15,9 @@ Training loss (:class:`ContactCriterion`), per frame:
   cheaper of the two orders (permutation-invariant).
 
 Validation metric: the mean distance (mm) between each finger's true and predicted points,
-slot 0 for one finger, matched for two; a wrong face is charged the body's thickness across
-(:mod:`ectskin.learn.contact_metrics`). Test metrics: localisation (mean / median / p90, per face,
+slot 0 for one finger, matched for two; a wrong face is charged the body's thickness across.
+Test localisation errors are distances over the skin (:func:`ectskin.twin.ect.on_skin_distance`:
+around the body's side edge between front and back). Test metrics: localisation (mean / median / p90, per face,
 per inflation state, a map per face), force, hover detection against height, finger count and
 per-finger error after Hungarian matching, each beside the baselines of
 :mod:`ectskin.learn.contact_baselines` on the same test frames.
@@ -56,6 +57,7 @@ from ectskin.learn.normalizer import Normalizer
 from ectskin.learn.predict import forward_batches
 from ectskin.learn.profiles import TrainSettings
 from ectskin.learn.tasks.base import Criterion, EvalCase, Task, as_tensor, build_config
+from ectskin.twin.ect import on_skin_distance
 from ectskin.twin.mechanics import ManipulatorConfig
 from ectskin.viz.contact import plot_error_maps, plot_force_scatter, plot_hover_curve
 
@@ -365,6 +367,16 @@ def contact_report(
         faces, np.clip(p_face, 0, len(faces) - 1), p_uv, width_mm=width, thickness_mm=thickness
     )
     single = test.count == 1
+    over_skin = np.empty(int(single.sum()))
+    tf, pf = t_face[single, 0], np.clip(p_face[single, 0], 0, len(faces) - 1)
+    tuv, puv = test.uv[single, 0], p_uv[single, 0]
+    for a in range(len(faces)):
+        for b in range(len(faces)):
+            m = (tf == a) & (pf == b)
+            if m.any():
+                over_skin[m] = on_skin_distance(
+                    faces[a], tuv[m], faces[b], puv[m], width, thickness
+                )
     loc = localisation_metrics(
         true_pts[single, 0],
         pred_pts[single, 0],
@@ -375,6 +387,7 @@ def contact_report(
         state_names=[_state_name(s) for s in test.states],
         true_uv=test.uv[single, 0] if with_maps else None,
         face_extent=test.face_extent if with_maps else None,
+        distance=over_skin,
     )
     p0 = slot_columns(pred, 0)
     force = force_metrics(test.force[single, 0], p0["force_n"][single])
