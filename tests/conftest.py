@@ -114,6 +114,61 @@ def synthetic_recording(
     return Recording(layout, trials, 30.0)
 
 
+def flat_skin_recording(layout=LAYOUT, n_frames=60, n_trials=40, seed=0) -> Recording:
+    """A flat skin whose readout is analytic in the finger's point: each pair's change is a
+    Gaussian bump of the distance from the finger to the pair's own spot on the front face,
+    times the force (so (u, v) and F are recoverable), on a per-pair base. Markers are random
+    walks (for the tracking runs of a reproduction)."""
+    rng = np.random.default_rng(seed)
+    p = layout.n_pairs
+    base = rng.uniform(0.5, 2.0, p)
+    spots = np.column_stack([rng.uniform(-25, 25, p), rng.uniform(0, 120, p)])
+    t = np.arange(n_frames) / 30
+    trials = [
+        Trial(
+            "rest",
+            base + rng.normal(0, 1e-5, (n_frames, p)),
+            t,
+            np.zeros(n_frames),
+            inflation=(0.0, 0.0, 0.0),
+            meta={"kind": "no_contact"},
+            markers=rng.normal(0, 1, (n_frames, layout.n_markers, 3)),
+            contact=np.zeros(n_frames, bool),
+            finger_uv_mm=np.full((n_frames, 2), np.nan),
+            finger_height_mm=np.full(n_frames, np.nan),
+            force=np.zeros(n_frames),
+        )
+    ]
+    front = [r for r in layout.regions if r.surface == "front"]
+    for k in range(n_trials):
+        reg = front[k % len(front)]
+        uv = np.array([rng.uniform(*reg.u_mm), rng.uniform(*reg.v_mm)])
+        force = np.linspace(0.5, 1.5, n_frames)
+        d2 = ((spots - uv) ** 2).sum(1)
+        bump = np.exp(-d2 / (2 * 30.0**2))
+        c = base * (1 - 0.05 * force[:, None] * bump[None, :])
+        trials.append(
+            Trial(
+                f"touch_{k}",
+                c + rng.normal(0, 1e-5, c.shape),
+                t,
+                np.full(n_frames, reg.id),
+                inflation=(0.0, 0.0, 0.0),
+                region=reg.id,
+                meta={"kind": "touch"},
+                markers=10 * np.arange(layout.n_markers)[None, :, None]
+                + np.cumsum(rng.normal(0, 0.3, (n_frames, layout.n_markers, 3)), 0),
+                contact=np.ones(n_frames, bool),
+                finger_uv_mm=np.repeat(uv[None], n_frames, 0),
+                finger_height_mm=np.zeros(n_frames),
+                force=force,
+                finger_surface="front",
+            )
+        )
+    return Recording(layout, trials, 30.0)
+
+
+
 @pytest.fixture
 def make_recording():
     """The :func:`synthetic_recording` factory."""
@@ -150,3 +205,9 @@ def _spawn_cli(argv: list[str], wait_for: str):
 def spawn_cli():
     """The :func:`_spawn_cli` helper: a real ``ectskin`` process with its stderr watched."""
     return _spawn_cli
+
+
+@pytest.fixture
+def contact_recording():
+    """The :func:`flat_skin_recording` factory (per-frame finger ground truth)."""
+    return flat_skin_recording

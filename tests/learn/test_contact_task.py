@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 import torch
 
-from ectskin.io import Recording, Trial
 from ectskin.learn.contact_baselines import region_centre_baseline
 from ectskin.learn.contact_data import MAX_FINGERS, contact_dataset
 from ectskin.learn.models.contact import ContactNet, ContactNetConfig
@@ -16,58 +15,8 @@ from ectskin.learn.tasks.contact import ContactCriterion, contact_report
 from ectskin.learn.train import train
 
 
-def _flat_skin_recording(layout, n_frames=60, n_trials=40, seed=0) -> Recording:
-    """A flat skin whose readout is analytic in the finger's point: each pair's change is a
-    Gaussian bump of the distance from the finger to the pair's own spot on the front face,
-    times the force (so (u, v) and F are recoverable), on a per-pair base."""
-    rng = np.random.default_rng(seed)
-    p = layout.n_pairs
-    base = rng.uniform(0.5, 2.0, p)
-    spots = np.column_stack([rng.uniform(-25, 25, p), rng.uniform(0, 120, p)])
-    t = np.arange(n_frames) / 30
-    trials = [
-        Trial(
-            "rest",
-            base + rng.normal(0, 1e-5, (n_frames, p)),
-            t,
-            np.zeros(n_frames),
-            inflation=(0.0, 0.0, 0.0),
-            meta={"kind": "no_contact"},
-            contact=np.zeros(n_frames, bool),
-            finger_uv_mm=np.full((n_frames, 2), np.nan),
-            finger_height_mm=np.full(n_frames, np.nan),
-            force=np.zeros(n_frames),
-        )
-    ]
-    front = [r for r in layout.regions if r.surface == "front"]
-    for k in range(n_trials):
-        reg = front[k % len(front)]
-        uv = np.array([rng.uniform(*reg.u_mm), rng.uniform(*reg.v_mm)])
-        force = np.linspace(0.5, 1.5, n_frames)
-        d2 = ((spots - uv) ** 2).sum(1)
-        bump = np.exp(-d2 / (2 * 30.0**2))
-        c = base * (1 - 0.05 * force[:, None] * bump[None, :])
-        trials.append(
-            Trial(
-                f"touch_{k}",
-                c + rng.normal(0, 1e-5, c.shape),
-                t,
-                np.full(n_frames, reg.id),
-                inflation=(0.0, 0.0, 0.0),
-                region=reg.id,
-                meta={"kind": "touch"},
-                contact=np.ones(n_frames, bool),
-                finger_uv_mm=np.repeat(uv[None], n_frames, 0),
-                finger_height_mm=np.zeros(n_frames),
-                force=force,
-                finger_surface="front",
-            )
-        )
-    return Recording(layout, trials, 30.0)
-
-
-def test_dataset_targets_by_hand(layout):
-    rec = _flat_skin_recording(layout, n_frames=5, n_trials=2)
+def test_dataset_targets_by_hand(layout, contact_recording):
+    rec = contact_recording(layout, n_frames=5, n_trials=2)
     # make trial touch_0 lift at frame 3 to 4 mm (hover) and frame 4 to 40 mm (not hover)
     t = rec.trials[1]
     t.contact[3:] = False
@@ -106,8 +55,10 @@ def test_the_loss_matches_two_fingers_in_either_order():
     assert not torch.allclose(a[2], b[2])  # one finger is slot 0, the empty slot is not a finger
 
 
-def test_contact_model_learns_a_flat_skin_better_than_region_centres(layout, tmp_path):
-    rec = _flat_skin_recording(layout, n_frames=40, n_trials=60)
+def test_contact_model_learns_a_flat_skin_better_than_region_centres(
+    layout, tmp_path, contact_recording
+):
+    rec = contact_recording(layout, n_frames=40, n_trials=60)
     task = get_task("contact")
     d = task.dataset(rec, window=2)
     groups = np.arange(d.n_groups)
