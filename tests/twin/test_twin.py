@@ -1,6 +1,8 @@
 """The digital twin: electrostatics on the deformed sensor, the paper's §2.2 characterisation,
 the protocol, and the simulation driver."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -90,7 +92,8 @@ def test_air_chambers_lower_the_pairs_they_lie_between(sensor, layout):
     assert rel[~same].max() < rel[same].min()
     # the same dielectric as the body: no correction at all
     np.testing.assert_allclose(
-        SensorModel(layout, chamber_eps_r=2.0).capacitance([0, 0, 0]), homogeneous.capacitance([0, 0, 0])
+        SensorModel(layout, chamber_eps_r=2.0).capacitance([0, 0, 0]),
+        homogeneous.capacitance([0, 0, 0]),
     )
     with pytest.raises(EctskinError, match="chamber_eps_r"):
         SensorModel(layout, chamber_eps_r=0.5)
@@ -153,7 +156,10 @@ def test_the_trial_model_stays_close_to_direct_solves(sensor, layout, region, p,
     for i in frames:
         handling = Handling(path.shear_n[i : i + 1], hand.push, hand.push_force_n[i : i + 1])
         direct = sensor.capacitance(
-            p, Touch(reg.surface, tuple(path.uv_mm[i])), path.force_n[i : i + 1], handling,
+            p,
+            Touch(reg.surface, tuple(path.uv_mm[i])),
+            path.force_n[i : i + 1],
+            handling,
             heights_mm=path.height_mm[i : i + 1],
         )[0]
         err = np.abs(c[i] - direct)
@@ -211,7 +217,9 @@ def test_protocol_rejects_bad_parameters():
     with pytest.raises(EctskinError, match="force_range_n"):
         Protocol(force_range_n=(2.0, 1.0))
     with pytest.raises(EctskinError, match="impossible inflation"):
-        simulate_experiment(Protocol(levels_ml=(-5.0,), touch_trials=0, duration_s=0.2), progress=False)
+        simulate_experiment(
+            Protocol(levels_ml=(-5.0,), touch_trials=0, duration_s=0.2), progress=False
+        )
 
 
 def test_simulation_is_deterministic_and_independent_of_workers(layout):
@@ -233,7 +241,9 @@ def test_simulation_is_deterministic_and_independent_of_workers(layout):
 
 
 def test_lifts_give_per_frame_contact_labels():
-    proto = Protocol(levels_ml=(0.0,), touch_trials=1, no_contact_trial=False, duration_s=20.0, lifts=True)
+    proto = Protocol(
+        levels_ml=(0.0,), touch_trials=1, no_contact_trial=False, duration_s=20.0, lifts=True
+    )
     t = simulate_experiment(proto, workers=1, progress=False).trials[0]
     assert set(np.unique(t.labels)) == {0, t.region}
     assert np.all(t.force[t.labels == 0] == 0)
@@ -245,7 +255,9 @@ def test_the_finger_is_human(layout):
     proto = Protocol(push_max_n=0.0)
     reg = layout.region(5)
     lo, hi = region_bounds(reg, proto.touch_margin)
-    path = finger_path(900, 30.0, np.asarray([reg.centre_mm]), lo, hi, proto, np.random.default_rng(1))
+    path = finger_path(
+        900, 30.0, np.asarray([reg.centre_mm]), lo, hi, proto, np.random.default_rng(1)
+    )
     assert path.contact.all() and np.all(path.height_mm == 0)
     f = path.force_n
     spectrum = np.abs(np.fft.rfft(f - f.mean())) ** 2
@@ -256,9 +268,16 @@ def test_the_finger_is_human(layout):
     spread = path.uv_mm.std(axis=0)
     assert np.all((spread > 0.1) & (spread < 1.5))
     assert np.all((path.uv_mm >= lo) & (path.uv_mm <= hi))
-    assert np.allclose(np.linalg.norm(path.shear_n, axis=1) / f, np.linalg.norm(path.shear_n[0]) / f[0])
+    assert np.allclose(
+        np.linalg.norm(path.shear_n, axis=1) / f, np.linalg.norm(path.shear_n[0]) / f[0]
+    )
     hov = finger_path(
-        900, 30.0, np.asarray([reg.centre_mm]), lo, hi, Protocol(approach=True, hover=True),
+        900,
+        30.0,
+        np.asarray([reg.centre_mm]),
+        lo,
+        hi,
+        Protocol(approach=True, hover=True),
         np.random.default_rng(2),
     )
     assert not hov.contact[0] and not hov.contact[-1] and hov.contact.any()
@@ -302,8 +321,14 @@ def test_live_twin_streams_touch_and_inflation():
 
 
 def test_touch_dwells_move_the_finger_within_its_region(layout):
-    proto = Protocol(levels_ml=(0.0,), touch_trials=1, no_contact_trial=False, duration_s=3.0,
-                     touch_dwells=3, seed=2)
+    proto = Protocol(
+        levels_ml=(0.0,),
+        touch_trials=1,
+        no_contact_trial=False,
+        duration_s=3.0,
+        touch_dwells=3,
+        seed=2,
+    )
     t = simulate_experiment(proto, workers=1, progress=False).trials[0]
     points = t.meta["touch_uv_mm"]
     assert len(points) == 3 and len({tuple(p) for p in points}) == 3
@@ -316,10 +341,14 @@ def test_touch_dwells_move_the_finger_within_its_region(layout):
 
 
 def test_trials_carry_the_fingers_ground_truth(layout):
-    proto = Protocol(levels_ml=(0.0,), touch_trials=1, duration_s=4.0, hover=True, approach=True, seed=4)
+    proto = Protocol(
+        levels_ml=(0.0,), touch_trials=1, duration_s=4.0, hover=True, approach=True, seed=4
+    )
     rec = simulate_experiment(proto, workers=1, progress=False)
     rest, touch = rec.trials
-    assert rest.has_ground_truth and not rest.contact.any() and np.isnan(rest.finger_height_mm).all()
+    assert (
+        rest.has_ground_truth and not rest.contact.any() and np.isnan(rest.finger_height_mm).all()
+    )
     assert touch.has_ground_truth and touch.finger_surface == layout.region(touch.region).surface
     on = touch.contact
     assert on.any() and (~on).any()
@@ -327,4 +356,38 @@ def test_trials_carry_the_fingers_ground_truth(layout):
     assert np.all(touch.force[~on] == 0) and np.all(touch.force[on] > 0)
     np.testing.assert_array_equal(touch.labels != 0, on)
     reg = layout.region(touch.region)
-    assert np.all((touch.finger_uv_mm[:, 0] > reg.u_mm[0]) & (touch.finger_uv_mm[:, 0] < reg.u_mm[1]))
+    assert np.all(
+        (touch.finger_uv_mm[:, 0] > reg.u_mm[0]) & (touch.finger_uv_mm[:, 0] < reg.u_mm[1])
+    )
+
+
+def test_each_dwell_has_its_own_readout_model(sensor, layout):
+    """A finger that moves to new points within a trial (touch_dwells): the readout of a frame
+    of the last dwell against a direct MoM solve there stays within 0.5 fF; one model around the
+    trial's mean point (before dwells had their own) was far off."""
+    from ectskin.twin.simulate import _rows, _touch_segment
+
+    proto = Protocol(touch_dwells=2, push_max_n=0.0)
+    reg = layout.region(5)
+    lo, hi = region_bounds(reg, proto.touch_margin)
+    aims = np.array([lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo)])  # the region's far corners
+    rng = np.random.default_rng(3)
+    n, p = 120, [10, 0, 20]
+    path = finger_path(n, 30.0, aims, lo, hi, proto, rng)
+    hand = hand_push(n, 30.0, proto, rng, sensor.manipulator.config)
+    plan = SimpleNamespace(surface=reg.surface, touch_uv_mm=tuple(map(tuple, aims)))
+    rows = np.array_split(np.arange(n), 2)[1]
+    c, _, _ = _touch_segment(
+        sensor, p, plan, proto, _rows(path, rows), _rows(hand, rows), None, None
+    )
+    one = TouchResponse(sensor, p, reg.surface, path, hand, None, proto)(path, hand)
+    i = rows[len(rows) // 2]
+    handling = Handling(path.shear_n[i : i + 1], hand.push, hand.push_force_n)
+    direct = sensor.capacitance(
+        p, Touch(reg.surface, tuple(path.uv_mm[i])), path.force_n[i : i + 1], handling
+    )[0]
+    err_dwell = np.abs(c[len(rows) // 2] - direct).max()
+    err_one = np.abs(one[i] - direct).max()
+    print(f"dwell model {err_dwell * 1e3:.3f} fF, one model {err_one * 1e3:.3f} fF")
+    assert err_dwell < 0.5e-3, err_dwell
+    assert err_one > 5 * err_dwell, (err_one, err_dwell)
