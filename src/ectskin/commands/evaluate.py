@@ -89,7 +89,27 @@ def summary_lines(metrics: dict) -> list[str]:
             lines.append(f"  worst trajectory {w['name']}: {w['ad_mm_mean']:.3f} mm")
         for name, b in (k.get("baselines") or {}).items():
             lines.append(f"  baseline {name}: AD {b['ad_mm_mean']:.3f} ± {b['ad_mm_std']:.3f} mm")
+    c = metrics.get("contact")
+    if c:
+        lines.append("contact: " + _contact_line(c))
+        for name, b in (c.get("baselines") or {}).items():
+            lines.append(f"  baseline {name}: " + _contact_line(b))
     return lines
+
+
+def _contact_line(c: dict) -> str:
+    """One line of a contact metrics block: point error, face, force, hover, count."""
+
+    def num(key: str, fmt: str) -> str:
+        v = c.get(key)
+        return format(v, fmt) if isinstance(v, int | float) else "-"
+
+    return (
+        f"point {num('loc_mm_mean', '.2f')} mm mean, {num('loc_mm_median', '.2f')} median, "
+        f"{num('loc_mm_p90', '.2f')} p90; face right {num('face_accuracy', '.1%')}; force MAE "
+        f"{num('force_mae_n', '.3f')} N; hover detected to {num('hover_detect_mm', 'g')} mm; "
+        f"count right {num('count_accuracy', '.1%')}"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
