@@ -11,7 +11,12 @@ CPU core. It reports frames/s sustained and the per-frame latency (frame arrival
 p99 / max, plus the cost of each stage measured alone. The target is >= 300 frames/s. At
 saturation the latency includes waiting behind the previous frame (``--queue-size 1`` keeps that
 to about one frame); the ``paced`` section gives the live latency, with frames arriving at
-``--paced-rate`` (below capacity) under the live policy ``skip-to-newest``.
+``--paced-rate`` (below capacity) under the live policy ``skip-to-newest``, with every head.
+
+Heads: ``end_to_end`` runs touch + tracking; ``all_heads`` adds the contact head (ContactNet on
+its window) and the ECT image head every ``--ect-every`` frames (default 1: every frame). The
+``stages_ms`` section also times the frame's JSON message with the ECT image (what ``--jsonl``
+and the dashboard encode, outside the inference loop).
 
 Soak::
 
@@ -22,9 +27,14 @@ attached (as ``ectskin live --record``), and checks zero lost frames (nothing sk
 engine, no sequence gaps, every frame recorded) and flat memory (RSS sampled every
 ``--rss-every`` seconds; start / end / max reported).
 
-Models: the run directories given with ``--touch-run`` / ``--track-run`` (``model.pt`` from
-``ectskin train``), else randomly initialised TouchMLP and C2DT of the paper's size (latency is
-what matters). Results are printed and written as JSON to ``--out``.
+Models: the run directories given with ``--touch-run`` / ``--track-run`` / ``--contact-run``
+(``model.pt`` from ``ectskin train``), else randomly initialised TouchMLP and C2DT of the paper's
+size and a ContactNet of the ``ectskin train contact`` default size (window 10; latency is what
+matters). The ECT imager is ``ectskin.twin.ect.EctImager`` of the layout at rest when that module
+is installed, else :class:`MatrixImager`, a stand-in with the same work per frame as its
+Tikhonov path (one precomputed pixel × pair matrix times Δc, the per-face reshape, then peak and
+centroid); ``result["models"]["ect"]`` says which ran. Results are printed and written as JSON
+to ``--out``.
 """
 
 from __future__ import annotations
@@ -60,6 +70,84 @@ def _pin_one_core() -> int | None:
         return cpu
     except (AttributeError, OSError):
         return None
+
+
+class MatrixImager:
+    """ECT imager stand-in (the interface the live engine uses) with the work of a linear
+    reconstruction: a fixed random (n_pix, n_pairs) matrix on a grid of ``pixel_mm`` (assumed 4 mm)
+    pixels per face; ``locate`` takes the peak pixel and the weighted centroid of the pixels of at
+    least half the peak within two pixels of it. Its images mean nothing; its cost is the point."""
+
+    def __init__(self, layout, pixel_mm: float = 4.0, seed: int = 0):
+        self.faces, self.grid_extent, self._shapes, uv, face = [], {}, [], [], []
+        for k, skin in enumerate(layout.skins):
+            nu = max(1, round((skin.u_mm[1] - skin.u_mm[0]) / pixel_mm))
+            nv = max(1, round((skin.v_mm[1] - skin.v_mm[0]) / pixel_mm))
+            u = np.linspace(*skin.u_mm, nu + 1)
+            v = np.linspace(*skin.v_mm, nv + 1)
+            vv, uu = np.meshgrid((v[1:] + v[:-1]) / 2, (u[1:] + u[:-1]) / 2, indexing="ij")
+            self.faces.append(skin.surface)
+            self.grid_extent[skin.surface] = [list(skin.u_mm), list(skin.v_mm)]
+            self._shapes.append((nv, nu))
+            uv.append(np.column_stack([uu.ravel(), vv.ravel()]))
+            face.append(np.full(nu * nv, k))
+        self._uv, self._face = np.concatenate(uv), np.concatenate(face)
+        rng = np.random.default_rng(seed)
+        self._matrix = rng.standard_normal((len(self._uv), layout.n_pairs))
+        self._radius = 2 * pixel_mm
+
+    def _pixels(self, dc):
+        return self._matrix @ dc
+
+    def image(self, dc):
+        y, out, a = self._pixels(dc), {}, 0
+        for name, (nv, nu) in zip(self.faces, self._shapes):
+            out[name] = y[a : a + nv * nu].reshape(nv, nu)
+            a += nv * nu
+        return out
+
+    def locate(self, dc):
+        y = self._pixels(dc)
+        k = int(np.argmax(y))
+        peak = y[k]
+        sel = (self._face == self._face[k]) & (
+            np.linalg.norm(self._uv - self._uv[k], axis=1) <= self._radius
+        )
+        sel &= y >= 0.5 * peak
+        w = y[sel] - 0.5 * peak
+        u, v = (w[:, None] * self._uv[sel]).sum(0) / w.sum() if w.sum() > 0 else self._uv[k]
+        return self.faces[self._face[k]], float(u), float(v), float(peak)
+
+
+def _imager(layout):
+    """(imager, description): the real EctImager when installed, else :class:`MatrixImager`."""
+    try:
+        from ectskin.twin.ect import EctImager
+    except ImportError:
+        return MatrixImager(layout), "MatrixImager stand-in (ectskin.twin.ect not installed)"
+    return EctImager(layout, (0.0, 0.0, 0.0)), "ectskin.twin.ect.EctImager at rest"
+
+
+def _contact(layout, contact_run, tmp: Path):
+    """ContactPredictor from a run dir, or a random ContactNet of the default training size."""
+    import torch
+
+    from ectskin.learn.checkpoint import save_checkpoint
+    from ectskin.learn.contact_predict import ContactPredictor
+    from ectskin.learn.models.contact import ContactNet, ContactNetConfig
+
+    if contact_run is None:
+        torch.manual_seed(0)
+        extent = {s.surface: [list(s.u_mm), list(s.v_mm)] for s in layout.skins}
+        extra = {
+            "pair_names": list(layout.pair_names),
+            "faces": list(extent),
+            "face_extent": extent,
+        }
+        contact_run = tmp / "contact"
+        model = ContactNet(ContactNetConfig(n_pairs=layout.n_pairs, window=10))
+        save_checkpoint(contact_run / "model.pt", model, extra=extra)
+    return ContactPredictor.from_run(contact_run)
 
 
 def _predictors(layout, touch_run, track_run, tmp: Path):
@@ -117,39 +205,65 @@ def _pct(a: np.ndarray) -> dict[str, float]:
     }
 
 
-def _stage_costs(touch, track, layout, n: int = 2000) -> dict[str, dict[str, float]]:
-    """Each predictor called alone (ms per call) with realistic inputs."""
+def _stage_costs(heads, layout, n: int = 2000) -> dict[str, dict[str, float]]:
+    """Each predictor called alone (ms per call) with realistic inputs, and the JSON message of
+    a frame with every head's output (the ECT image quantised)."""
+    from ectskin.live.heads import EctHead
+    from ectskin.live.output import Output
+
+    touch, track, contact, imager = (
+        heads["touch"],
+        heads["track"],
+        heads["contact"],
+        heads["imager"],
+    )
     rng = np.random.default_rng(1)
     x = (0.01 * rng.standard_normal(layout.n_pairs)).astype(np.float32)
     w = (0.01 * rng.standard_normal((track.window, layout.n_pairs))).astype(np.float32)
+    wc = (0.01 * rng.standard_normal((contact.window, layout.n_pairs))).astype(np.float32)
     init = rng.normal(size=(layout.n_markers, 3)).astype(np.float32) * 20
+    raw = 1 + 0.01 * rng.random(layout.n_pairs)
+    c0 = np.ones(layout.n_pairs)
+    ect = EctHead(imager, layout)
+    out_msg = Output(seq=1, t=0.0, raw=raw, calibrated=raw - 1, touch_probs=touch.predict(x))
+    out_msg.touch_cls = int(np.argmax(out_msg.touch_probs))
+    out_msg.markers_pred = out_msg.markers_reference = init.astype(np.float64)
+    out_msg.contact = contact.read(wc)
+    out_msg.ect = ect(raw, c0)
     out = {}
     for name, fn in (
         ("touch_predict", lambda: touch.predict(x)),
         ("track_predict", lambda: track.predict(w, init)),
+        ("contact_read", lambda: contact.read(wc)),
+        ("ect_image_locate", lambda: ect(raw, c0)),
+        ("message_json", lambda: json.dumps(out_msg.to_json_dict(), allow_nan=False)),
     ):
         for _ in range(50):
             fn()
         t = np.empty(n)
+        cpu0 = time.thread_time()
         for i in range(n):
             t0 = time.perf_counter()
             fn()
             t[i] = time.perf_counter() - t0
         out[name] = _pct(t * 1e3)
+        out[name]["cpu_mean"] = 1e3 * (time.thread_time() - cpu0) / n
     return out
 
 
-def throughput(args, layout, touch, track) -> dict:
+def throughput(args, layout, heads) -> dict:
     from ectskin.live import LiveEngine, ReplaySource
 
     rec = _recording(layout, args.frames, 30.0)
-    result = {"mode": "throughput", "frames": args.frames}
-    for label, t_model, k_model in (("engine_only", None, None), ("end_to_end", touch, track)):
+    result = {"mode": "throughput", "frames": args.frames, "ect_every": args.ect_every}
+    paper = {"touch": heads["touch"], "track": heads["track"]}
+    configs = (("engine_only", {}), ("end_to_end", paper), ("all_heads", heads))
+    for label, models in configs:
         src = ReplaySource(rec, speed=math.inf)
         eng = LiveEngine(
             src,
-            touch=t_model,
-            track=k_model,
+            **models,
+            ect_every=args.ect_every,
             policy="block",
             queue_size=args.queue_size,
             reference_frames=30,
@@ -161,29 +275,34 @@ def throughput(args, layout, touch, track) -> dict:
             lat[n[0]] = o.latency_ms
             n[0] += 1
 
-        t0 = time.perf_counter()
+        t0, cpu0 = time.perf_counter(), time.process_time()
         stats = eng.run(on_output=on_output)
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
         lat = lat[: n[0]]
         result[label] = {
             "fps": stats["processed"] / wall,
             "wall_s": wall,
+            # CPU time of the whole process (reader, engine, this callback) per frame: what one
+            # core can sustain when it is not shared (wall-clock fps drops when it is)
+            "cpu_ms_per_frame": 1e3 * cpu / max(stats["processed"], 1),
+            "fps_cpu_bound": stats["processed"] / cpu if cpu > 0 else float("nan"),
             "processed": stats["processed"],
             "dropped": stats["dropped"],
             "errors": stats["errors"],
             "latency_ms": _pct(lat),
         }
         logging.info(
-            "%s: %.0f frames/s, latency p50 %.3f ms p99 %.3f ms",
+            "%s: %.0f frames/s (%.0f CPU-bound), latency p50 %.3f ms p99 %.3f ms",
             label,
             result[label]["fps"],
+            result[label]["fps_cpu_bound"],
             result[label]["latency_ms"]["p50"],
             result[label]["latency_ms"]["p99"],
         )
     # live latency: frames paced at --paced-rate (below capacity), live policy skip-to-newest
     n_paced = int(args.paced_rate * args.paced_seconds)
     src = ReplaySource(_recording(layout, n_paced, 30.0), speed=args.paced_rate / 30.0)
-    eng = LiveEngine(src, touch=touch, track=track, policy="skip-to-newest")
+    eng = LiveEngine(src, **heads, ect_every=args.ect_every, policy="skip-to-newest")
     lat = []
     stats = eng.run(on_output=lambda o: lat.append(o.latency_ms))
     result["paced"] = {
@@ -192,6 +311,7 @@ def throughput(args, layout, touch, track) -> dict:
         "processed": stats["processed"],
         "dropped": stats["dropped"],
         "latency_ms": _pct(np.asarray(lat)),
+        "heads": "all",
     }
     logging.info(
         "paced %.0f frames/s: %d dropped of %d, latency p50 %.3f ms p99 %.3f ms",
@@ -201,13 +321,14 @@ def throughput(args, layout, touch, track) -> dict:
         result["paced"]["latency_ms"]["p50"],
         result["paced"]["latency_ms"]["p99"],
     )
-    result["stages_ms"] = _stage_costs(touch, track, layout)
+    result["stages_ms"] = _stage_costs(heads, layout)
     result["target_fps"] = 300
     result["meets_target"] = result["end_to_end"]["fps"] >= 300
+    result["all_heads_meet_target"] = result["all_heads"]["fps"] >= 300
     return result
 
 
-def soak(args, layout, touch, track) -> dict:
+def soak(args, layout, heads) -> dict:
     from ectskin.live import LiveEngine, Recorder, ReplaySource
 
     rate = float(args.rate)
@@ -219,10 +340,11 @@ def soak(args, layout, touch, track) -> dict:
     if path.exists():
         path.unlink()
     recorder = None if args.no_record else Recorder(path, layout, rate)
+    models = heads if args.all_heads else {"touch": heads["touch"], "track": heads["track"]}
     eng = LiveEngine(
         src,
-        touch=touch,
-        track=track,
+        **models,
+        ect_every=args.ect_every,
         policy="skip-to-newest",
         recorder=recorder,
         max_lag_ms=args.max_lag_ms,
@@ -278,6 +400,7 @@ def soak(args, layout, touch, track) -> dict:
         "rate_hz": rate,
         "max_lag_ms": args.max_lag_ms,
         "recording_on": recorder is not None,
+        "heads": "all" if args.all_heads else "touch+track",
         "seconds": args.soak_seconds,
         "frames": stats["frames"],
         "processed": stats["processed"],
@@ -321,6 +444,18 @@ def main(argv=None) -> int:
     ap.add_argument("--paced-seconds", type=float, default=5.0)
     ap.add_argument("--touch-run", type=Path, help="run dir of a trained TouchMLP")
     ap.add_argument("--track-run", type=Path, help="run dir of a trained C2DT")
+    ap.add_argument("--contact-run", type=Path, help="run dir of a trained ContactNet")
+    ap.add_argument(
+        "--ect-every",
+        type=int,
+        default=1,
+        help="ECT image every N-th frame (default 1: every frame)",
+    )
+    ap.add_argument(
+        "--all-heads",
+        action="store_true",
+        help="soak: run contact and ECT too (default: touch+track)",
+    )
     ap.add_argument("--soak-seconds", type=float, help="run the soak test for this long")
     ap.add_argument("--rate", type=float, help="soak: frames per second")
     ap.add_argument("--rss-every", type=float, default=5.0, help="soak: RSS sampling period, s")
@@ -346,10 +481,17 @@ def main(argv=None) -> int:
     layout = default_layout()
     with tempfile.TemporaryDirectory() as tmp:
         touch, track = _predictors(layout, args.touch_run, args.track_run, Path(tmp))
+        imager, ect_name = _imager(layout)
+        heads = {
+            "touch": touch,
+            "track": track,
+            "contact": _contact(layout, args.contact_run, Path(tmp)),
+            "imager": imager,
+        }
         if args.soak_seconds is not None:
-            result = soak(args, layout, touch, track)
+            result = soak(args, layout, heads)
         else:
-            result = throughput(args, layout, touch, track)
+            result = throughput(args, layout, heads)
     result["machine"] = {
         "python": sys.version.split()[0],
         "torch": torch.__version__,
@@ -361,6 +503,8 @@ def main(argv=None) -> int:
     result["models"] = {
         "touch": str(args.touch_run or "random TouchMLP (paper size)"),
         "track": str(args.track_run or "random C2DT (paper size)"),
+        "contact": str(args.contact_run or "random ContactNet (train default size, window 10)"),
+        "ect": ect_name,
     }
     text = json.dumps(result, indent=1)
     print(text)

@@ -1,4 +1,4 @@
-"""``ectskin live --source SPEC``: touch recognition and tracking on a live source.
+"""``ectskin live --source SPEC``: touch recognition, tracking, contact and ECT imaging live.
 
 Prints a status line every second (or serves the web dashboard with ``--dashboard``), optionally
 records every frame (``--record``) and writes every output as JSON lines (``--jsonl``). Every
@@ -37,6 +37,7 @@ EXAMPLES = """\
   ectskin live --source tcp:192.168.1.20:5000 --touch-model runs/touch --record rig.h5 \\
       --jsonl rig.jsonl
   ectskin live --source replay:crashed.h5 --allow-partial --jsonl - --max-frames 100
+  ectskin live --source sim --contact-model runs/contact --ect --ect-every 3 --dashboard
 
 the reference: the first --reference-frames frames (default 30 = 1 s) are the reference that
 every later frame is calibrated against (paper Eq. 2). Keep the skin UNTOUCHED and UNINFLATED
@@ -52,6 +53,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--source", required=True, metavar="SPEC", help=f"one of {SOURCE_SPECS}")
     p.add_argument("--touch-model", metavar="RUN", help="run dir (or model.pt) of a TouchMLP")
     p.add_argument("--track-model", metavar="RUN", help="run dir (or model.pt) of a C2DT")
+    p.add_argument(
+        "--contact-model",
+        metavar="RUN",
+        help="run dir (or model.pt) of a ContactNet: finger count, points, forces, hover",
+    )
+    p.add_argument(
+        "--ect",
+        action="store_true",
+        help="image the skin by ECT (an imager built from the layout at the uninflated state)",
+    )
+    p.add_argument(
+        "--ect-every",
+        type=int,
+        default=3,
+        metavar="N",
+        help="--ect: image every N-th processed frame (default 3: 10 images/s at 30 fps)",
+    )
     p.add_argument("--dashboard", action="store_true", help="serve the web dashboard")
     p.add_argument("--port", type=int, default=8765, help="dashboard port (default 8765)")
     p.add_argument(
@@ -172,29 +190,49 @@ def _check_markers(m: np.ndarray, path: str, layout: SensorLayout | None) -> Non
 def run(args: argparse.Namespace) -> int:
     if args.threads < 1:
         raise EctskinError(f"--threads must be >= 1, got {args.threads}")
+    if args.ect_every < 1:
+        raise EctskinError(f"--ect-every must be >= 1 (frames), got {args.ect_every}")
     _check_outputs(args)
     ref_markers = None
     if args.reference_markers:
         ref_markers = _load_markers(args.reference_markers)
         _check_markers(ref_markers, args.reference_markers, _known_layout(args))
     with contextlib.ExitStack() as stack:
-        touch = track = None
-        if args.touch_model or args.track_model:
+        touch = track = contact = None
+        if args.touch_model or args.track_model or args.contact_model:
             # torch is imported only when a model is given: a run without models, and every
             # other `ectskin` command, starts without it
+            from ectskin.learn.contact_predict import ContactPredictor
             from ectskin.learn.predict import TouchPredictor, TrackPredictor
             from ectskin.learn.threads import torch_threads
 
             stack.enter_context(torch_threads(args.threads))
             layout = _known_layout(args)  # a model for another skin is refused before it is built
             touch = (
-                TouchPredictor.from_run(args.touch_model, layout=layout) if args.touch_model else None
+                TouchPredictor.from_run(args.touch_model, layout=layout)
+                if args.touch_model
+                else None
             )
             track = (
-                TrackPredictor.from_run(args.track_model, layout=layout) if args.track_model else None
+                TrackPredictor.from_run(args.track_model, layout=layout)
+                if args.track_model
+                else None
             )
+            if args.contact_model:
+                contact = ContactPredictor.from_run(args.contact_model, layout=layout)
         with stop_on_signals("closing the recording" if args.record else "stopping"):
-            return _run(args, touch, track, ref_markers)
+            return _run(args, {"touch": touch, "track": track, "contact": contact}, ref_markers)
+
+
+def _ect_imager(layout: SensorLayout):
+    """``--ect``: the ECT imager of ``layout`` at the uninflated state (the touch reference's)."""
+    try:
+        from ectskin.twin.ect import EctImager
+    except ImportError:
+        raise EctskinError(
+            "--ect needs the ECT imager (ectskin.twin.ect.EctImager), missing from this install"
+        ) from None
+    return EctImager(layout, (0.0, 0.0, 0.0))  # ml per chamber: the rest state
 
 
 # ---------------------------------------------------------------------------- the run
@@ -248,8 +286,9 @@ class _JsonLines:
         )
 
 
-def _run(args: argparse.Namespace, touch, track, ref_markers) -> int:
-    """The command with its models loaded (``touch``/``track`` may be None)."""
+def _run(args: argparse.Namespace, models: dict, ref_markers) -> int:
+    """The command with its models loaded (``models``: touch, track, contact; each may be
+    None)."""
     layout = load_layout(args.layout) if args.layout else None
     source = open_source(
         args.source,
@@ -274,14 +313,17 @@ def _run(args: argparse.Namespace, touch, track, ref_markers) -> int:
                     "source": args.source,
                     "touch_model": args.touch_model,
                     "track_model": args.track_model,
+                    "contact_model": args.contact_model,
+                    "ect_every": args.ect_every if args.ect else None,
                 },
                 trial_info=getattr(source, "trial_info", None),
             )
         engine = LiveEngine(
             source,
             source.layout,
-            touch=touch,
-            track=track,
+            **models,
+            imager=_ect_imager(source.layout) if args.ect else None,
+            ect_every=args.ect_every,
             policy=args.policy,
             reference_frames=args.reference_frames,
             recorder=recorder,
@@ -364,8 +406,10 @@ def _console(engine, run_kwargs, jsonl, status: bool) -> tuple[dict, bool]:
                 d = np.linalg.norm(out.markers_pred - out.markers_reference, axis=1)
                 moved = f"{np.nanmax(d):5.2f} mm"
             ref = s.get("reference", {}).get("touch", {}).get("state", "-")
+            heads = "".join(f" | {h}" for h in (_contact_text(out.contact),) if h)
             print(
-                f"t {out.t:9.3f} s | touch {touch} | markers moved {moved} | reference {ref} | "
+                f"t {out.t:9.3f} s | touch {touch} | markers moved {moved}{heads} | "
+                f"reference {ref} | "
                 f"{s['fps_out']:5.1f} fps | latency p50 {s['latency_ms_p50']} ms "
                 f"p99 {s['latency_ms_p99']} ms | dropped {s['dropped']} malformed "
                 f"{s['malformed']} reconnects {s['reconnects']}",
@@ -378,6 +422,20 @@ def _console(engine, run_kwargs, jsonl, status: bool) -> tuple[dict, bool]:
         log.info("interrupted")
         engine.stop()
         return engine.stats, True
+
+
+def _contact_text(reading) -> str:
+    """The contact head's reading for the status line ('' without one)."""
+    if reading is None:
+        return ""
+    fingers = ", ".join(
+        f"{f.face} ({f.u_mm:.0f}, {f.v_mm:.0f}) mm {f.force_n:.2f} N" for f in reading.fingers
+    )
+    return (
+        f"contact {reading.count}"
+        + (f": {fingers}" if fingers else "")
+        + (f" hover {reading.p_hover:.2f}")
+    )
 
 
 def _serve(engine, args, run_kwargs, jsonl) -> tuple[dict, bool]:

@@ -240,7 +240,8 @@ class Hub:
         """The ``meta`` message (see :func:`build_meta`).
 
         With an engine that has ``meta()`` (LiveEngine), its current reference markers and its
-        extra fields (``touch_model``, ``track_model``, ``policy``) are included.
+        extra fields (``touch_model``, ``track_model``, ``policy``, and ``contact`` and ``ect``:
+        the faces and extents the Contact panel draws, see ``docs/live.md``) are included.
         """
         ref = self._reference_markers
         extra: dict[str, Any] = {}

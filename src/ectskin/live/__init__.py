@@ -8,13 +8,16 @@
 * :mod:`ectskin.live.engine` — :class:`LiveEngine`: reference capture
   (:mod:`~ectskin.live.reference`), calibration (paper Eq. 2), touch and tracking predictors
   (:mod:`~ectskin.live.predictors`), latency and drop accounting (:mod:`~ectskin.live.meter`);
-  emits :class:`Output` (:mod:`~ectskin.live.output`).
+  emits :class:`Output` (:mod:`~ectskin.live.output`); the optional contact and ECT image heads
+  (:mod:`~ectskin.live.heads`: :class:`ContactHead`, :class:`EctHead`, giving an
+  :class:`EctFrame`).
 
 Optional dependencies (pyserial, pylsl) are imported only when such a source is opened.
 """
 
 from ectskin.live.engine import POLICIES, LiveEngine
-from ectskin.live.output import Output
+from ectskin.live.heads import ContactHead, EctHead
+from ectskin.live.output import EctFrame, Output
 from ectskin.live.recorder import Recorder, record_main
 from ectskin.live.sources import (
     Frame,
@@ -31,6 +34,9 @@ from ectskin.live.sources import (
 
 __all__ = [
     "POLICIES",
+    "ContactHead",
+    "EctFrame",
+    "EctHead",
     "Frame",
     "FrameSource",
     "LiveEngine",

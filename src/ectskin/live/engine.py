@@ -1,4 +1,8 @@
-"""The live engine: source → reference capture → calibration (Eq. 2) → touch + tracking → outputs.
+"""The live engine: source → reference capture → calibration (Eq. 2) → heads → outputs.
+
+Heads: touch (TouchMLP, one frame), tracking (C2DT, a window), and optionally contact (a window,
+:class:`~ectskin.live.heads.ContactHead`) and the ECT image (every N-th frame,
+:class:`~ectskin.live.heads.EctHead`).
 
 Threads and policy
 ------------------
@@ -25,6 +29,8 @@ are averaged channel-wise (NaN-aware) into the reference c_0; frames are calibra
 c = (c_t − c_0)/c_0. Touch uses the touch reference (the paper's rest state: capture it untouched
 and uninflated), tracking its own reference (the paper's "prior knowledge": the state at the start
 of the trajectory, with the marker coordinates of that moment as the decoder's initial coordinates).
+Contact and the ECT image use the touch reference too (their models, like touch, describe the
+skin against its rest state).
 ``capture_reference(which="both"|"touch"|"track")`` re-captures one or both.
 
 A capture window is judged before use (:mod:`ectskin.live.reference`): the touch reference refuses
@@ -39,6 +45,10 @@ Latency is ``perf_counter()`` from the frame's arrival (``Frame.arrival``) to it
 torch single-threaded (``ectskin live`` does, through :func:`ectskin.learn.threads.torch_threads`):
 the models are tiny, and extra intra-op threads compete with the reader and recorder threads and
 stall inference on a small machine.
+
+Size: over 500 lines because the reader thread, the inference loop, the reference captures and
+the counters share one lock and one state; the per-frame heads that need no such state live in
+:mod:`~ectskin.live.heads`.
 """
 
 from __future__ import annotations
@@ -56,6 +66,7 @@ import numpy as np
 from ectskin._check import EctskinError, check_array, check_option
 from ectskin.io.calibration import relative_change
 from ectskin.layout import SensorLayout
+from ectskin.live.heads import ContactHead, EctHead
 from ectskin.live.meter import Meter
 from ectskin.live.output import Output, json_list
 from ectskin.live.predictors import bind_predictors
@@ -79,6 +90,12 @@ class LiveEngine:
     touch, track
         Predictors with the ``TouchPredictor`` / ``TrackPredictor`` protocol of
         :mod:`ectskin.learn.predict`, or None.
+    contact
+        A predictor with the ``ContactPredictor`` protocol of
+        :mod:`ectskin.learn.contact_predict`, or None.
+    imager, ect_every
+        An ECT imager (``faces``, ``grid_extent``, ``image(delta_c)``, ``locate(delta_c)``) run
+        on every ``ect_every``-th processed frame, or None.
     reference_frames
         Frames averaged into a reference (30 = 1 s at 30 fps).
     policy
@@ -102,6 +119,9 @@ class LiveEngine:
         *,
         touch=None,
         track=None,
+        contact=None,
+        imager=None,
+        ect_every: int = 1,
         reference_frames: int = 30,
         policy: str = "skip-to-newest",
         recorder=None,
@@ -140,6 +160,10 @@ class LiveEngine:
         bound = bind_predictors(layout, touch, track)
         self._touch_sel, self._track_sel = bound.touch_channels, bound.track_channels
         self.n_classes, self.window = bound.n_classes, bound.window
+        self.contact = None if contact is None else ContactHead(contact, layout)
+        self.ect = None if imager is None else EctHead(imager, layout, ect_every)
+        # raw frames kept for the windowed heads (tracking, contact), a ring buffer
+        self._ring = max(self.window, self.contact.window if self.contact else 1)
         if reference_markers is None:
             reference_markers = getattr(source, "reference_markers", None)
         if reference_markers is not None:
@@ -172,7 +196,7 @@ class LiveEngine:
         self.latest: Output | None = None
         # inference-loop state
         self._refs = References(n_pairs, n_markers, layout.pair_names)
-        self._win = np.zeros((self.window, n_pairs))
+        self._win = np.zeros((self._ring, n_pairs))
         self._win_pos = 0
         self._win_n = 0
         self._init_markers: np.ndarray | None = None
@@ -221,6 +245,9 @@ class LiveEngine:
             "reference_frames": self.reference_frames,
             "touch_model": self.touch is not None,
             "track_model": self.track is not None,
+            "contact_model": self.contact is not None,
+            "contact": None if self.contact is None else self.contact.meta(),
+            "ect": None if self.ect is None else self.ect.meta(),
             "source": str(getattr(self.source, "name", type(self.source).__name__)),
         }
 
@@ -372,11 +399,10 @@ class LiveEngine:
                 self.reference_frames,
             )
         c = f.capacitance
-        k = self.window
         if self._win_n == 0:
             self._win[:] = c  # pad: the first frame repeated (as datasets' pad=True)
         self._win[self._win_pos] = c
-        self._win_pos = (self._win_pos + 1) % k
+        self._win_pos = (self._win_pos + 1) % self._ring
         self._win_n += 1
         for name, ref, text in self._refs.add(f):
             self._reference_done(name, ref, f, text)
@@ -430,11 +456,19 @@ class LiveEngine:
                     out.touch_cls = int(np.argmax(probs))
                 except Exception:
                     self._model_error("touch")
+            if self.contact is not None:
+                try:
+                    out.contact = self.contact(self._window(self.contact.window), c0)
+                except Exception:
+                    self._model_error("contact")
+            if self.ect is not None and self.ect.due():
+                try:
+                    out.ect = self.ect(raw, c0)
+                except Exception:
+                    self._model_error("ECT imager")
         c0t = self._refs.tracking.c0
         if self.track is not None and c0t is not None and self._init_markers is not None:
-            k = self.window
-            order = (self._win_pos + np.arange(k)) % k  # oldest first
-            w = relative_change(self._win[order], c0t)  # Eq. 2 on the window, (k, n_pairs)
+            w = relative_change(self._window(self.window), c0t)  # Eq. 2, (k, n_pairs)
             w = np.nan_to_num(w, nan=0.0, posinf=0.0, neginf=0.0)
             if self._track_sel is not None:
                 w = w[:, self._track_sel]
@@ -449,6 +483,11 @@ class LiveEngine:
         return out
 
     # ------------------------------------------------------------------ helpers
+    def _window(self, k: int) -> np.ndarray:
+        """(k, n_pairs) the newest k raw frames, oldest first (k <= the ring's length)."""
+        order = (self._win_pos - k + np.arange(k)) % self._ring
+        return self._win[order]
+
     def _close_source(self) -> None:
         try:
             self.source.close()

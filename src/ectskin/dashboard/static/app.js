@@ -1,6 +1,8 @@
 // ectskin live dashboard. Plain JS, no dependencies (the page must work offline).
 // Messages on /ws: one "meta", one "history", then "status" (the engine running, ended, failed:
-// again whenever it changes) and "frame"s (see ectskin/dashboard/app.py).
+// again whenever it changes) and "frame"s (see ectskin/dashboard/app.py). A frame's "contact"
+// (the contact model's reading) and "ect" (the ECT image, quantised, and its peak) are drawn in
+// the Contact panel, shown when the meta says the engine has either head.
 (function () {
   "use strict";
 
@@ -16,6 +18,12 @@
   const STALE_MS = 2000;          // badge: no frame for this long while running = "stale"
   const SURFACE_ORDER = ["front", "back", "right", "left"];
   const SVG_NS = "http://www.w3.org/2000/svg";
+  const FINGER_SLOTS = 2;         // contact: fingers drawn at most (the model's slots)
+  const FORCE_FULL_N = 2;         // contact: a force bar's full width, N (grows past it)
+  const DOT_MM = 2.2;             // contact: finger dot radius on the face drawing, mm
+  const HOVER_AT = 0.5;           // contact: "hovering" at p_hover >= this without contact
+  const HEAT_DECAY_S = 5;         // ECT: the colour scale follows the largest value, decaying
+                                  // with this time constant (rest noise stays faint after a touch)
 
   const state = {
     meta: null,
@@ -36,6 +44,8 @@
     chartSpans: [],               // per pair, the vertical span drawn last (tests read it)
     chartBoundaries: [],          // trial names whose boundary is drawn in the window
     trial: null,
+    contact: null,                // the last contact reading drawn
+    ect: null,                    // the last ECT frame drawn: {seq, face, u_mm, v_mm, scale, drawn}
   };
 
   const $ = (id) => document.getElementById(id);
@@ -115,6 +125,7 @@
     buildProbs(meta);
     for (const id of ["markers-yz", "markers-xz"]) buildView(id, meta);
     buildMarkerBars(meta);
+    buildContact(meta);
     resizeChart();
   }
 
@@ -240,6 +251,8 @@
     updateTrial(f);
     updateTouch(f.touch, f.label);
     updateMarkers(f.markers);
+    updateContact(f.contact);
+    if (f.ect) updateEct(f.ect, f.seq);
     updateBadge();
   }
 
@@ -604,6 +617,236 @@
     });
   }
 
+  // ------------------------------------------------------------------ contact and ECT image
+  // Each face drawn in its own (u, v) mm: u across, v from the base (bottom) to the tip (top);
+  // SVG y = -v. The ECT image is a canvas (one pixel per image pixel, scaled by the browser) in a
+  // foreignObject over the imager's grid extent, under the fingers: a dot at (u, v), a dashed
+  // circle of radius sigma_mm (one standard deviation) around it, and a cross at the ECT peak.
+  const contactView = { faces: {}, forceScale: FORCE_FULL_N, heatScale: 0, heatT: 0 };
+
+  function contactFaces(meta) {
+    const names = [];
+    for (const head of [meta.contact, meta.ect]) {
+      if (head && Array.isArray(head.faces)) head.faces.forEach((f) => names.push(f));
+    }
+    const known = SURFACE_ORDER.filter((s) => names.includes(s));
+    return known.concat([...new Set(names)].filter((f) => !known.includes(f)));
+  }
+
+  // The face's drawing extent: its skins, the contact model's face extent, the ECT grid.
+  function faceBounds(meta, face) {
+    const b = { u0: Infinity, u1: -Infinity, v0: Infinity, v1: -Infinity };
+    const add = (u, v) => {
+      b.u0 = Math.min(b.u0, u[0]); b.u1 = Math.max(b.u1, u[1]);
+      b.v0 = Math.min(b.v0, v[0]); b.v1 = Math.max(b.v1, v[1]);
+    };
+    meta.skins.filter((s) => s.surface === face).forEach((s) => add(s.u_mm, s.v_mm));
+    for (const ext of [meta.contact && meta.contact.face_extent[face],
+                       meta.ect && meta.ect.grid_extent[face]]) {
+      if (Array.isArray(ext)) add(ext[0], ext[1]);
+    }
+    if (!isFinite(b.u0)) Object.assign(b, { u0: -20, u1: 20, v0: 0, v1: 120 });
+    return b;
+  }
+
+  function buildContact(meta) {
+    const panel = $("contact-panel"), host = $("contact-faces");
+    host.innerHTML = "";
+    contactView.faces = {};
+    contactView.forceScale = FORCE_FULL_N;
+    contactView.heatScale = 0;
+    state.contact = null;
+    state.ect = null;
+    $("contact-fingers").querySelectorAll(".cf-row").forEach((el) => el.remove());
+    panel.hidden = !(meta.contact || meta.ect);
+    if (panel.hidden) return;
+    for (const face of contactFaces(meta)) {
+      const b = faceBounds(meta, face), m = 4;
+      const div = document.createElement("div");
+      div.className = "cface";
+      div.dataset.face = face;
+      const svg = svgEl("svg", {
+        id: "cface-" + face, viewBox: [b.u0 - m, -(b.v1 + m), b.u1 - b.u0 + 2 * m,
+                                       b.v1 - b.v0 + 2 * m].join(" "),
+      }, div);
+      for (const sk of meta.skins.filter((sk) => sk.surface === face)) {
+        svgEl("rect", { class: "skin", x: sk.u_mm[0], y: -sk.v_mm[1], rx: 1.5,
+          width: sk.u_mm[1] - sk.u_mm[0], height: sk.v_mm[1] - sk.v_mm[0] }, svg);
+      }
+      let canvas = null;
+      const ext = meta.ect && meta.ect.grid_extent[face];
+      if (Array.isArray(ext)) {
+        const fo = svgEl("foreignObject", { x: ext[0][0], y: -ext[1][1],
+          width: ext[0][1] - ext[0][0], height: ext[1][1] - ext[1][0] }, svg);
+        canvas = document.createElement("canvas");  // an HTML element inside the SVG
+        canvas.className = "heat";
+        canvas.dataset.face = face;
+        canvas.width = 1; canvas.height = 1;
+        fo.appendChild(canvas);
+      }
+      for (const r of meta.regions.filter((r) => r.surface === face)) {
+        svgEl("rect", { class: "region", x: r.u_mm[0], y: -r.v_mm[1],
+          width: r.u_mm[1] - r.u_mm[0], height: r.v_mm[1] - r.v_mm[0] }, svg);
+      }
+      const peak = svgEl("path", { class: "ect-peak", d: "", visibility: "hidden" }, svg);
+      const sigma = [], dots = [];
+      for (let k = 0; k < FINGER_SLOTS; k++) {
+        sigma.push(svgEl("circle", { class: "finger-sigma", "data-finger": k, r: 0,
+                                     visibility: "hidden" }, svg));
+      }
+      for (let k = 0; k < FINGER_SLOTS; k++) {
+        dots.push(svgEl("circle", { class: "finger-dot", "data-finger": k, r: DOT_MM,
+                                    visibility: "hidden" }, svg));
+      }
+      const title = document.createElement("div");
+      title.className = "title";
+      title.textContent = face + " (u across, v up to the tip, mm)";
+      div.appendChild(title);
+      host.appendChild(div);
+      contactView.faces[face] = { svg, canvas, peak, sigma, dots };
+    }
+    const list = $("contact-fingers");
+    for (let k = 0; k < FINGER_SLOTS; k++) {
+      const row = document.createElement("div");
+      row.className = "cf-row absent";
+      row.dataset.finger = k;
+      row.innerHTML = '<span class="name"></span><span class="track"><span class="bar"></span>' +
+        '</span><span class="v">—</span><span class="where"></span>';
+      row.querySelector(".name").textContent = "finger " + (k + 1);
+      list.appendChild(row);
+    }
+    const notes = [];
+    if (!meta.contact) notes.push("no contact model (ectskin live --contact-model RUN)");
+    if (!meta.ect) notes.push("no ECT image (ectskin live --ect)");
+    else notes.push("ECT image every " + meta.ect.every + " frame(s)");
+    setText("contact-note", notes.join("; "));
+    updateForceScale();
+  }
+
+  function updateForceScale() {
+    const el = $("force-scale");
+    el.dataset.scale = String(contactView.forceScale);
+    setText("force-scale", "full bar: " + contactView.forceScale + " N");
+  }
+
+  function updateContact(c) {
+    const meta = state.meta;
+    if (!meta || !meta.contact) return;
+    state.contact = c || null;
+    const fingers = c && Array.isArray(c.fingers) ? c.fingers.slice(0, FINGER_SLOTS) : [];
+    const count = $("contact-count"), p = $("contact-p");
+    count.dataset.count = c ? String(c.count) : "";
+    setText("contact-count", c ? String(c.count) : "—");
+    p.dataset.value = c && isNum(c.p_contact) ? String(c.p_contact) : "";
+    setText("contact-p", c ? fmt(c.p_contact, 2) : "—");
+    for (const face in contactView.faces) {
+      const view = contactView.faces[face];
+      for (let k = 0; k < FINGER_SLOTS; k++) {
+        const f = fingers[k];
+        const here = f && f.face === face && isNum(f.u_mm) && isNum(f.v_mm);
+        const dot = view.dots[k], ring = view.sigma[k];
+        dot.setAttribute("visibility", here ? "visible" : "hidden");
+        ring.setAttribute("visibility", here ? "visible" : "hidden");
+        if (!here) continue;
+        for (const el of [dot, ring]) {
+          el.setAttribute("cx", f.u_mm.toFixed(2));
+          el.setAttribute("cy", (-f.v_mm).toFixed(2));
+        }
+        ring.setAttribute("r", (isNum(f.sigma_mm) ? Math.max(0, f.sigma_mm) : 0).toFixed(2));
+      }
+    }
+    const maxF = Math.max(0, ...fingers.map((f) => (isNum(f.force_n) ? f.force_n : 0)));
+    if (maxF > contactView.forceScale) {
+      contactView.forceScale = niceCeil(maxF);
+      updateForceScale();
+    }
+    const rows = $("contact-fingers").querySelectorAll(".cf-row");
+    rows.forEach((row, k) => {
+      const f = fingers[k];
+      const force = f && isNum(f.force_n) ? f.force_n : null;
+      row.classList.toggle("absent", !f);
+      row.dataset.force = force === null ? "" : String(force);
+      row.dataset.face = f ? f.face : "";
+      row.querySelector(".bar").style.width =
+        (force === null ? 0 : 100 * Math.max(0, force) / contactView.forceScale).toFixed(1) + "%";
+      row.querySelector(".v").textContent = force === null ? "—" : force.toFixed(2) + " N";
+      row.querySelector(".where").textContent = f ? f.face + " (" + fmt(f.u_mm, 1) + ", " +
+        fmt(f.v_mm, 1) + ") mm ± " + fmt(f.sigma_mm, 1) : "";
+    });
+    const ph = c && isNum(c.p_hover) ? c.p_hover : null;
+    const hov = $("hover-indicator");
+    const st = !c ? "none" : c.count > 0 ? "contact" : ph !== null && ph >= HOVER_AT ? "hover"
+      : "none";
+    hov.dataset.state = st;
+    hov.dataset.p = ph === null ? "" : String(ph);
+    setText("hover-indicator", { contact: "touching", hover: "hovering", none: "—" }[st]);
+    setText("hover-p", fmt(ph, 2));
+    $("hover-bar").style.width = (ph === null ? 0 : 100 * Math.max(0, Math.min(1, ph)))
+      .toFixed(1) + "%";
+  }
+
+  // Heat-map colour of a value t in [-1, 1] (of the colour scale): positive change red to yellow
+  // and more opaque as it grows; negative change faint blue; [r, g, b, alpha] 0-255.
+  function heatColor(t) {
+    if (!isNum(t) || t === 0) return [0, 0, 0, 0];
+    const a = Math.min(1, Math.abs(t));
+    if (t < 0) return [47, 111, 219, Math.round(127 * Math.pow(a, 0.7))];
+    return [Math.round(226 + 19 * a), Math.round(65 + 132 * a), Math.round(59 + 7 * a),
+            Math.round(235 * Math.pow(a, 0.7))];
+  }
+
+  function drawHeat(canvas, rows, gain) {
+    const nv = Array.isArray(rows) ? rows.length : 0;
+    const nu = nv && Array.isArray(rows[0]) ? rows[0].length : 0;
+    if (!nv || !nu) return 0;
+    if (canvas.width !== nu || canvas.height !== nv) { canvas.width = nu; canvas.height = nv; }
+    const ctx = canvas.getContext("2d");
+    const im = ctx.createImageData(nu, nv);
+    for (let r = 0; r < nv; r++) {
+      const row = rows[r], y = nv - 1 - r;  // row 0 is the lowest v: the bottom of the canvas
+      for (let c = 0; c < nu; c++) {
+        const col = heatColor(isNum(row[c]) ? row[c] * gain : NaN), i = 4 * (y * nu + c);
+        im.data[i] = col[0]; im.data[i + 1] = col[1]; im.data[i + 2] = col[2];
+        im.data[i + 3] = col[3];
+      }
+    }
+    ctx.putImageData(im, 0, 0);
+    return nu * nv;
+  }
+
+  function updateEct(e, seq) {
+    const meta = state.meta;
+    if (!meta || !meta.ect) return;
+    const img = e.image || {};
+    const now = performance.now() / 1000;
+    const scale = isNum(img.scale) ? img.scale : 0;
+    const held = contactView.heatScale * Math.exp(-(now - contactView.heatT) / HEAT_DECAY_S);
+    contactView.heatScale = Math.max(scale, held);
+    contactView.heatT = now;
+    // a pixel q (in levels) is q * scale / levels; the colour scale is the held maximum
+    const gain = contactView.heatScale > 0 && isNum(img.levels)
+      ? scale / (img.levels * contactView.heatScale) : 0;
+    let drawn = 0;
+    for (const face in contactView.faces) {
+      const view = contactView.faces[face];
+      if (view.canvas && img.faces) drawn += drawHeat(view.canvas, img.faces[face], gain);
+      const here = e.face === face && isNum(e.u_mm) && isNum(e.v_mm);
+      view.peak.setAttribute("visibility", here ? "visible" : "hidden");
+      if (here) {
+        const x = e.u_mm, y = -e.v_mm, d = 3;
+        view.peak.setAttribute("d", "M" + (x - d) + "," + (y - d) + "L" + (x + d) + "," + (y + d) +
+          "M" + (x - d) + "," + (y + d) + "L" + (x + d) + "," + (y - d));
+      }
+    }
+    const el = $("ect-peak");
+    el.dataset.face = typeof e.face === "string" ? e.face : "";
+    setText("ect-peak", "ECT peak " + (e.face || "—") + " (" + fmt(e.u_mm, 1) + ", " +
+      fmt(e.v_mm, 1) + ") mm");
+    state.ect = { seq, face: e.face, u_mm: e.u_mm, v_mm: e.v_mm, peak: e.peak,
+                  scale: contactView.heatScale,
+                  drawn: (state.ect ? state.ect.drawn : 0) + (drawn ? 1 : 0) };
+  }
+
   // ------------------------------------------------------------------ strip chart
   const chart = { canvas: null, ctx: null, dpr: 1, W: 0, H: 0 };
   function resizeChart() {
@@ -793,7 +1036,8 @@
 
   // ------------------------------------------------------------------ start
   // For the browser test: the page's state and its pure helpers.
-  window.ectskinDashboard = { state, badge, chartRange, MIN_SPAN_RAW_PF, MIN_SPAN_CALIBRATED };
+  window.ectskinDashboard = { state, badge, chartRange, heatColor, MIN_SPAN_RAW_PF,
+                              MIN_SPAN_CALIBRATED };
   document.querySelectorAll('input[name="chart-mode"]').forEach((el) => {
     el.addEventListener("change", () => { state.mode = el.value; state.chartDirty = true; });
   });
