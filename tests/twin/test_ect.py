@@ -153,3 +153,15 @@ def test_metrics_on_a_hand_built_recording(imager):
     assert set(out["timing"]["reconstruct_us_per_frame"]) == {"lbp", "tikhonov", "landweber"}
     fig = plot_ect_images(out["examples"], out["grid"]["faces"], out["grid"]["extents"])
     assert len(fig.axes) >= 2 * len(out["examples"])
+
+
+def test_imager_names_its_faces_and_the_extent_of_their_images():
+    layout = default_layout()
+    imager = EctImager(layout, REST, grid=ect_grid(layout, pixel_mm=5.0))
+    images = imager.image(np.zeros(layout.n_pairs))
+    assert imager.faces == list(images)
+    for skin in layout.skins:
+        (u0, u1), (v0, v1) = imager.grid_extent[skin.surface]
+        assert (u0, u1, v0, v1) == (*skin.u_mm, *skin.v_mm)
+        n_v, n_u = images[skin.surface].shape
+        assert n_u == round((u1 - u0) / 5.0) and n_v == round((v1 - v0) / 5.0)

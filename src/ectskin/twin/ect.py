@@ -278,6 +278,19 @@ class EctImager:
             None if m is None else layer_sum_matrix(self.grid.pixel, self.grid.n_pixels) @ m
         )
 
+    @property
+    def faces(self) -> list[str]:
+        """The faces the images cover, in the order of :meth:`image`."""
+        return list(self.grid.faces)
+
+    @property
+    def grid_extent(self) -> dict[str, list[list[float]]]:
+        """{face: [[u_lo, u_hi], [v_lo, v_hi]]} mm that each face's image spans (row 0 at the
+        lowest v)."""
+        return {
+            f: [[e[0], e[1]], [e[2], e[3]]] for f, e in zip(self.grid.faces, self.grid.extents)
+        }
+
     def pixel_image(self, delta_c) -> np.ndarray:
         """(n_pix,) or (F, n_pix) image summed over layers."""
         if self._pixel_matrix is not None:
