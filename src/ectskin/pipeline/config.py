@@ -15,11 +15,12 @@ run                 task     window  prior  role
                                             the contact experiment (``contact.h5``)
 ==================  =======  ======  =====  ==========================================
 
-The contact run trains on its own recording, the *contact experiment*
-(:meth:`ReproduceConfig.contact_protocol`): the paper's finger, forces and handling, with the
-chambers at their lowest and highest level (8 states), touches anywhere in their region with
-the finger sliding to new points, lifting, hovering and approaching, and a second finger in some
-trials: what continuous contact models need and the paper's protocol does not hold.
+The contact run trains on ``contact.h5``: the paper's trials of ``data.h5`` together with the
+*contact experiment* (:meth:`ReproduceConfig.contact_protocol`): the paper's finger, forces and
+handling, with the chambers at their lowest and highest level (8 states), touches anywhere in
+their region with the finger sliding to a new point, lifting, hovering and approaching, and a
+second finger in some trials: what continuous contact models need and the paper's protocol does
+not hold.
 """
 
 from __future__ import annotations
@@ -182,9 +183,10 @@ class ReproduceConfig:
 
     def contact_protocol(self) -> Protocol | None:
         """The contact experiment: the simulated protocol with the chambers at its lowest and
-        highest level only, touches placed anywhere in their region (3 points per trial), lifts,
-        hover and approach, and a second finger in 30 % of the touch trials; None when a
-        recording is given."""
+        highest level only, 4 touch trials per state placed anywhere in their region (2 points
+        per trial), lifts, hover and approach, and a second finger in 30 % of the touch trials;
+        None when a recording is given. (The contact model trains on these trials together with
+        the paper's: :func:`ectskin.pipeline.contact.with_paper_trials`.)"""
         base = self.simulation_protocol()
         if base is None:
             return None
@@ -193,7 +195,8 @@ class ReproduceConfig:
             base,
             levels_ml=levels,
             touch_placement="uniform",
-            touch_dwells=3,
+            touch_trials=4,
+            touch_dwells=2,
             lifts=True,
             hover=True,
             approach=True,

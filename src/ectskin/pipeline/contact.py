@@ -2,7 +2,8 @@
 
 ::
 
-    simulate_contact   OUT_DIR/contact.h5                the contact experiment (twin)
+    simulate_contact   OUT_DIR/contact.h5                the contact experiment (twin) and
+                                                          the paper's trials of data.h5
     train_contact      OUT_DIR/runs/contact/              ContactNet (quick or paper profile)
     evaluate_contact   OUT_DIR/runs/contact/metrics.json  with its baselines and figures
     ect_images         OUT_DIR/ect/                       training-free ECT images of the
@@ -16,17 +17,19 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
+from dataclasses import replace
 from functools import partial
 from pathlib import Path
 from typing import Any
 
+from ectskin._check import EctskinError
 from ectskin._files import read_json, save_figure_atomic, write_json_atomic
-from ectskin.io import read_recording, write_recording
+from ectskin.io import Recording, read_recording, write_recording
 from ectskin.learn.evaluate import evaluate_run
 from ectskin.learn.train import TrainConfig, train_from_recording
 from ectskin.pipeline.config import CONTACT_RUN, RUNS, ReproduceConfig
 from ectskin.pipeline.runner import StepRunner, digest
-from ectskin.pipeline.steps import recording_digest, run_settings
+from ectskin.pipeline.steps import DATA_FILE, recording_digest, run_settings
 from ectskin.twin import simulate_experiment
 from ectskin.twin.ect import METHODS, ect_image_metrics
 from ectskin.viz import figure_file
@@ -39,9 +42,29 @@ CONTACT_FILE = "contact.h5"
 ECT_FRAME_STEP = 10
 
 
-def contact_data(runner: StepRunner, config: ReproduceConfig) -> tuple[Path, dict[str, Any]] | None:
-    """Step "simulate_contact": ``OUT_DIR/contact.h5``; None when a given recording lacks
-    ground truth (then the contact steps are skipped)."""
+def with_paper_trials(paper: Recording, contact: Recording) -> Recording:
+    """One recording of the paper's trials (renamed ``paper_<name>``) and the contact
+    experiment's (``contact_<name>``), for the contact model: the paper's trials add touch
+    points at the regions' centres at all 27 inflation states; the contact experiment adds
+    points anywhere, lifts, hover and a second finger."""
+    if paper.layout != contact.layout or paper.frame_rate_hz != contact.frame_rate_hz:
+        raise EctskinError(
+            "the paper's recording and the contact experiment differ in layout or frame rate; "
+            "they cannot be trained on together"
+        )
+    trials = [replace(t, name=f"paper_{t.name}") for t in paper.trials]
+    trials += [replace(t, name=f"contact_{t.name}") for t in contact.trials]
+    meta = {"protocol": contact.meta.get("protocol"), "paper_protocol": paper.meta.get("protocol")}
+    return Recording(contact.layout, trials, contact.frame_rate_hz, meta=meta)
+
+
+def contact_data(
+    runner: StepRunner, config: ReproduceConfig, paper_settings: Mapping[str, Any]
+) -> tuple[Path, dict[str, Any]] | None:
+    """Step "simulate_contact": ``OUT_DIR/contact.h5``, the contact experiment together with
+    the paper's trials of ``OUT_DIR/data.h5`` (made with ``paper_settings``,
+    :func:`with_paper_trials`); None when a given recording lacks ground truth (then the
+    contact steps are skipped)."""
     path = runner.out / CONTACT_FILE
     if config.recording is not None:
         missing = [t.name for t in config.recording.trials if t.missing_ground_truth]
@@ -59,11 +82,18 @@ def contact_data(runner: StepRunner, config: ReproduceConfig) -> tuple[Path, dic
 
     else:
         protocol = config.contact_protocol()
-        settings = {"source": "ectskin.twin", "protocol": protocol.to_dict()}
+        paper_path = runner.out / DATA_FILE
+        settings = {
+            "source": "ectskin.twin",
+            "protocol": protocol.to_dict(),
+            "with": {"file": DATA_FILE, "data": digest(paper_settings)},
+        }
 
         def make() -> None:
             rec = simulate_experiment(protocol, workers=config.workers, progress=config.progress)
-            write_recording(rec, path, overwrite=True)
+            write_recording(
+                with_paper_trials(read_recording(paper_path), rec), path, overwrite=True
+            )
 
     runner.step("simulate_contact", settings, [path], make)
     return path, settings

@@ -72,7 +72,7 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
     results = evaluate_runs(runner, config, data_path, data_settings)
     contact = ect = None
     if config.contact:
-        found = contact_data(runner, config)
+        found = contact_data(runner, config, data_settings)
         if found is not None:
             contact = contact_run(runner, config, *found, threads)
             ect = ect_images(runner, config, *found)

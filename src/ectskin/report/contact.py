@@ -116,9 +116,10 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
                 "p",
                 "ContactNet (ours) reads a window of calibrated frames and gives the finger count, "
                 "each finger's face, point (mm) and force (N), and whether a finger hovers. It "
-                "is trained and tested on the contact experiment (contact.h5: the paper's finger, "
-                "forces and handling; chambers at their lowest and highest level; touches "
-                "anywhere in the region, lifts, hover and a second finger), split by trial. "
+                "is trained and tested, split by trial, on the paper's trials together with the "
+                "contact experiment (contact.h5: the paper's finger, forces and handling; chambers "
+                "at their lowest and highest level; touches anywhere in the region, lifts, hover "
+                "and a second finger). "
                 "Errors are distances over the skin at rest: on one face the distance in (u, v); "
                 "a point on the wrong face is charged the way around the body's side edge (the "
                 "same rule as the ECT images below). Baselines: "
