@@ -39,3 +39,20 @@ def test_reproduce_reports_contact_two_fingers_and_ect_images(tmp_path, contact_
         assert heading in report, heading
     assert (out / "figures" / "contact_error_map.png").is_file()
     assert (out / "figures" / "ect_images.png").is_file()
+
+
+def test_the_contact_data_joins_the_papers_trials_renamed(contact_recording):
+    from dataclasses import replace
+
+    from ectskin._check import EctskinError
+    from ectskin.pipeline.contact import with_paper_trials
+
+    paper = contact_recording(n_frames=5, n_trials=2)
+    contact = contact_recording(n_frames=5, n_trials=3, seed=1)
+    both = with_paper_trials(paper, contact)
+    assert [t.name for t in both.trials] == [f"paper_{t.name}" for t in paper.trials] + [
+        f"contact_{t.name}" for t in contact.trials
+    ]
+    assert both.trials[0].capacitance is paper.trials[0].capacitance
+    with pytest.raises(EctskinError, match="frame rate"):
+        with_paper_trials(paper, replace(contact, frame_rate_hz=60.0))

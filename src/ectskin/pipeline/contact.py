@@ -47,7 +47,10 @@ def with_paper_trials(paper: Recording, contact: Recording) -> Recording:
     experiment's (``contact_<name>``), for the contact model: the paper's trials add touch
     points at the regions' centres at all 27 inflation states; the contact experiment adds
     points anywhere, lifts, hover and a second finger."""
-    if paper.layout != contact.layout or paper.frame_rate_hz != contact.frame_rate_hz:
+    if (
+        paper.layout.to_json() != contact.layout.to_json()
+        or paper.frame_rate_hz != contact.frame_rate_hz
+    ):
         raise EctskinError(
             "the paper's recording and the contact experiment differ in layout or frame rate; "
             "they cannot be trained on together"
