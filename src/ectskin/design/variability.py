@@ -22,7 +22,8 @@ Steps (each cached under ``OUT``, so a stopped run resumes where it stopped):
    * ``baseline``: the nominal model, frames calibrated against the nominal skin's rest readout;
    * ``own_reference`` (recovery b): the nominal model, each skin's frames calibrated against
      its own rest readout (Eq. 2 with that skin's rest state). Not defined for a dead
-     electrode: its pairs read 0 at rest, and Eq. 2 divides by them (null, with the reason);
+     electrode: its pairs read noise around 0 at rest (below :data:`DEAD_FRACTION` of the
+     nominal readout), and Eq. 2 divides by them (null, with the reason);
    * ``domain_randomisation`` (recovery a): the DR model, nominal reference; and
      ``dr_own_reference``: the DR model with the skin's own reference;
    * ``finetune`` (recovery c): the nominal model fine-tuned on N labelled samples of the skin
@@ -74,6 +75,7 @@ from ectskin.learn.train import TrainConfig, train, train_from_recording
 from ectskin.twin.fabrication import (
     FabricatedSkin,
     FabricationVariation,
+    apply_fault,
     nominal_skin,
     sample_skin,
     simulate_skin,
@@ -91,6 +93,9 @@ EVALUATIONS = (
     ("domain_randomisation", "dr", "nominal"),
     ("dr_own_reference", "dr", "own"),
 )
+
+#: A channel whose own rest readout is below this fraction of the nominal one is dead.
+DEAD_FRACTION = 0.01
 
 #: The default protocol: small enough for a 2-core machine, with every region touched.
 DEFAULT_PROTOCOL = Protocol(
@@ -194,7 +199,9 @@ def run_variability(out: str | Path, config: VariabilityConfig = VariabilityConf
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     cases = skin_cases(config)
-    recs = {c.name: _simulated(out, c, config) for c in cases}
+    recs: dict[str, Recording] = {}
+    for c in cases:
+        recs[c.name] = _simulated(out, c, config, recs.get("nominal"))
     nominal = recs["nominal"]
     nom_ref = _rest_reference(nominal)
     runs = {}
@@ -221,15 +228,27 @@ def run_variability(out: str | Path, config: VariabilityConfig = VariabilityConf
     return doc
 
 
-def _simulated(out: Path, case: SkinCase, config: VariabilityConfig) -> Recording:
+def _simulated(
+    out: Path, case: SkinCase, config: VariabilityConfig, nominal: Recording | None
+) -> Recording:
+    """The recording of ``case`` (cached). A fault case on the nominal geometry is the nominal
+    recording with the fault applied: what :func:`simulate_skin` gives, without simulating the
+    same skin twice."""
     path = out / "data" / f"{case.name}.h5"
     if path.exists():
         return read_recording(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    log.info("simulating skin %s (%s, scale %.2f)", case.name, case.role, case.scale)
-    rec = simulate_skin(
-        config.protocol, case.skin, workers=config.workers, progress=config.progress
-    )
+    if case.role == "fault" and nominal is not None:
+        log.info("skin %s: the nominal recording with the fault at the readout", case.name)
+        meta = {**nominal.meta, "fabrication": case.skin.to_dict()}
+        rec = apply_fault(
+            replace(nominal, meta=meta), case.skin.fault, config.protocol.readout, case.skin.seed
+        )
+    else:
+        log.info("simulating skin %s (%s, scale %.2f)", case.name, case.role, case.scale)
+        rec = simulate_skin(
+            config.protocol, case.skin, workers=config.workers, progress=config.progress
+        )
     write_recording(rec, path)
     return read_recording(path)
 
@@ -237,6 +256,21 @@ def _simulated(out: Path, case: SkinCase, config: VariabilityConfig) -> Recordin
 def _rest_reference(rec: Recording) -> np.ndarray:
     """(n_pairs,) the mean rest-state readout of ``rec`` (pF)."""
     return next(iter(touch_reference(rec, reference="rest").values()))
+
+
+def own_rest_reference(rec: Recording, nominal: np.ndarray) -> np.ndarray:
+    """(n_pairs,) ``rec``'s own mean rest readout (pF), refused when a channel reads less
+    than :data:`DEAD_FRACTION` of its nominal rest readout: a dead channel (its mean is noise
+    around 0, and Eq. 2 would divide the frames by that noise)."""
+    own = _rest_reference(rec)
+    dead = np.flatnonzero(np.abs(own) < DEAD_FRACTION * np.abs(nominal))
+    if dead.size:
+        names = [rec.layout.pair_names[j] for j in dead]
+        raise EctskinError(
+            f"channels {names} read less than {DEAD_FRACTION:.0%} of their nominal rest "
+            "readout (dead); Eq. 2 cannot divide by them"
+        )
+    return own
 
 
 def _train_config(config: VariabilityConfig) -> TrainConfig:
@@ -363,7 +397,7 @@ def _evaluated(
     log.info("evaluating on skin %s", case.name)
     own, own_error = None, None
     try:
-        own = _rest_reference(rec)
+        own = own_rest_reference(rec, nom_ref)
     except EctskinError as exc:
         own_error = str(exc)
     res: dict[str, Any] = {
