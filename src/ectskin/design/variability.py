@@ -12,7 +12,10 @@ Steps (each cached under ``OUT``, so a stopped run resumes where it stopped):
    protocol with the same seed: the same touches, so the differences are the skin's.
    ``OUT/data/<skin>.h5``.
 2. **Train** the touch (TouchMLP) and contact (ContactNet) models on the nominal recording
-   (``profile``, default ``quick``): ``OUT/runs/{touch,contact}_nominal``.
+   (contact: ``profile``, default ``quick``; touch: ``touch_profile``, default ``robust``, the
+   paper's TouchMLP with the recipe for unseen (inflation state, placement) combinations: this
+   protocol has only a few touches per region, and the ``quick`` recipe's TouchMLP falls back to
+   the no-touch class on it): ``OUT/runs/{touch,contact}_nominal``.
 3. **Domain randomisation**: the same models trained on the nominal skin and the ``dr_skins``
    skins together, every frame calibrated against the *nominal* rest reference (the one a model
    in the field would use without a rest readout of its skin), on the trials of the nominal
@@ -115,7 +118,8 @@ class VariabilityConfig:
     ``skins``: fabricated skins on the degradation curve, their spreads the variation ×
     scales evenly spaced over ``scale_range``; ``dr_skins``: skins (scale 1) added to the
     domain-randomisation training; ``finetune_frames``: the N of the fine-tuning curve (0 = no
-    fine-tuning); ``epochs``: override the profile's training epochs; ``faults``: also score
+    fine-tuning); ``profile``, ``touch_profile``: the training profiles of the contact and the
+    touch models; ``epochs``: override the profile's training epochs; ``faults``: also score
     the nominal skin with a dead and with a shorted electrode; ``workers``: simulation
     processes; ``threads``: torch threads.
     """
@@ -129,6 +133,7 @@ class VariabilityConfig:
     finetune_lr: float = 3e-4
     faults: bool = True
     profile: str = "quick"
+    touch_profile: str = "robust"
     epochs: int | None = None
     variation: FabricationVariation = field(default_factory=FabricationVariation)
     protocol: Protocol = DEFAULT_PROTOCOL
@@ -273,9 +278,13 @@ def own_rest_reference(rec: Recording, nominal: np.ndarray) -> np.ndarray:
     return own
 
 
-def _train_config(config: VariabilityConfig) -> TrainConfig:
+def _profile(task: str, config: VariabilityConfig) -> str:
+    return config.touch_profile if task == "touch" else config.profile
+
+
+def _train_config(task: str, config: VariabilityConfig) -> TrainConfig:
     return TrainConfig(
-        profile=config.profile,
+        profile=_profile(task, config),
         seed=config.seed,
         progress=config.progress,
         threads=config.threads,
@@ -290,7 +299,7 @@ def _train_nominal(out: Path, task: str, config: VariabilityConfig) -> Path:
     if not done.exists():
         log.info("training %s on the nominal skin", task)
         summary = train_from_recording(
-            task, out / "data" / "nominal.h5", run, _train_config(config)
+            task, out / "data" / "nominal.h5", run, _train_config(task, config)
         )
         write_json_atomic(done, summary)
     return run
@@ -324,7 +333,7 @@ def _train_dr(
         train_data["train"],
         train_data["val"],
         run,
-        profile=config.profile,
+        profile=_profile(task, config),
         seed=config.seed,
         resume=True,
         epochs=config.epochs,
@@ -647,7 +656,8 @@ def report_markdown(doc: dict[str, Any]) -> str:
         "",
         f"Skins: {len(doc['skins'])} scored (nominal, sampled at scales "
         f"{cfg['scale_range'][0]:g}–{cfg['scale_range'][1]:g} × the assumed spreads, faults); "
-        f"domain randomisation on {cfg['dr_skins']} more skins; profile {cfg['profile']}; "
+        f"domain randomisation on {cfg['dr_skins']} more skins; profiles: touch "
+        f"{cfg['touch_profile']}, contact {cfg['profile']}; "
         f"seed {cfg['seed']}; {doc['seconds'] / 60:.1f} min.",
         "Spreads (assumed): " + ", ".join(f"{k} {v}" for k, v in cfg["variation"].items()) + ".",
         "",
