@@ -25,8 +25,9 @@ Steps (each cached under ``OUT``, so a stopped run resumes where it stopped):
    * ``baseline``: the nominal model, frames calibrated against the nominal skin's rest readout;
    * ``own_reference`` (recovery b): the nominal model, each skin's frames calibrated against
      its own rest readout (Eq. 2 with that skin's rest state). Not defined for a dead
-     electrode: its pairs read noise around 0 at rest (below :data:`DEAD_FRACTION` of the
-     nominal readout), and Eq. 2 divides by them (null, with the reason);
+     electrode, nor for a short (the shorted pair itself): those channels read noise around 0
+     at rest (below :data:`DEAD_FRACTION` of the nominal readout), and Eq. 2 divides by them
+     (null, with the reason);
    * ``domain_randomisation`` (recovery a): the DR model, nominal reference; and
      ``dr_own_reference``: the DR model with the skin's own reference;
    * ``finetune`` (recovery c): the nominal model fine-tuned on N labelled samples of the skin
@@ -687,8 +688,8 @@ def report_markdown(doc: dict[str, Any]) -> str:
     lines += ["## Figures", ""] + [f"* `{k}`: {v}" for k, v in doc.get("figures", {}).items()]
     lines += [
         "",
-        "The fault rows use the nominal geometry; a dead electrode has no own rest reference "
-        "(its pairs read 0 at rest).",
+        "The fault rows use the nominal geometry. A dead electrode, and a short (its own pair), "
+        "have no own rest reference: those channels read ~0 at rest.",
         "",
     ]
     return "\n".join(lines)
