@@ -3,7 +3,7 @@
 The order (documented in ``docs/architecture.md``), lowest first::
 
     _check, _files → layout → viz → electrostatics → io → twin → learn → report → pipeline
-      → live → dashboard → commands → cli
+      → design → live → dashboard → commands → cli
 
 ``viz`` sits low on purpose: plot functions take arrays (and the layout, to draw the faces) and
 return figures, so every layer above can own its figures. Function-local imports count the same
@@ -31,6 +31,7 @@ LAYERS = (
     ("learn",),
     ("report",),
     ("pipeline",),
+    ("design",),
     ("live",),
     ("dashboard",),
     ("commands",),

@@ -1,0 +1,1 @@
+"""Designing a skin before making one: scoring layouts and their fabrication variability."""

@@ -1,0 +1,695 @@
+"""How a model trained on the nominal skin fares on the skins that come out of the mould, and
+what recovers it: :func:`run_variability` (``ectskin variability OUT``).
+
+Steps (each cached under ``OUT``, so a stopped run resumes where it stopped):
+
+1. **Simulate** one protocol (:data:`DEFAULT_PROTOCOL`, small: 8 inflation states, 6 short
+   touch trials each, touches anywhere in their region) on the nominal skin, on ``skins``
+   fabricated skins (:func:`~ectskin.twin.fabrication.sample_skin`) whose spreads are the
+   variation × a scale running over ``scale_range`` (the x-axis of the degradation curves), on
+   the nominal skin with a dead electrode and with a short (the fault cases), and on
+   ``dr_skins`` more skins at scale 1 for domain randomisation. Every skin runs the same
+   protocol with the same seed: the same touches, so the differences are the skin's.
+   ``OUT/data/<skin>.h5``.
+2. **Train** the touch (TouchMLP) and contact (ContactNet) models on the nominal recording
+   (contact: ``profile``, default ``quick``; touch: ``touch_profile``, default ``robust``, the
+   paper's TouchMLP with the recipe for unseen (inflation state, placement) combinations: this
+   protocol has only a few touches per region, and the ``quick`` recipe's TouchMLP falls back to
+   the no-touch class on it): ``OUT/runs/{touch,contact}_nominal``.
+3. **Domain randomisation**: the same models trained on the nominal skin and the ``dr_skins``
+   skins together, every frame calibrated against the *nominal* rest reference (the one a model
+   in the field would use without a rest readout of its skin), on the trials of the nominal
+   run's train and validation splits: ``OUT/runs/{touch,contact}_dr``.
+4. **Evaluate** on the test trials of the nominal split (the same trial names on every skin):
+
+   * ``baseline``: the nominal model, frames calibrated against the nominal skin's rest readout;
+   * ``own_reference`` (recovery b): the nominal model, each skin's frames calibrated against
+     its own rest readout (Eq. 2 with that skin's rest state). Not defined for a dead
+     electrode, nor for a short (the shorted pair itself): those channels read noise around 0
+     at rest (below :data:`DEAD_FRACTION` of the nominal readout), and Eq. 2 divides by them
+     (null, with the reason);
+   * ``domain_randomisation`` (recovery a): the DR model, nominal reference; and
+     ``dr_own_reference``: the DR model with the skin's own reference;
+   * ``finetune`` (recovery c): the nominal model fine-tuned on N labelled samples of the skin
+     (N in ``finetune_frames``; drawn at random from its train-split trials, nominal
+     reference, so N = 0 is the baseline), ``finetune_epochs`` epochs of Adam at
+     ``finetune_lr`` from the trained weights, the normalisation kept.
+
+   Touch: test accuracy; contact: ``loc_mm_mean`` (mm over the skin, frames with one finger).
+   ``OUT/eval/<skin>.json`` per skin.
+5. ``OUT/variability.json``, the figures ``OUT/variability_curves.png`` (metric against the
+   perturbation scale, per recovery) and ``OUT/variability_finetune.png`` (metric against N),
+   and ``OUT/variability.md``.
+
+The perturbation of each skin is also measured: ``rest_deviation_pct``, the RMS over pairs of
+the relative change of its rest readout from the nominal one.
+
+Size: the study's steps, its evaluation matrix, its two figures and its report read one
+results document; apart they would each re-learn its shape.
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from ectskin._check import EctskinError
+from ectskin._files import (
+    read_json_object,
+    save_figure_atomic,
+    write_json_atomic,
+    write_text_atomic,
+)
+from ectskin.io import Recording, read_recording, write_recording
+from ectskin.io.calibration import touch_reference
+from ectskin.layout import SensorLayout, default_layout
+from ectskin.learn.checkpoint import load_checkpoint
+from ectskin.learn.evaluate import read_run
+from ectskin.learn.profiles import TrainSettings
+from ectskin.learn.tasks import EvalCase, get_task
+from ectskin.learn.threads import torch_threads
+from ectskin.learn.train import TrainConfig, train, train_from_recording
+from ectskin.twin.fabrication import (
+    FabricatedSkin,
+    FabricationVariation,
+    apply_fault,
+    nominal_skin,
+    sample_skin,
+    simulate_skin,
+)
+from ectskin.twin.protocol import Protocol
+
+log = logging.getLogger(__name__)
+
+#: The tasks scored, and the metric of each (higher is better for accuracy, lower for mm).
+TASKS = {"touch": "accuracy", "contact": "loc_mm_mean"}
+#: The evaluations without fine-tuning: (name, model run, reference).
+EVALUATIONS = (
+    ("baseline", "nominal", "nominal"),
+    ("own_reference", "nominal", "own"),
+    ("domain_randomisation", "dr", "nominal"),
+    ("dr_own_reference", "dr", "own"),
+)
+
+#: A channel whose own rest readout is below this fraction of the nominal one is dead.
+DEAD_FRACTION = 0.01
+
+#: The default protocol: small enough for a 2-core machine, with every region touched.
+DEFAULT_PROTOCOL = Protocol(
+    levels_ml=(0.0, 20.0),
+    touch_trials=6,
+    duration_s=4.0,
+    touch_placement="uniform",
+    force_nodes=3,
+    seed=0,
+)
+
+
+@dataclass(frozen=True)
+class VariabilityConfig:
+    """What :func:`run_variability` does (module docstring).
+
+    ``skins``: fabricated skins on the degradation curve, their spreads the variation ×
+    scales evenly spaced over ``scale_range``; ``dr_skins``: skins (scale 1) added to the
+    domain-randomisation training; ``finetune_frames``: the N of the fine-tuning curve (0 = no
+    fine-tuning); ``profile``, ``touch_profile``: the training profiles of the contact and the
+    touch models; ``epochs``: override the profile's training epochs; ``faults``: also score
+    the nominal skin with a dead and with a shorted electrode; ``workers``: simulation
+    processes; ``threads``: torch threads.
+    """
+
+    skins: int = 4
+    seed: int = 0
+    scale_range: tuple[float, float] = (0.5, 2.0)
+    dr_skins: int = 2
+    finetune_frames: tuple[int, ...] = (0, 100, 1000)
+    finetune_epochs: int = 10
+    finetune_lr: float = 3e-4
+    faults: bool = True
+    profile: str = "quick"
+    touch_profile: str = "robust"
+    epochs: int | None = None
+    variation: FabricationVariation = field(default_factory=FabricationVariation)
+    protocol: Protocol = DEFAULT_PROTOCOL
+    layout: SensorLayout | None = None
+    workers: int | None = None
+    threads: int | str | None = None
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("skins", "dr_skins", "finetune_epochs"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise EctskinError(f"variability: {name} must be an integer >= 0, got {v!r}")
+        lo, hi = self.scale_range
+        if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
+            raise EctskinError(
+                f"variability: scale_range must be 0 <= low <= high, got {self.scale_range!r}"
+            )
+        if any(
+            isinstance(n, bool) or not isinstance(n, int) or n < 0 for n in self.finetune_frames
+        ):
+            raise EctskinError(
+                f"variability: finetune_frames must be integers >= 0, got {self.finetune_frames!r}"
+            )
+        if not (np.isfinite(self.finetune_lr) and self.finetune_lr > 0):
+            raise EctskinError(f"variability: finetune_lr must be > 0, got {self.finetune_lr!r}")
+
+    def scales(self) -> np.ndarray:
+        """(skins,) perturbation scales of the curve's skins."""
+        if self.skins == 1:
+            return np.array([self.scale_range[1]])
+        return np.linspace(self.scale_range[0], self.scale_range[1], self.skins)
+
+
+@dataclass(frozen=True)
+class SkinCase:
+    """One skin of the study: its name, role ("nominal", "sampled", "fault", "dr"), scale and
+    the fabricated skin."""
+
+    name: str
+    role: str
+    scale: float
+    skin: FabricatedSkin
+
+
+def skin_cases(config: VariabilityConfig) -> list[SkinCase]:
+    """Every skin of the study, in order; seeds derived from ``config.seed``."""
+    layout = config.layout or default_layout()
+    base = config.seed * 1000
+    cases = [SkinCase("nominal", "nominal", 0.0, nominal_skin(layout))]
+    for k, s in enumerate(config.scales()):
+        skin = sample_skin(layout, config.variation.scaled(float(s)), base + 1 + k)
+        cases.append(SkinCase(f"skin{k + 1}", "sampled", float(s), skin))
+    if config.faults:
+        for kind in ("dead", "short"):
+            v = replace(FabricationVariation.none(), fault=kind)
+            cases.append(SkinCase(kind, "fault", 0.0, sample_skin(layout, v, base + 500)))
+    for m in range(config.dr_skins):
+        skin = sample_skin(layout, config.variation, base + 100 + m)
+        cases.append(SkinCase(f"dr{m + 1}", "dr", 1.0, skin))
+    return cases
+
+
+# ----------------------------------------------------------------------------- the steps
+def run_variability(out: str | Path, config: VariabilityConfig = VariabilityConfig()) -> dict:
+    """Run the study (module docstring) into ``out``; returns what ``variability.json`` holds."""
+    out = Path(out)
+    t0 = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    cases = skin_cases(config)
+    recs: dict[str, Recording] = {}
+    for c in cases:
+        recs[c.name] = _simulated(out, c, config, recs.get("nominal"))
+    nominal = recs["nominal"]
+    nom_ref = _rest_reference(nominal)
+    runs = {}
+    for task in TASKS:
+        runs[(task, "nominal")] = _train_nominal(out, task, config)
+        split = read_run(runs[(task, "nominal")]).split
+        dr = [recs["nominal"]] + [recs[c.name] for c in cases if c.role == "dr"]
+        runs[(task, "dr")] = _train_dr(out, task, dr, nom_ref, split, config)
+    results = {}
+    for c in cases:
+        if c.role == "dr":
+            continue
+        results[c.name] = _evaluated(out, c, recs[c.name], nom_ref, runs, config)
+    doc = {
+        "config": _config_dict(config),
+        "skins": results,
+        "summary": summarise(results),
+        "seconds": time.perf_counter() - t0,
+    }
+    doc["figures"] = _figures(out, results, config)
+    write_json_atomic(out / "variability.json", doc)
+    write_text_atomic(out / "variability.md", report_markdown(doc))
+    log.info("wrote %s and %s", out / "variability.json", out / "variability.md")
+    return doc
+
+
+def _simulated(
+    out: Path, case: SkinCase, config: VariabilityConfig, nominal: Recording | None
+) -> Recording:
+    """The recording of ``case`` (cached). A fault case on the nominal geometry is the nominal
+    recording with the fault applied: what :func:`simulate_skin` gives, without simulating the
+    same skin twice."""
+    path = out / "data" / f"{case.name}.h5"
+    if path.exists():
+        return read_recording(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if case.role == "fault" and nominal is not None:
+        log.info("skin %s: the nominal recording with the fault at the readout", case.name)
+        meta = {**nominal.meta, "fabrication": case.skin.to_dict()}
+        rec = apply_fault(
+            replace(nominal, meta=meta), case.skin.fault, config.protocol.readout, case.skin.seed
+        )
+    else:
+        log.info("simulating skin %s (%s, scale %.2f)", case.name, case.role, case.scale)
+        rec = simulate_skin(
+            config.protocol, case.skin, workers=config.workers, progress=config.progress
+        )
+    write_recording(rec, path)
+    return read_recording(path)
+
+
+def _rest_reference(rec: Recording) -> np.ndarray:
+    """(n_pairs,) the mean rest-state readout of ``rec`` (pF)."""
+    return next(iter(touch_reference(rec, reference="rest").values()))
+
+
+def own_rest_reference(rec: Recording, nominal: np.ndarray) -> np.ndarray:
+    """(n_pairs,) ``rec``'s own mean rest readout (pF), refused when a channel reads less
+    than :data:`DEAD_FRACTION` of its nominal rest readout: a dead channel (its mean is noise
+    around 0, and Eq. 2 would divide the frames by that noise)."""
+    own = _rest_reference(rec)
+    dead = np.flatnonzero(np.abs(own) < DEAD_FRACTION * np.abs(nominal))
+    if dead.size:
+        names = [rec.layout.pair_names[j] for j in dead]
+        raise EctskinError(
+            f"channels {names} read less than {DEAD_FRACTION:.0%} of their nominal rest "
+            "readout (dead); Eq. 2 cannot divide by them"
+        )
+    return own
+
+
+def _profile(task: str, config: VariabilityConfig) -> str:
+    return config.touch_profile if task == "touch" else config.profile
+
+
+def _train_config(task: str, config: VariabilityConfig) -> TrainConfig:
+    return TrainConfig(
+        profile=_profile(task, config),
+        seed=config.seed,
+        progress=config.progress,
+        threads=config.threads,
+        resume=True,
+        epochs=config.epochs,
+    )
+
+
+def _train_nominal(out: Path, task: str, config: VariabilityConfig) -> Path:
+    run = out / "runs" / f"{task}_nominal"
+    done = run / "variability_done.json"
+    if not done.exists():
+        log.info("training %s on the nominal skin", task)
+        summary = train_from_recording(
+            task, out / "data" / "nominal.h5", run, _train_config(task, config)
+        )
+        write_json_atomic(done, summary)
+    return run
+
+
+def _train_dr(
+    out: Path,
+    task: str,
+    recs: list[Recording],
+    reference: np.ndarray,
+    split: dict[str, Any],
+    config: VariabilityConfig,
+) -> Path:
+    """The domain-randomised model: the train and val trials of the nominal split of every skin
+    in ``recs``, each calibrated against ``reference`` (the nominal rest readout)."""
+    run = out / "runs" / f"{task}_dr"
+    done = run / "variability_done.json"
+    if done.exists():
+        return run
+    t = get_task(task)
+    parts = {"train": [], "val": []}
+    for rec in recs:
+        ds = t.dataset(rec, reference=reference, **_dataset_options(task))
+        for k in parts:
+            parts[k].append(ds.select(_group_ids(ds, split[k], rec)))
+    train_data = {k: concat_data(v) for k, v in parts.items()}
+    names = {k: [f"{i}/{n}" for i in range(len(recs)) for n in split[k]] for k in parts}
+    log.info("training %s on %d skins (domain randomisation)", task, len(recs))
+    summary = train(
+        task,
+        train_data["train"],
+        train_data["val"],
+        run,
+        profile=_profile(task, config),
+        seed=config.seed,
+        resume=True,
+        epochs=config.epochs,
+        progress=config.progress,
+        threads=config.threads,
+        split={**names, "test": [], "task": task, "data": "domain randomisation"},
+    )
+    write_json_atomic(done, summary)
+    return run
+
+
+def _dataset_options(task: str) -> dict[str, Any]:
+    """The data-set options of :func:`_train_config`'s runs (contact: a window of 10 frames)."""
+    return {"window": TrainConfig().window} if task == "contact" else {}
+
+
+def _group_ids(ds: Any, names: list[str], rec: Recording) -> np.ndarray:
+    index = {n: i for i, n in enumerate(ds.group_names)}
+    missing = [n for n in names if n not in index]
+    if missing:
+        raise EctskinError(
+            f"recording {rec.source or ''}: lacks trial(s) {missing[:3]} of the nominal split; "
+            "every skin must run the same protocol"
+        )
+    return np.array([index[n] for n in names], dtype=np.int64)
+
+
+def concat_data(parts: list[Any]) -> Any:
+    """One data set (TouchData or ContactData) of several with the same channels: sample arrays
+    concatenated, groups renumbered, group names kept (made unique with a skin index)."""
+    first = parts[0]
+    per_sample = [
+        k
+        for k, v in vars(first).items()
+        if isinstance(v, np.ndarray) and v.shape[:1] == first.x.shape[:1]
+    ]
+    per_group = ["group_region"]
+    for p in parts[1:]:
+        if p.pair_names != first.pair_names or getattr(p, "states", None) != getattr(
+            first, "states", None
+        ):
+            raise EctskinError(
+                "concat_data: the data sets differ in their channels or inflation states"
+            )
+    changes: dict[str, Any] = {}
+    for k in per_sample:
+        if k == "group":
+            offsets = np.cumsum([0] + [p.n_groups for p in parts[:-1]])
+            changes[k] = np.concatenate([p.group + o for p, o in zip(parts, offsets)])
+        else:
+            changes[k] = np.concatenate([getattr(p, k) for p in parts])
+    for k in per_group:
+        changes[k] = np.concatenate([getattr(p, k) for p in parts])
+    changes["group_names"] = [f"{i}/{n}" for i, p in enumerate(parts) for n in p.group_names]
+    return replace(first, **changes)
+
+
+# ----------------------------------------------------------------------------- evaluation
+def _evaluated(
+    out: Path,
+    case: SkinCase,
+    rec: Recording,
+    nom_ref: np.ndarray,
+    runs: dict[tuple[str, str], Path],
+    config: VariabilityConfig,
+) -> dict[str, Any]:
+    path = out / "eval" / f"{case.name}.json"
+    if path.exists():
+        return read_json_object(path, "evaluation")
+    log.info("evaluating on skin %s", case.name)
+    own, own_error = None, None
+    try:
+        own = own_rest_reference(rec, nom_ref)
+    except EctskinError as exc:
+        own_error = str(exc)
+    res: dict[str, Any] = {
+        "role": case.role,
+        "scale": case.scale,
+        "fabrication": case.skin.to_dict(),
+        "rest_deviation_pct": None
+        if own is None
+        else float(100 * np.sqrt(np.mean(((own - nom_ref) / nom_ref) ** 2))),
+    }
+    refs = {"nominal": nom_ref, "own": own}
+    with torch_threads(config.threads):
+        for task, metric in TASKS.items():
+            scores: dict[str, Any] = {}
+            nominal_run = read_run(runs[(task, "nominal")])
+            test_names = nominal_run.split["test"]
+            for name, which, ref in EVALUATIONS:
+                model, model_config, _ = load_checkpoint(runs[(task, which)] / "model.pt")
+                if refs[ref] is None:
+                    scores[name] = None
+                    scores[f"{name}_note"] = f"no own rest reference: {own_error}"
+                    continue
+                scores[name] = score(task, model, model_config, rec, refs[ref], test_names)
+            scores["finetune"] = {
+                str(n): _finetuned_score(task, nominal_run, rec, nom_ref, n, case, config)
+                for n in config.finetune_frames
+            }
+            res[task] = {"metric": metric, **scores}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(path, res)
+    return res
+
+
+def score(
+    task: str,
+    model: torch.nn.Module,
+    model_config: Any,
+    rec: Recording,
+    reference: np.ndarray,
+    names: list[str],
+) -> float | None:
+    """The task's metric (:data:`TASKS`) of ``model`` on the trials ``names`` of ``rec``, every
+    frame calibrated against ``reference`` (n_pairs,) pF."""
+    t = get_task(task)
+    ds = t.dataset(rec, reference=reference, **t.dataset_options(model_config))
+    test = ds.select(_group_ids(ds, names, rec))
+    pred = t.predict(model, test)
+    m = t.test_metrics(EvalCase(data=ds, test=test, pred=pred, recording=rec, config=model_config))
+    v = m[TASKS[task]]
+    return None if v is None else float(v)
+
+
+def _finetuned_score(
+    task: str,
+    run: Any,
+    rec: Recording,
+    reference: np.ndarray,
+    n: int,
+    case: SkinCase,
+    config: VariabilityConfig,
+) -> float | None:
+    names = run.split["test"]
+    if n == 0:
+        return score(task, run.model, run.config, rec, reference, names)
+    t = get_task(task)
+    ds = t.dataset(rec, reference=reference, **t.dataset_options(run.config))
+    pool = ds.select(_group_ids(ds, run.split["train"], rec))
+    rng = np.random.default_rng([config.seed, 17, n, sum(map(ord, case.name))])
+    take = rng.choice(pool.x.shape[0], size=min(n, pool.x.shape[0]), replace=False)
+    model = finetune(
+        task,
+        run.model,
+        _subset(pool, np.sort(take)),
+        epochs=config.finetune_epochs,
+        lr=config.finetune_lr,
+        seed=config.seed,
+    )
+    return score(task, model, run.config, rec, reference, names)
+
+
+def _subset(data: Any, rows: np.ndarray) -> Any:
+    """``data`` cut to the samples ``rows`` (per-sample arrays only; groups kept)."""
+    n = data.x.shape[0]
+    changes = {
+        k: v[rows]
+        for k, v in vars(data).items()
+        if isinstance(v, np.ndarray) and v.shape[:1] == (n,)
+    }
+    return replace(data, **changes)
+
+
+def finetune(
+    task: str,
+    model: torch.nn.Module,
+    data: Any,
+    *,
+    epochs: int,
+    lr: float,
+    seed: int = 0,
+    batch_size: int = 32,
+) -> torch.nn.Module:
+    """A copy of ``model`` trained ``epochs`` more epochs on ``data`` with Adam at ``lr`` (the
+    task's training loss, no augmentation; the model's normalisation is kept)."""
+    t = get_task(task)
+    model = copy.deepcopy(model)
+    settings = TrainSettings(epochs=max(epochs, 1), batch_size=batch_size, lr=lr)
+    criterion = t.criterion(model, settings, data, torch.device("cpu"))
+    tensors = t.tensors(data, torch.device("cpu"))
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    g = torch.Generator().manual_seed(seed)
+    model.train()
+    for _ in range(epochs):
+        perm = torch.randperm(tensors.n, generator=g)
+        for start in range(0, tensors.n, batch_size):
+            loss = criterion.loss(model, tensors.batch(perm[start : start + batch_size]), None)
+            if not torch.isfinite(loss):
+                raise EctskinError(f"fine-tuning {task}: the loss is not finite ({loss.item()})")
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+    model.eval()
+    return model
+
+
+# ----------------------------------------------------------------------------- summary, report
+def summarise(results: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Mean of each evaluation over the sampled skins, per task, and the nominal skin's values."""
+    out: dict[str, Any] = {}
+    sampled = [r for r in results.values() if r["role"] == "sampled"]
+    for task in TASKS:
+        rows = {}
+        for name in [e[0] for e in EVALUATIONS] + ["finetune"]:
+            if name == "finetune":
+                keys = sampled[0][task]["finetune"].keys() if sampled else []
+                for k in keys:
+                    rows[f"finetune_{k}"] = _mean([r[task]["finetune"][k] for r in sampled])
+            else:
+                rows[name] = _mean([r[task][name] for r in sampled])
+        out[task] = {"sampled_mean": rows}
+        if "nominal" in results:
+            out[task]["nominal_baseline"] = results["nominal"][task]["baseline"]
+    return out
+
+
+def _mean(values: list[Any]) -> float | None:
+    v = [x for x in values if x is not None]
+    return float(np.mean(v)) if v else None
+
+
+def _config_dict(config: VariabilityConfig) -> dict[str, Any]:
+    d = asdict(replace(config, layout=None, protocol=DEFAULT_PROTOCOL))
+    d["protocol"] = config.protocol.to_dict()
+    d["layout"] = (config.layout or default_layout()).name
+    return d
+
+
+def _figures(out: Path, results: dict[str, Any], config: VariabilityConfig) -> dict[str, str]:
+    figs = {
+        "variability_curves.png": (plot_degradation(results), "metric against perturbation scale"),
+        "variability_finetune.png": (plot_finetune(results), "metric against fine-tuning frames N"),
+    }
+    for name, (fig, _) in figs.items():
+        save_figure_atomic(fig, out / name)
+    return {name: caption for name, (_, caption) in figs.items()}
+
+
+_LABELS = {
+    "baseline": "nominal model, nominal reference",
+    "own_reference": "(b) own rest reference",
+    "domain_randomisation": "(a) domain randomisation",
+    "dr_own_reference": "(a) + (b)",
+}
+_YLABEL = {"touch": "touch accuracy", "contact": "contact loc_mm_mean (mm)"}
+
+
+def plot_degradation(results: dict[str, Any]) -> Any:
+    """Touch accuracy and contact error of every evaluation against the skins' perturbation
+    scale (the nominal skin at 0; fault cases as separate markers at the right)."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    pts = sorted(
+        ((r["scale"], r) for r in results.values() if r["role"] in ("nominal", "sampled")),
+        key=lambda p: p[0],
+    )
+    faults = [(k, r) for k, r in results.items() if r["role"] == "fault"]
+    x_fault = (pts[-1][0] if pts else 1.0) + 0.5
+    for ax, task in zip(axes, TASKS):
+        x = [p[0] for p in pts]
+        for name, label in _LABELS.items():
+            y = [np.nan if p[1][task][name] is None else p[1][task][name] for p in pts]
+            line = ax.plot(x, y, "o-", label=label)[0]
+            for j, (_, r) in enumerate(faults):
+                v = r[task][name]
+                if v is not None:
+                    ax.plot(x_fault + 0.25 * j, v, "s", color=line.get_color())
+        for j, (fname, _) in enumerate(faults):
+            ax.annotate(
+                fname,
+                (x_fault + 0.25 * j, 0),
+                xycoords=("data", "axes fraction"),
+                ha="center",
+                va="bottom",
+                fontsize=8,
+            )
+        ax.set_xlabel("perturbation scale (× the assumed spreads)")
+        ax.set_ylabel(_YLABEL[task])
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle("Models trained on the nominal skin, on fabricated skins")
+    fig.tight_layout()
+    return fig
+
+
+def plot_finetune(results: dict[str, Any]) -> Any:
+    """Each skin's metric against the number N of labelled frames fine-tuned on."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for ax, task in zip(axes, TASKS):
+        for name, r in results.items():
+            ft = r[task]["finetune"]
+            ns = sorted(int(k) for k in ft)
+            y = [np.nan if ft[str(n)] is None else ft[str(n)] for n in ns]
+            ax.plot(ns, y, "o-", label=name, alpha=0.9)
+        ax.set_xscale("symlog", linthresh=100)
+        ax.set_xlabel("labelled frames of the new skin N")
+        ax.set_ylabel(_YLABEL[task])
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle("Fine-tuning the nominal model on N frames of each skin")
+    fig.tight_layout()
+    return fig
+
+
+def _fmt(v: Any, task: str) -> str:
+    if v is None:
+        return "–"
+    return f"{v:.3f}" if task == "touch" else f"{v:.1f}"
+
+
+def report_markdown(doc: dict[str, Any]) -> str:
+    """The study as Markdown: one table per task (a row per skin, a column per evaluation)."""
+    cfg = doc["config"]
+    lines = [
+        "# Fabrication variability",
+        "",
+        f"Skins: {len(doc['skins'])} scored (nominal, sampled at scales "
+        f"{cfg['scale_range'][0]:g}–{cfg['scale_range'][1]:g} × the assumed spreads, faults); "
+        f"domain randomisation on {cfg['dr_skins']} more skins; profiles: touch "
+        f"{cfg['touch_profile']}, contact {cfg['profile']}; "
+        f"seed {cfg['seed']}; {doc['seconds'] / 60:.1f} min.",
+        "Spreads (assumed): " + ", ".join(f"{k} {v}" for k, v in cfg["variation"].items()) + ".",
+        "",
+    ]
+    ft_keys = None
+    for task, metric in TASKS.items():
+        first = next(iter(doc["skins"].values()))[task]
+        ft_keys = list(first["finetune"].keys())
+        head = ["skin", "scale", "rest dev. %"] + [e[0] for e in EVALUATIONS]
+        head += [f"finetune N={k}" for k in ft_keys if k != "0"]
+        lines += [f"## {task}: {metric}", "", "| " + " | ".join(head) + " |"]
+        lines.append("|" + "---|" * len(head))
+        for name, r in doc["skins"].items():
+            dev = r["rest_deviation_pct"]
+            row = [name, f"{r['scale']:g}", "–" if dev is None else f"{dev:.1f}"]
+            row += [_fmt(r[task][e[0]], task) for e in EVALUATIONS]
+            row += [_fmt(r[task]["finetune"][k], task) for k in ft_keys if k != "0"]
+            lines.append("| " + " | ".join(row) + " |")
+        mean = doc["summary"][task]["sampled_mean"]
+        lines += [
+            "",
+            "Mean over the sampled skins: "
+            + ", ".join(f"{k} {_fmt(v, task)}" for k, v in mean.items())
+            + ".",
+            "",
+        ]
+    lines += ["## Figures", ""] + [f"* `{k}`: {v}" for k, v in doc.get("figures", {}).items()]
+    lines += [
+        "",
+        "The fault rows use the nominal geometry. A dead electrode, and a short (its own pair), "
+        "have no own rest reference: those channels read ~0 at rest.",
+        "",
+    ]
+    return "\n".join(lines)

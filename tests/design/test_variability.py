@@ -1,0 +1,143 @@
+"""The variability study's parts: data sets merged across skins, fine-tuning, the skins, the
+summary; and (slow) the whole study on a tiny protocol, resumed without redoing a step.
+
+What each test catches: group indices not shifted when data sets are merged (samples of skin 2
+would be counted as skin 1's trials); fine-tuning that trains the caller's model in place (the
+baseline would be scored with the fine-tuned weights) or does not train at all; summary means
+that count a missing value as 0; a resumed study that simulates again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from ectskin.design import variability as var
+from ectskin.design.variability import (
+    VariabilityConfig,
+    concat_data,
+    finetune,
+    skin_cases,
+    summarise,
+)
+from ectskin.learn.datasets import touch_dataset
+from ectskin.learn.tasks import get_task
+from ectskin.twin.protocol import Protocol
+
+
+def test_concat_data_renumbers_groups(make_recording):
+    synthetic_recording = make_recording
+    a = touch_dataset(synthetic_recording(seed=0), reference="rest")
+    b = touch_dataset(synthetic_recording(seed=1), reference="rest")
+    m = concat_data([a, b])
+    np.testing.assert_array_equal(m.x, np.concatenate([a.x, b.x]))
+    np.testing.assert_array_equal(m.y, np.concatenate([a.y, b.y]))
+    np.testing.assert_array_equal(m.group[: len(a.group)], a.group)
+    np.testing.assert_array_equal(m.group[len(a.group) :], b.group + a.n_groups)
+    assert m.n_groups == a.n_groups + b.n_groups == len(set(m.group_names))
+    np.testing.assert_array_equal(m.group_region, np.r_[a.group_region, b.group_region])
+    # a trial of the second set is found under its own name
+    g = a.n_groups + 2
+    np.testing.assert_array_equal(m.select([g]).x, b.select([2]).x)
+
+
+def _accuracy(model, data) -> float:
+    return float((get_task("touch").predict(model, data) == data.y).mean())
+
+
+def test_finetune_learns_and_leaves_the_given_model_alone(make_recording):
+    synthetic_recording = make_recording
+    torch.manual_seed(0)
+    data = touch_dataset(synthetic_recording(n_frames=12), reference="rest")
+    t = get_task("touch")
+    model = t.build_model(data, None)
+    t.fit_normalization(model, data)
+    model.eval()
+    before = {k: v.clone() for k, v in model.state_dict().items()}
+    acc0 = _accuracy(model, data)
+    tuned = finetune("touch", model, data, epochs=25, lr=1e-2, seed=0)
+    for k, v in model.state_dict().items():
+        assert torch.equal(v, before[k]), k
+    acc1 = _accuracy(tuned, data)
+    assert acc1 >= 0.75 and acc1 > acc0 + 0.3
+    # the normalisation is the trained model's, not refit
+    assert torch.equal(tuned.state_dict()["x_mean"], before["x_mean"])
+
+
+def test_skin_cases_roles_seeds_and_a_zero_scale():
+    cfg = VariabilityConfig(skins=3, dr_skins=2, scale_range=(0.0, 1.0))
+    cases = skin_cases(cfg)
+    assert [c.role for c in cases] == ["nominal"] + ["sampled"] * 3 + ["fault"] * 2 + ["dr"] * 2
+    assert [c.scale for c in cases[1:4]] == [0.0, 0.5, 1.0]
+    nominal = cases[0].skin.layout.to_dict()
+    assert cases[1].skin.layout.to_dict() == nominal  # scale 0: the nominal skin
+    assert cases[2].skin.layout.to_dict() != nominal
+    for c in cases[4:6]:  # faults on the nominal geometry
+        assert c.skin.layout.to_dict() == nominal and c.skin.fault.kind == c.name
+    seeds = [c.skin.seed for c in cases[1:]]
+    assert len(set(seeds[:3] + seeds[5:])) == 5  # every sampled skin its own draw
+
+
+def test_summarise_means_over_sampled_skins_skipping_missing():
+    def row(b, own, ft):
+        keys = ("baseline", "own_reference", "domain_randomisation", "dr_own_reference")
+        return {
+            **dict(zip(keys, (b, own, b, own))),
+            "finetune": {"0": b, "100": ft},
+        }
+
+    results = {
+        "nominal": {"role": "nominal", "touch": row(0.9, 0.9, 0.9), "contact": row(5, 5, 5)},
+        "skin1": {"role": "sampled", "touch": row(0.5, 0.8, 0.6), "contact": row(20, 8, 10)},
+        "skin2": {"role": "sampled", "touch": row(0.3, 0.7, 0.4), "contact": row(30, 9, 12)},
+        "dead": {"role": "fault", "touch": row(0.1, None, 0.2), "contact": row(50, None, 40)},
+    }
+    s = summarise(results)
+    assert s["touch"]["sampled_mean"]["baseline"] == pytest.approx(0.4)
+    assert s["touch"]["sampled_mean"]["finetune_100"] == pytest.approx(0.5)
+    assert s["contact"]["sampled_mean"]["own_reference"] == pytest.approx(8.5)
+    assert s["contact"]["nominal_baseline"] == 5
+    results["skin2"]["touch"]["own_reference"] = None
+    assert summarise(results)["touch"]["sampled_mean"]["own_reference"] == pytest.approx(0.8)
+
+
+@pytest.mark.slow
+def test_tiny_study_end_to_end_and_resumed(tmp_path, monkeypatch):
+    p = Protocol(
+        levels_ml=(0.0, 20.0),
+        touch_trials=3,
+        duration_s=1.0,
+        touch_placement="uniform",
+        force_nodes=3,
+    )
+    cfg = VariabilityConfig(
+        skins=2,
+        dr_skins=1,
+        protocol=p,
+        epochs=2,
+        finetune_frames=(0, 20),
+        finetune_epochs=2,
+        progress=False,
+        workers=1,
+    )
+    doc = var.run_variability(tmp_path, cfg)
+    assert set(doc["skins"]) == {"nominal", "skin1", "skin2", "dead", "short"}
+    for r in doc["skins"].values():
+        assert set(r["touch"]["finetune"]) == {"0", "20"}
+        assert r["touch"]["finetune"]["0"] == r["touch"]["baseline"]  # N = 0 is the baseline
+        assert 0 <= r["touch"]["baseline"] <= 1 and r["contact"]["baseline"] > 0
+    assert doc["skins"]["dead"]["touch"]["own_reference"] is None
+    assert doc["skins"]["nominal"]["rest_deviation_pct"] == 0.0
+    assert doc["skins"]["skin2"]["rest_deviation_pct"] > doc["skins"]["skin1"]["rest_deviation_pct"]
+    for name in ("variability.json", "variability.md", *doc["figures"]):
+        assert (tmp_path / name).is_file()
+
+    def refuse(*a, **k):
+        raise AssertionError("a resumed study simulated again")
+
+    monkeypatch.setattr(var, "simulate_skin", refuse)
+    again = var.run_variability(tmp_path, replace(cfg))
+    assert again["skins"] == doc["skins"]
