@@ -12,6 +12,9 @@ The voxel grid (:func:`ect_grid`) is laid out in *rest* surface coordinates (u, 
 each skin, pixels of ``pixel_mm``, and layers between ``heights_mm`` edges above the surface;
 for a state the voxel centres are mapped through the deformation and pushed out along the
 deformed surface normal. Locations are reported in rest coordinates, as the recordings' truth.
+
+Size: the grid, the sensitivity, the live imager and the evaluation over a recording share the
+grid's geometry and the per-state reference; split apart they would pass it all around.
 """
 
 from __future__ import annotations
