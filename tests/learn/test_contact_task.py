@@ -73,3 +73,14 @@ def test_contact_model_learns_a_flat_skin_better_than_region_centres(
     assert m["loc_mm_mean"] < 0.6 * base["loc_mm_mean"]
     assert m["face_accuracy"] == pytest.approx(1.0)
     assert m["count_accuracy"] == pytest.approx(1.0)
+
+
+def test_count_weights_by_hand():
+    from ectskin.learn.tasks.contact import count_weights
+
+    # 90 frames without a finger, 9 with one, 1 with two: n / (3 n_c) = 1/2.7, 10/2.7, 100/3
+    w = count_weights(np.array([0] * 90 + [1] * 9 + [2]))
+    np.testing.assert_allclose(w.numpy(), np.sqrt([100 / 270, 100 / 27, 100 / 3]), rtol=1e-6)
+    # a count the data lacks weighs 1 and does not change the others' ratio
+    w = count_weights(np.array([0, 0, 1, 1]))
+    np.testing.assert_allclose(w.numpy(), [1.0, 1.0, 1.0])

@@ -5,7 +5,8 @@ of an import with contact labels); model: :class:`~ectskin.learn.models.contact.
 
 Training loss (:class:`ContactCriterion`), per frame:
 
-* cross-entropy of the finger count (0, 1, 2);
+* cross-entropy of the finger count (0, 1, 2), each count weighted by √(1 / its frequency)
+  (:func:`count_weights`: two fingers are rare);
 * frames with no finger on the skin: binary cross-entropy of hover;
 * frames with fingers: per finger, cross-entropy of its face, smooth-L1 of its (u, v) (in units
   of the face's half extent, weight :data:`POSITION_WEIGHT`) and of its force (in units of the
@@ -86,10 +87,15 @@ class ContactCriterion(Criterion):
     """See the module docstring. ``thickness`` (mm) charges a wrong face in the metric."""
 
     def __init__(
-        self, model: nn.Module, thickness_mm: float, state_means: torch.Tensor | None = None
+        self,
+        model: nn.Module,
+        thickness_mm: float,
+        state_means: torch.Tensor | None = None,
+        count_weight: torch.Tensor | None = None,
     ) -> None:
         super().__init__()
         self.thickness = float(thickness_mm)
+        self.count_weight = count_weight  # (S + 1,) or None: every count weighs 1
         self.state_means = state_means  # (n_states, P) or None: no inflation shift
         self.shift_states = 0 if state_means is None else len(state_means)
 
@@ -118,6 +124,8 @@ class ContactCriterion(Criterion):
         x, count, face, uv, force, hover = batch
         out = model(x)
         loss = F.cross_entropy(out["count"], count, reduction="none")
+        if self.count_weight is not None:
+            loss = loss * self.count_weight[count]
         off = count == 0
         bce = F.binary_cross_entropy_with_logits(out["hover"], hover, reduction="none")
         loss = loss + torch.where(off, bce, torch.zeros_like(bce))
@@ -301,7 +309,9 @@ class ContactTask(Task):
                     f"inflation shift skipped: the training data holds {len(means)} no-contact "
                     "trial(s), at least 2 are needed"
                 )
-        criterion = ContactCriterion(model, body_size()[1], state_means)
+        criterion = ContactCriterion(
+            model, body_size()[1], state_means, count_weights(train_data.count).to(device)
+        )
         criterion.notes.extend(notes)
         return criterion
 
@@ -339,6 +349,18 @@ class ContactTask(Task):
                 metrics["hover"]["curve"], metrics["hover"]["rate_threshold"]
             ),
         }
+
+
+def count_weights(count: np.ndarray) -> torch.Tensor:
+    """(S + 1,) weights of the finger counts in the training loss: √(n / ((S + 1) n_c)), so that a
+    rare count (two fingers are on the skin in a few percent of the frames) is not simply never
+    predicted; 1 for a count the data does not hold. The square root keeps the common counts'
+    accuracy (full inverse-frequency weights trade too much of it)."""
+    n_c = np.bincount(np.asarray(count, np.int64), minlength=MAX_FINGERS + 1).astype(np.float64)
+    w = np.ones(MAX_FINGERS + 1)
+    present = n_c > 0
+    w[present] = np.sqrt(n_c.sum() / (present.sum() * n_c[present]))
+    return torch.from_numpy(w.astype(np.float32))
 
 
 def _state_name(state: tuple[float, ...]) -> str:
