@@ -15,4 +15,5 @@ COMMANDS = (
     ("record", "record"),
     ("live", "live"),
     ("import", "import_"),
+    ("design", "design"),
 )
