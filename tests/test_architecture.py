@@ -31,6 +31,7 @@ LAYERS = (
     ("learn",),
     ("report",),
     ("pipeline",),
+    ("design",),
     ("live",),
     ("dashboard",),
     ("commands",),

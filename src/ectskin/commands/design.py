@@ -40,7 +40,7 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="inflation levels per chamber, ml (default 0,20: 8 states)")
     p.add_argument("--touch-trials", type=int, default=2,
                    help="touch trials per inflation state (default 2)")
-    p.add_argument("--duration", type=float, default=4.0, help="seconds per trial (default 4)")
+    p.add_argument("--duration", type=float, default=3.0, help="seconds per trial (default 3)")
     p.add_argument("--epochs", default="15,6,3",
                    help="quick-profile epochs of the touch, contact and track models "
                    "(default 15,6,3)")
@@ -96,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.design_command is None:
         raise EctskinError("design: choose a subcommand, score or search (ectskin design -h)")
+    if args.workers is not None and args.workers < 0:
+        raise EctskinError(f"--workers must be >= 0, got {args.workers}")
     rules = ManufacturingRules(args.min_width, args.min_spacing, args.edge_margin)
     config = _config(args)
     if args.design_command == "score":
@@ -125,11 +127,14 @@ def run(args: argparse.Namespace) -> int:
         out = Path(args.out)
     for e in design["layouts"]:
         log.info(
-            "%-14s %2d electrodes  loc %.1f mm  region acc %s  force %.3f N  track %s mm",
-            e["name"], e["n_electrodes"], e["loc_mm_mean"],
-            "n/a" if e["region_accuracy"] is None else f"{e['region_accuracy']:.3f}",
-            e["force_mae_n"],
-            "n/a" if e["track_ad_mm"] is None else f"{e['track_ad_mm']:.2f}",
+            "%-14s %2d electrodes  loc %s mm  region acc %s  force %s N  track %s mm",
+            e["name"], e["n_electrodes"], _num(e["loc_mm_mean"], ".1f"),
+            _num(e["region_accuracy"], ".3f"), _num(e["force_mae_n"], ".3f"),
+            _num(e["track_ad_mm"], ".2f"),
         )
     log.info("wrote %s, %s", out / "design.json", out / "design.html")
     return 0
+
+
+def _num(v, spec: str) -> str:
+    return "n/a" if v is None else format(v, spec)

@@ -196,7 +196,7 @@ def face_electrodes(
     n = face.n_wires
     u0, u1 = skin.u_mm
     v0, v1 = skin.v_mm
-    xs = np.linspace(-face.span_mm / 2, face.span_mm / 2, n) + (u0 + u1) / 2
+    xs = np.round(np.linspace(-face.span_mm / 2, face.span_mm / 2, n) + (u0 + u1) / 2, 4)
     if face.routing == "straight":
         pitch = face.span_mm / (n - 1)
         pad = min(MAX_PAD_MM, pitch - gap)
@@ -210,6 +210,7 @@ def face_electrodes(
             f"pads of {pad:.2f} mm; at least {MIN_PAD_MM:g} mm are needed (fewer wires, a wider "
             f"span or fan routing)"
         )
+    pad = float(np.floor(pad * 1e4) / 1e4)  # 0.1 µm steps: the file's numbers are exact
     v_start = v0 + pad
     out = []
     for k, (x, px, length) in enumerate(zip(xs, pad_x, _lengths(face))):
@@ -229,9 +230,9 @@ def face_electrodes(
             Electrode(
                 name=f"E{first_index + k}",
                 skin=skin.name,
-                polyline_mm=np.round(np.asarray(poly, dtype=np.float64), 6),
+                polyline_mm=np.asarray(poly, dtype=np.float64),
                 width_mm=float(face.width_mm),
-                pad_centre_mm=(round(float(px), 6), round(v0 + pad / 2, 6)),
+                pad_centre_mm=(round(float(px), 6), v0 + pad / 2),
                 pad_size_mm=(float(pad), float(pad)),
             )
         )

@@ -82,7 +82,7 @@ def plot_front(points: Sequence[Mapping[str, Any]], paper: Mapping[str, Any] | N
         for p in front:
             ax.annotate(p["name"], (p["n_electrodes"], p["loc_mm_mean"]), fontsize=7,
                         xytext=(3, 3), textcoords="offset points")
-    if paper is not None:
+    if paper is not None and paper.get("loc_mm_mean") is not None:
         ax.plot([paper["n_electrodes"]], [paper["loc_mm_mean"]], "k*", ms=12, label="paper")
     ax.set_xlabel("electrodes")
     ax.set_ylabel("mean localisation error (mm)")

@@ -7,11 +7,17 @@ match, so a sweep resumes without redoing finished layouts.
 
 The default protocol (:func:`design_protocol`) is far smaller than the paper's (so that one
 layout costs minutes on one core): the contact experiment's placement (touches anywhere in
-their region, 3 dwells per trial, lifts) at the chambers' lowest and highest level (8 states),
-2 touch trials and one no-contact trial per state of 4 s, 3 force nodes, no hover, approach or
-second finger. Errors measured on it are comparable between layouts (every layout sees the
-same touches for a seed: the trial plan depends on the regions, not on the electrodes), not
-with the paper's numbers.
+their region, 2 dwells per trial, lifts) at the chambers' lowest and highest level (8 states),
+2 touch trials and one no-contact trial per state of 3 s, 3 force nodes, no hover, approach or
+second finger.
+
+Every layout is scored on the same *scoring regions* (:func:`scoring_regions`: each face cut
+into ``ScoreConfig.region_rows`` × ``region_cols`` rectangles, default 2 × 1: base and tip
+half), not on its own: touches are drawn uniformly in them, so every layout sees the same
+touches for a seed (the trial plan depends on the regions, not on the electrodes), and the few
+touch trials of the small protocol still reach the test split (the split keeps one trial of
+every region for training first). ``region_accuracy`` is the touch model's accuracy over these
+regions and "no touch". Errors are comparable between layouts, not with the paper's numbers.
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ from ectskin._check import EctskinError
 from ectskin._files import json_text, read_json, write_json_atomic, write_text_atomic
 from ectskin.electrostatics.reconstruct import normalise_sensitivity
 from ectskin.io import write_recording
-from ectskin.layout import SensorLayout
+from ectskin.layout import Region, SensorLayout
 from ectskin.learn.evaluate import evaluate_run
 from ectskin.learn.train import TrainConfig, train_from_recording
 from ectskin.twin import Protocol, SensorModel, simulate_experiment
@@ -53,9 +59,9 @@ def design_protocol(seed: int = 0, **overrides: Any) -> Protocol:
         seed=seed,
         levels_ml=(0.0, 20.0),
         touch_trials=2,
-        duration_s=4.0,
+        duration_s=3.0,
         touch_placement="uniform",
-        touch_dwells=3,
+        touch_dwells=2,
         lifts=True,
         force_nodes=3,
     )
@@ -79,8 +85,15 @@ class ScoreConfig:
     )
     seed: int = 0
     tasks: tuple[str, ...] = TASKS
+    region_rows: int = 2
+    region_cols: int = 1
 
     def __post_init__(self) -> None:
+        if not all(isinstance(v, int) and v >= 1 for v in (self.region_rows, self.region_cols)):
+            raise EctskinError(
+                f"score config: region_rows and region_cols must be integers >= 1, got "
+                f"{self.region_rows!r}, {self.region_cols!r}"
+            )
         unknown = sorted(set(self.tasks) - set(TASKS))
         if unknown or "contact" not in self.tasks:
             raise EctskinError(
@@ -100,6 +113,7 @@ class ScoreConfig:
             "epochs": {t: self.epochs[t] for t in self.tasks},
             "seed": self.seed,
             "tasks": list(self.tasks),
+            "regions": [self.region_rows, self.region_cols],
         }
 
     def to_dict(self) -> dict[str, Any]:
@@ -112,7 +126,27 @@ class ScoreConfig:
             epochs={k: int(v) for k, v in d["epochs"].items()},
             seed=int(d["seed"]),
             tasks=tuple(d["tasks"]),
+            region_rows=int(d["regions"][0]),
+            region_cols=int(d["regions"][1]),
         )
+
+
+def scoring_regions(layout: SensorLayout, rows: int, cols: int) -> tuple[Region, ...]:
+    """Each front/back skin of ``layout`` cut into ``rows`` (along v, from the base) × ``cols``
+    (along u) rectangles, numbered 1… row-major from the base, front before back."""
+    regions = []
+    for skin in layout.skins:
+        if skin.surface not in ("front", "back"):
+            continue
+        u = np.linspace(*skin.u_mm, cols + 1)
+        v = np.linspace(*skin.v_mm, rows + 1)
+        for r in range(rows):
+            for c in range(cols):
+                regions.append(
+                    Region(len(regions) + 1, skin.surface, (float(u[c]), float(u[c + 1])),
+                           (float(v[r]), float(v[r + 1])))
+                )
+    return tuple(regions)
 
 
 def finished_score(dir_: str | Path, layout: SensorLayout, config: ScoreConfig) -> dict | None:
@@ -211,7 +245,9 @@ def score_layout(
     out.mkdir(parents=True)
     write_text_atomic(out / "layout.json", layout.to_json() + "\n")
     t0 = time.perf_counter()
-    rec = simulate_experiment(config.protocol, layout=layout, workers=1, progress=False)
+    regions = scoring_regions(layout, config.region_rows, config.region_cols)
+    scored = replace(layout, regions=regions)
+    rec = simulate_experiment(config.protocol, layout=scored, workers=1, progress=False)
     data = write_recording(rec, out / "recording.h5", overwrite=True)
     t_sim = time.perf_counter() - t0
     metrics: dict[str, Any] = {}
@@ -284,5 +320,6 @@ __all__ = [
     "finished_score",
     "score_layout",
     "score_to_dict",
+    "scoring_regions",
     "sensor_metrics",
 ]

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -38,7 +39,7 @@ from ectskin.design.family import (
     build_layout,
 )
 from ectskin.design.report import _close, pareto_front, plot_front, write_report
-from ectskin.design.score import ScoreConfig, _plain, score_layout
+from ectskin.design.score import ScoreConfig, _plain, finished_score, score_layout
 from ectskin.design.sweep import PAPER, layout_dir, write_design
 from ectskin.layout import SensorLayout, default_layout
 
@@ -90,12 +91,16 @@ class SearchSpace:
                 f"with high >= the minimum width {rules.min_width_mm:g} mm"
             )
         width = min(s.u_mm[1] - s.u_mm[0] for s in base.skins)
-        if _span_range(self.max_wires, "fan", max(wlo, rules.min_width_mm), width, rules) is None and (
-            _span_range(self.min_wires, "fan", max(wlo, rules.min_width_mm), width, rules) is None
-        ):
+        w = max(wlo, rules.min_width_mm)
+        fits = [
+            n for n in range(self.min_wires, self.max_wires + 1)
+            if any(_span_range(n, r, w, width, rules) is not None for r in ROUTINGS)
+        ]
+        if not fits:
             raise EctskinError(
                 f"search space is empty: {self.min_wires}..{self.max_wires} wires do not fit "
-                f"across a {width:g} mm skin with {rules.min_spacing_mm:g} mm gaps"
+                f"across a {width:g} mm skin with {rules.min_spacing_mm:g} mm gaps and pads of "
+                f"at least {MIN_PAD_MM:g} mm"
             )
 
 
@@ -170,9 +175,11 @@ def run_search(
     seed: int = 0,
     n_workers: int = 2,
     scheduler: str | None = None,
+    score_fn: Callable[[SensorLayout, Path, ScoreConfig], dict] = score_layout,
 ) -> dict[str, Any]:
     """Run (or continue) the study in ``out`` until ``n_trials`` trials have finished; write
-    ``design.json``, the report and the front figure. Returns the design dict."""
+    ``design.json``, the report and the front figure. Returns the design dict. ``score_fn`` is
+    the per-layout scorer (a test hook; it must be importable by the workers)."""
     import optuna
     from optuna.storages import JournalStorage
     from optuna.storages.journal import JournalFileBackend
@@ -238,8 +245,11 @@ def run_search(
     state = {"asked": finished + len(stale), "failed_builds": 0}
 
     def next_job():
-        if queue:
-            return queue.pop(0)
+        while queue:
+            job = queue.pop(0)
+            if finished_score(job[1], job[0], config) is None:
+                return job
+            reused.append(job)
         while state["asked"] < n_trials:
             trial = study.ask()
             state["asked"] += 1
@@ -255,20 +265,40 @@ def run_search(
             trial.set_user_attr("design", design.to_dict())
             trial.set_user_attr("layout", name)
             names[str(layout_dir(out, name))] = trial.number
-            return (layout, layout_dir(out, name), config)
+            job = (layout, layout_dir(out, name), config)
+            if finished_score(job[1], layout, config) is not None:  # same design sampled again
+                reused.append(job)
+                continue
+            return job
         return None
 
     scores: dict[str, dict] = {}
+    reused: list[tuple] = []
     t0 = time.perf_counter()
+
+    def results():
+        for job, score in runner.stream(score_fn, next_job):
+            yield job, score
+            while reused:
+                job = reused.pop()
+                yield job, finished_score(job[1], job[0], config)
+        while reused:
+            job = reused.pop()
+            yield job, finished_score(job[1], job[0], config)
+
     with open_runner(n_workers, scheduler) as runner:
-        for job, score in runner.stream(score_layout, next_job):
+        for job, score in results():
             number = names[str(job[1])]
             if number is None:
                 scores[PAPER] = score
             else:
-                study.tell(number, [score["loc_mm_mean"], score["n_electrodes"]])
+                loc = score["loc_mm_mean"]
+                if loc is None:  # no test frame with one finger: nothing to rank it by
+                    study.tell(number, state=TrialState.FAIL)
+                else:
+                    study.tell(number, [loc, score["n_electrodes"]])
                 scores[_trial_name(number)] = score
-            log.info("%s: %d electrodes, %.1f mm", job[0].name, score["n_electrodes"], score["loc_mm_mean"])
+            log.info("%s: %d electrodes, %s mm", job[0].name, score["n_electrodes"], score["loc_mm_mean"])
         seconds = time.perf_counter() - t0
         # every finished trial of the study (earlier runs' too) is in the report
         for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)):
@@ -276,16 +306,21 @@ def run_search(
             if name not in scores:
                 design = LayoutDesign.from_dict(t.user_attrs["design"])
                 layout = build_layout(design, name, base=base, rules=rules)
-                scores[name] = score_layout(layout, layout_dir(out, name), config)
+                done = finished_score(layout_dir(out, name), layout, config)
+                scores[name] = done or score_fn(layout, layout_dir(out, name), config)
         named = [(PAPER, base)] + [
             (n, None) for n in sorted(k for k in scores if k != PAPER)
         ]
-        points = [{**scores[n], "name": n} for n, _ in named if n != PAPER]
+        points = [
+            {**scores[n], "name": n} for n, _ in named
+            if n != PAPER and scores[n]["loc_mm_mean"] is not None
+        ]
         front = pareto_front(points)
         paper = {**scores[PAPER], "name": PAPER}
         better = [
             p["name"] for p in points
-            if p["n_electrodes"] <= 8 and p["loc_mm_mean"] < paper["loc_mm_mean"]
+            if paper["loc_mm_mean"] is not None
+            and p["n_electrodes"] <= 8 and p["loc_mm_mean"] < paper["loc_mm_mean"]
         ]
         extra = {
             "search": {
