@@ -31,7 +31,9 @@ CANDIDATES = (
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--layouts", type=int, default=4, help="layouts per sweep, the paper's included")
+    ap.add_argument(
+        "--layouts", type=int, default=4, help="layouts per sweep, the paper's included"
+    )
     ap.add_argument("--workers", default="1,2", help="worker counts timed")
     ap.add_argument("--out", default=None, help="write results as JSON here")
     args = ap.parse_args()
@@ -46,14 +48,16 @@ def main() -> None:
             t0 = time.perf_counter()
             design = score_layouts(named, Path(tmp), config, n_workers=w, report=False)
             wall = time.perf_counter() - t0
-            runs.append({
-                "workers": w,
-                "layouts": len(design["layouts"]),
-                "wall_s": round(wall, 1),
-                "per_layout_s": [round(e["seconds"]["total"], 1) for e in design["layouts"]],
-                "load_before": [round(x, 2) for x in load0],
-                "load_after": [round(x, 2) for x in os.getloadavg()],
-            })
+            runs.append(
+                {
+                    "workers": w,
+                    "layouts": len(design["layouts"]),
+                    "wall_s": round(wall, 1),
+                    "per_layout_s": [round(e["seconds"]["total"], 1) for e in design["layouts"]],
+                    "load_before": [round(x, 2) for x in load0],
+                    "load_after": [round(x, 2) for x in os.getloadavg()],
+                }
+            )
             print(json.dumps(runs[-1]), flush=True)
     result = {
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},

@@ -25,11 +25,19 @@ class FakeScore:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         score = {
-            "name": layout.name, "n_electrodes": layout.n_electrodes, "n_pairs": layout.n_pairs,
-            "loc_mm_mean": 30.0 - layout.n_electrodes, "region_accuracy": 0.5,
-            "force_mae_n": 0.1, "track_ad_mm": 1.0, "loc_mm_per_face": {}, "loc_map": {},
-            "sensor": {"snr_db_min": 60.0}, "seconds": {"total": 0.0},
-            "settings": config.settings(), "layout": layout.to_dict(),
+            "name": layout.name,
+            "n_electrodes": layout.n_electrodes,
+            "n_pairs": layout.n_pairs,
+            "loc_mm_mean": 30.0 - layout.n_electrodes,
+            "region_accuracy": 0.5,
+            "force_mae_n": 0.1,
+            "track_ad_mm": 1.0,
+            "loc_mm_per_face": {},
+            "loc_map": {},
+            "sensor": {"snr_db_min": 60.0},
+            "seconds": {"total": 0.0},
+            "settings": config.settings(),
+            "layout": layout.to_dict(),
         }
         write_json_atomic(out / SCORE_FILE, score)
         (out / "layout.json").write_text(layout.to_json())

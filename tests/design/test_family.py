@@ -53,7 +53,9 @@ def _wire(name, x, width=1.0, pad=(5.0, 5.0), v=(10.0, 50.0)):
 def test_conductor_gap_by_hand():
     # two 1 mm wires 3 mm apart: 2 mm between their edges; pads 3 mm apart are 5 mm wide: they
     # overlap by 2 mm
-    assert conductor_gap_mm(_wire("a", 0, pad=(1, 1)), _wire("b", 3, pad=(1, 1))) == pytest.approx(2.0)
+    assert conductor_gap_mm(_wire("a", 0, pad=(1, 1)), _wire("b", 3, pad=(1, 1))) == pytest.approx(
+        2.0
+    )
     assert conductor_gap_mm(_wire("a", 0), _wire("b", 3)) == pytest.approx(-2.0)
     # pads 7 mm apart, 5 mm wide: 2 mm; wires 7 mm apart: 6 mm
     assert conductor_gap_mm(_wire("a", 0), _wire("b", 7)) == pytest.approx(2.0)
@@ -76,7 +78,9 @@ def test_the_paper_layout_meets_the_default_rules():
 def test_a_thin_wire_is_one_error_naming_file_and_field(tmp_path):
     d = _paper_dict()
     d["electrodes"][2]["width_mm"] = 0.3
-    with pytest.raises(EctskinError, match=r"cand\.json: electrodes\[2\]\.width_mm: .*0\.3 mm.*0\.5"):
+    with pytest.raises(
+        EctskinError, match=r"cand\.json: electrodes\[2\]\.width_mm: .*0\.3 mm.*0\.5"
+    ):
         check_manufacturable(_load(d, tmp_path))
 
 
@@ -85,7 +89,10 @@ def test_wires_too_close_are_one_error_naming_file_and_field(tmp_path):
     d["electrodes"][1]["polyline_mm"] = [[-13.2, 12.0], [-13.2, 55.0]]
     d["electrodes"][1]["pad"]["centre_mm"] = [-6.0, 7.5]
     layout = _load(d, tmp_path)  # the loader accepts it: they do not touch
-    with pytest.raises(EctskinError, match=r"cand\.json: electrodes\[1\]\.polyline_mm: .*'E1' and 'E2' are 0\.80 mm apart"):
+    with pytest.raises(
+        EctskinError,
+        match=r"cand\.json: electrodes\[1\]\.polyline_mm: .*'E1' and 'E2' are 0\.80 mm apart",
+    ):
         check_manufacturable(layout)
     check_manufacturable(layout, ManufacturingRules(min_spacing_mm=0.5))
 
@@ -93,7 +100,9 @@ def test_wires_too_close_are_one_error_naming_file_and_field(tmp_path):
 def test_a_wire_inside_the_skin_but_within_the_margin_is_refused(tmp_path):
     layout = default_layout()  # E1's left edge at -15.5 mm: 4.5 mm inside the -20 mm side
     check_manufacturable(layout, ManufacturingRules(edge_margin_mm=4.5))
-    with pytest.raises(EctskinError, match=r"electrodes\[0\]\.polyline_mm: .*'E1' reaches \(-15\.50"):
+    with pytest.raises(
+        EctskinError, match=r"electrodes\[0\]\.polyline_mm: .*'E1' reaches \(-15\.50"
+    ):
         check_manufacturable(layout, ManufacturingRules(edge_margin_mm=4.6))
 
 

@@ -8,7 +8,7 @@ import optuna
 import pytest
 
 from ectskin._check import EctskinError
-from ectskin.design.family import ManufacturingRules, check_manufacturable, build_layout
+from ectskin.design.family import ManufacturingRules, build_layout, check_manufacturable
 from ectskin.design.report import pareto_front
 from ectskin.design.search import SearchSpace, run_search, sample_design
 from ectskin.layout import default_layout
@@ -84,7 +84,12 @@ def test_the_study_resumes_and_a_killed_trial_is_scored_again(tmp_path, fake_sco
     design = run_search(tmp_path, n_trials=5, n_workers=0, score_fn=fake_score)
     assert fake_score.calls == ["design-0003", "design-0004"]
     assert [e["name"] for e in design["layouts"]] == [
-        "paper", "design-0000", "design-0001", "design-0002", "design-0003", "design-0004"
+        "paper",
+        "design-0000",
+        "design-0001",
+        "design-0002",
+        "design-0003",
+        "design-0004",
     ]
     saved = json.loads((tmp_path / "design.json").read_text())
     assert saved["search"]["n_complete"] == 5
@@ -92,6 +97,9 @@ def test_the_study_resumes_and_a_killed_trial_is_scored_again(tmp_path, fake_sco
 
 def test_a_rerun_with_other_settings_is_refused(tmp_path, fake_score):
     run_search(tmp_path, n_trials=1, n_workers=0, score_fn=fake_score)
-    with pytest.raises(EctskinError, match=r"study\.journal: the study was started with other settings \(space\)"):
-        run_search(tmp_path, n_trials=1, n_workers=0, score_fn=fake_score,
-                   space=SearchSpace(max_wires=6))
+    with pytest.raises(
+        EctskinError, match=r"study\.journal: the study was started with other settings \(space\)"
+    ):
+        run_search(
+            tmp_path, n_trials=1, n_workers=0, score_fn=fake_score, space=SearchSpace(max_wires=6)
+        )

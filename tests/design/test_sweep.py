@@ -15,30 +15,50 @@ from ectskin.design.family import FaceDesign, LayoutDesign, build_layout
 from ectskin.design.score import ScoreConfig, conditioning, design_protocol
 from ectskin.design.sweep import score_layouts
 
+
 def _layouts():
     a = build_layout(LayoutDesign(FaceDesign(3), FaceDesign(3)), "three")
     b = build_layout(LayoutDesign(FaceDesign(5, 36.0, routing="fan")), "five")
     return a, b
 
 
-def test_a_sweep_killed_in_the_middle_resumes_without_redoing_finished_layouts(tmp_path, fake_score):
+def test_a_sweep_killed_in_the_middle_resumes_without_redoing_finished_layouts(
+    tmp_path, fake_score
+):
     a, b = _layouts()
     boom = build_layout(LayoutDesign(FaceDesign(2)), "boom")
     cfg = ScoreConfig()
     fake_score.calls.clear()
     with pytest.raises(RuntimeError, match="killed"):
-        score_layouts([("a", a), ("boom", boom), ("b", b)], tmp_path, cfg, n_workers=0,
-                      score_fn=fake_score, report=False)
+        score_layouts(
+            [("a", a), ("boom", boom), ("b", b)],
+            tmp_path,
+            cfg,
+            n_workers=0,
+            score_fn=fake_score,
+            report=False,
+        )
     assert fake_score.calls == ["paper-2x4-wires", "three", "boom"]
     design = json.loads((tmp_path / "design.json").read_text())
     assert [e["name"] for e in design["layouts"]] == ["paper", "a"] and not design["complete"]
     # the rerun (the crash fixed) scores only what is missing
     fixed = build_layout(LayoutDesign(FaceDesign(2)), "boom-fixed")
     fake_score.calls.clear()
-    design = score_layouts([("a", a), ("boom", fixed), ("b", b)], tmp_path, cfg, n_workers=0,
-                           score_fn=fake_score, report=False)
+    design = score_layouts(
+        [("a", a), ("boom", fixed), ("b", b)],
+        tmp_path,
+        cfg,
+        n_workers=0,
+        score_fn=fake_score,
+        report=False,
+    )
     assert fake_score.calls == ["boom-fixed", "five"]
-    assert design["complete"] and [e["name"] for e in design["layouts"]] == ["paper", "a", "boom", "b"]
+    assert design["complete"] and [e["name"] for e in design["layouts"]] == [
+        "paper",
+        "a",
+        "boom",
+        "b",
+    ]
     # other settings: everything is scored again
     fake_score.calls.clear()
     other = ScoreConfig(seed=1)
@@ -49,10 +69,12 @@ def test_a_sweep_killed_in_the_middle_resumes_without_redoing_finished_layouts(t
 def test_a_changed_layout_under_the_same_name_is_scored_again(tmp_path, fake_score):
     a, b = _layouts()
     fake_score.calls.clear()
-    score_layouts([("x", a)], tmp_path, n_workers=0, score_fn=fake_score, report=False,
-                  include_paper=False)
-    score_layouts([("x", b)], tmp_path, n_workers=0, score_fn=fake_score, report=False,
-                  include_paper=False)
+    score_layouts(
+        [("x", a)], tmp_path, n_workers=0, score_fn=fake_score, report=False, include_paper=False
+    )
+    score_layouts(
+        [("x", b)], tmp_path, n_workers=0, score_fn=fake_score, report=False, include_paper=False
+    )
     assert fake_score.calls == ["three", "five"]
 
 

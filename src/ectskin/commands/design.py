@@ -30,27 +30,50 @@ def _pair(text: str, name: str) -> tuple[float, float]:
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--workers", type=int, default=2,
-                   help="Dask LocalCluster worker processes, one layout each at a time "
-                   "(default 2; 0: in this process, one after another)")
-    p.add_argument("--scheduler", default=None,
-                   help="a running Dask scheduler, tcp://HOST:PORT (default: a local cluster)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=2,
+        help="Dask LocalCluster worker processes, one layout each at a time "
+        "(default 2; 0: in this process, one after another)",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        help="a running Dask scheduler, tcp://HOST:PORT (default: a local cluster)",
+    )
     p.add_argument("--seed", type=int, default=0, help="protocol, split and model seed")
-    p.add_argument("--levels", default="0,20",
-                   help="inflation levels per chamber, ml (default 0,20: 8 states)")
-    p.add_argument("--touch-trials", type=int, default=2,
-                   help="touch trials per inflation state (default 2)")
+    p.add_argument(
+        "--levels", default="0,20", help="inflation levels per chamber, ml (default 0,20: 8 states)"
+    )
+    p.add_argument(
+        "--touch-trials", type=int, default=2, help="touch trials per inflation state (default 2)"
+    )
     p.add_argument("--duration", type=float, default=3.0, help="seconds per trial (default 3)")
-    p.add_argument("--epochs", default="15,6,3",
-                   help="quick-profile epochs of the touch, contact and track models "
-                   "(default 15,6,3)")
+    p.add_argument(
+        "--epochs",
+        default="15,6,3",
+        help="quick-profile epochs of the touch, contact and track models (default 15,6,3)",
+    )
     p.add_argument("--no-track", action="store_true", help="skip the tracking model")
-    p.add_argument("--min-width", type=float, default=0.5,
-                   help="manufacturing rule: narrowest wire, mm (default 0.5)")
-    p.add_argument("--min-spacing", type=float, default=1.0,
-                   help="manufacturing rule: smallest gap between conductors, mm (default 1)")
-    p.add_argument("--edge-margin", type=float, default=0.0,
-                   help="manufacturing rule: conductors this far inside the skin, mm (default 0)")
+    p.add_argument(
+        "--min-width",
+        type=float,
+        default=0.5,
+        help="manufacturing rule: narrowest wire, mm (default 0.5)",
+    )
+    p.add_argument(
+        "--min-spacing",
+        type=float,
+        default=1.0,
+        help="manufacturing rule: smallest gap between conductors, mm (default 1)",
+    )
+    p.add_argument(
+        "--edge-margin",
+        type=float,
+        default=0.0,
+        help="manufacturing rule: conductors this far inside the skin, mm (default 0)",
+    )
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -108,7 +131,11 @@ def run(args: argparse.Namespace) -> int:
             layout = load_layout(path)
             named.append((Path(path).stem, replace(layout, source=str(path))))
         design = score_layouts(
-            named, args.out, config, n_workers=args.workers, scheduler=args.scheduler,
+            named,
+            args.out,
+            config,
+            n_workers=args.workers,
+            scheduler=args.scheduler,
             rules=rules,
         )
         out = Path(args.out)
@@ -116,20 +143,31 @@ def run(args: argparse.Namespace) -> int:
         from ectskin.design.search import SearchSpace, run_search
 
         space = SearchSpace(
-            args.min_wires, args.max_wires, _pair(args.length_mm, "--length-mm"),
+            args.min_wires,
+            args.max_wires,
+            _pair(args.length_mm, "--length-mm"),
             _pair(args.width_mm, "--width-mm"),
         )
         design = run_search(
-            args.out, n_trials=args.trials, space=space, config=config, rules=rules,
-            sampler=args.sampler, seed=args.seed, n_workers=args.workers,
+            args.out,
+            n_trials=args.trials,
+            space=space,
+            config=config,
+            rules=rules,
+            sampler=args.sampler,
+            seed=args.seed,
+            n_workers=args.workers,
             scheduler=args.scheduler,
         )
         out = Path(args.out)
     for e in design["layouts"]:
         log.info(
             "%-14s %2d electrodes  loc %s mm  region acc %s  force %s N  track %s mm",
-            e["name"], e["n_electrodes"], _num(e["loc_mm_mean"], ".1f"),
-            _num(e["region_accuracy"], ".3f"), _num(e["force_mae_n"], ".3f"),
+            e["name"],
+            e["n_electrodes"],
+            _num(e["loc_mm_mean"], ".1f"),
+            _num(e["region_accuracy"], ".3f"),
+            _num(e["force_mae_n"], ".3f"),
             _num(e["track_ad_mm"], ".2f"),
         )
     log.info("wrote %s, %s", out / "design.json", out / "design.html")

@@ -18,7 +18,8 @@ layout of the family runs through the same protocol and is scored on the same to
 paper's layout is a member: 4 wires per face over 30 mm, 20 to 95 mm ascending, straight, 1 mm.
 
 :class:`ManufacturingRules` are what a mould can make (all assumed defaults): a minimum wire
-width, a minimum gap between conductors on one face, every wire inside its skin with a margin. :func:`check_manufacturable` refuses a layout that violates them with one
+width, a minimum gap between conductors on one face, every wire inside its skin with a margin.
+:func:`check_manufacturable` refuses a layout that violates them with one
 :class:`~ectskin._check.EctskinError` naming the layout's file and the field.
 """
 
@@ -143,7 +144,9 @@ class FaceDesign:
         check_option("order", self.order, ORDERS)
         check_option("routing", self.routing, ROUTINGS)
         if not isinstance(self.n_wires, (int, np.integer)) or self.n_wires < 2:
-            raise EctskinError(f"face design: n_wires must be an integer >= 2, got {self.n_wires!r}")
+            raise EctskinError(
+                f"face design: n_wires must be an integer >= 2, got {self.n_wires!r}"
+            )
         if not (0 < self.length_min_mm <= self.length_max_mm):
             raise EctskinError(
                 f"face design: need 0 < length_min_mm <= length_max_mm, got "

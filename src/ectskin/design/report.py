@@ -80,8 +80,13 @@ def plot_front(points: Sequence[Mapping[str, Any]], paper: Mapping[str, Any] | N
         fe = [p["loc_mm_mean"] for p in front]
         ax.plot(fn, fe, "o-", color="tab:red", label="trade-off front")
         for p in front:
-            ax.annotate(p["name"], (p["n_electrodes"], p["loc_mm_mean"]), fontsize=7,
-                        xytext=(3, 3), textcoords="offset points")
+            ax.annotate(
+                p["name"],
+                (p["n_electrodes"], p["loc_mm_mean"]),
+                fontsize=7,
+                xytext=(3, 3),
+                textcoords="offset points",
+            )
     if paper is not None and paper.get("loc_mm_mean") is not None:
         ax.plot([paper["n_electrodes"]], [paper["loc_mm_mean"]], "k*", ms=12, label="paper")
     ax.set_xlabel("electrodes")
@@ -151,9 +156,11 @@ def write_report(
         lines_md += [f"![{cap}]({rel})", ""]
     names = [e["name"] for e in design["layouts"]]
     header = ["", *names]
-    rows = [[label, *(_fmt(_value(e, key), spec) for e in design["layouts"])] for label, key, spec in ROWS]
-    lines_md += ["## Summary", "", "| " + " | ".join(header) + " |",
-                 "|" + "---|" * len(header)]
+    rows = [
+        [label, *(_fmt(_value(e, key), spec) for e in design["layouts"])]
+        for label, key, spec in ROWS
+    ]
+    lines_md += ["## Summary", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines_md += ["| " + " | ".join(r) + " |" for r in rows]
     lines_md.append("")
     html_parts = [
@@ -164,9 +171,13 @@ def write_report(
         "<h1>Electrode layouts scored in the twin</h1>",
         *(f"<p>{html.escape(t)}</p>" for t in intro if t),
         f"<p>{html.escape(about)}</p>",
-        *(f"<figure><img src='{html.escape(rel)}' width='520'><figcaption>{html.escape(cap)}"
-          f"</figcaption></figure>" for cap, rel in extra_figures),
-        "<h2>Summary</h2><table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header)
+        *(
+            f"<figure><img src='{html.escape(rel)}' width='520'><figcaption>{html.escape(cap)}"
+            f"</figcaption></figure>"
+            for cap, rel in extra_figures
+        ),
+        "<h2>Summary</h2><table><tr>"
+        + "".join(f"<th>{html.escape(h)}</th>" for h in header)
         + "</tr>",
         *("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows),
         "</table>",
@@ -175,13 +186,23 @@ def write_report(
         name = entry["name"]
         per_face = entry.get("loc_mm_per_face", {})
         table = [(label, _fmt(_value(entry, key), spec)) for label, key, spec in ROWS]
-        table += [(f"mean localisation error, {f} face (mm)", _fmt(v, "{:.1f}"))
-                  for f, v in per_face.items()]
-        lines_md += [f"## {name}", "", f"Layout file: `{entry['folder']}/layout.json`", "",
-                     "| metric | value |", "|---|---|"]
+        table += [
+            (f"mean localisation error, {f} face (mm)", _fmt(v, "{:.1f}"))
+            for f, v in per_face.items()
+        ]
+        lines_md += [
+            f"## {name}",
+            "",
+            f"Layout file: `{entry['folder']}/layout.json`",
+            "",
+            "| metric | value |",
+            "|---|---|",
+        ]
         lines_md += [f"| {a} | {b} |" for a, b in table]
         html_parts.append(f"<h2>{html.escape(name)}</h2><table>")
-        html_parts += [f"<tr><td>{html.escape(a)}</td><td>{html.escape(b)}</td></tr>" for a, b in table]
+        html_parts += [
+            f"<tr><td>{html.escape(a)}</td><td>{html.escape(b)}</td></tr>" for a, b in table
+        ]
         html_parts.append("</table>")
         if rel:
             lines_md += ["", f"![{name}: localisation error per face]({rel})"]

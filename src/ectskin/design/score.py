@@ -80,9 +80,7 @@ class ScoreConfig:
     """
 
     protocol: Protocol = field(default_factory=design_protocol)
-    epochs: dict[str, int] = field(
-        default_factory=lambda: {"touch": 15, "contact": 6, "track": 3}
-    )
+    epochs: dict[str, int] = field(default_factory=lambda: {"touch": 15, "contact": 6, "track": 3})
     seed: int = 0
     tasks: tuple[str, ...] = TASKS
     region_rows: int = 2
@@ -103,7 +101,9 @@ class ScoreConfig:
         for task in self.tasks:
             n = self.epochs.get(task)
             if not isinstance(n, int) or n < 1:
-                raise EctskinError(f"score config: epochs[{task!r}] must be an integer >= 1, got {n!r}")
+                raise EctskinError(
+                    f"score config: epochs[{task!r}] must be an integer >= 1, got {n!r}"
+                )
 
     def settings(self) -> dict[str, Any]:
         """Everything a finished score depends on (compared on resume)."""
@@ -143,8 +143,12 @@ def scoring_regions(layout: SensorLayout, rows: int, cols: int) -> tuple[Region,
         for r in range(rows):
             for c in range(cols):
                 regions.append(
-                    Region(len(regions) + 1, skin.surface, (float(u[c]), float(u[c + 1])),
-                           (float(v[r]), float(v[r + 1])))
+                    Region(
+                        len(regions) + 1,
+                        skin.surface,
+                        (float(u[c]), float(u[c + 1])),
+                        (float(v[r]), float(v[r + 1])),
+                    )
                 )
     return tuple(regions)
 
@@ -299,7 +303,10 @@ def _error_maps(contact_map: dict[str, Any]) -> dict[str, Any]:
     for face, m in contact_map.items():
         if not isinstance(m, dict) or "mean_mm" not in m:
             continue
-        out[face] = {k: np.asarray(m[k], dtype=np.float64).tolist() for k in ("u_edges", "v_edges", "mean_mm")}
+        out[face] = {
+            k: np.asarray(m[k], dtype=np.float64).tolist()
+            for k in ("u_edges", "v_edges", "mean_mm")
+        }
     return out
 
 

@@ -93,7 +93,8 @@ class SearchSpace:
         width = min(s.u_mm[1] - s.u_mm[0] for s in base.skins)
         w = max(wlo, rules.min_width_mm)
         fits = [
-            n for n in range(self.min_wires, self.max_wires + 1)
+            n
+            for n in range(self.min_wires, self.max_wires + 1)
             if any(_span_range(n, r, w, width, rules) is not None for r in ROUTINGS)
         ]
         if not fits:
@@ -119,9 +120,7 @@ def _span_range(n, routing, width, width_skin, rules) -> tuple[float, float] | N
     for s in spans:
         pad = _pad(n, routing, s, width_skin, gap)
         wire_ok = s / (n - 1) >= width + gap and s / 2 + width / 2 <= width_skin / 2 - m
-        pad_ok = pad >= MIN_PAD_MM and (
-            routing == "fan" or s / 2 + pad / 2 <= width_skin / 2 - m
-        )
+        pad_ok = pad >= MIN_PAD_MM and (routing == "fan" or s / 2 + pad / 2 <= width_skin / 2 - m)
         ok.append(wire_ok and pad_ok)
     ok = np.asarray(ok)
     if not ok.any():
@@ -148,7 +147,9 @@ def sample_design(trial, space: SearchSpace, rules: ManufacturingRules, base: Se
         b = trial.suggest_float(f"{face}_length_b_mm", *space.length_mm)
         rng = _span_range(n, routing, width, w_skin, rules)
         if rng is None:
-            raise EctskinError(f"{face}: {n} wires of {width:.2f} mm with {routing} routing do not fit")
+            raise EctskinError(
+                f"{face}: {n} wires of {width:.2f} mm with {routing} routing do not fit"
+            )
         pad = _pad(n, routing, rng[1], w_skin, rules.min_spacing_mm)
         room = sk.v_mm[1] - sk.v_mm[0] - max(pad, MIN_PAD_MM) - rules.edge_margin_mm
         lo, hi = sorted((min(a, room), min(b, room)))
@@ -298,7 +299,9 @@ def run_search(
                 else:
                     study.tell(number, [loc, score["n_electrodes"]])
                 scores[_trial_name(number)] = score
-            log.info("%s: %d electrodes, %s mm", job[0].name, score["n_electrodes"], score["loc_mm_mean"])
+            log.info(
+                "%s: %d electrodes, %s mm", job[0].name, score["n_electrodes"], score["loc_mm_mean"]
+            )
         seconds = time.perf_counter() - t0
         # every finished trial of the study (earlier runs' too) is in the report
         for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)):
@@ -308,19 +311,20 @@ def run_search(
                 layout = build_layout(design, name, base=base, rules=rules)
                 done = finished_score(layout_dir(out, name), layout, config)
                 scores[name] = done or score_fn(layout, layout_dir(out, name), config)
-        named = [(PAPER, base)] + [
-            (n, None) for n in sorted(k for k in scores if k != PAPER)
-        ]
+        named = [(PAPER, base)] + [(n, None) for n in sorted(k for k in scores if k != PAPER)]
         points = [
-            {**scores[n], "name": n} for n, _ in named
+            {**scores[n], "name": n}
+            for n, _ in named
             if n != PAPER and scores[n]["loc_mm_mean"] is not None
         ]
         front = pareto_front(points)
         paper = {**scores[PAPER], "name": PAPER}
         better = [
-            p["name"] for p in points
+            p["name"]
+            for p in points
             if paper["loc_mm_mean"] is not None
-            and p["n_electrodes"] <= 8 and p["loc_mm_mean"] < paper["loc_mm_mean"]
+            and p["n_electrodes"] <= 8
+            and p["loc_mm_mean"] < paper["loc_mm_mean"]
         ]
         extra = {
             "search": {
@@ -329,9 +333,7 @@ def run_search(
                 "seed": seed,
                 "n_trials": n_trials,
                 "n_complete": len(points),
-                "n_not_manufacturable": sum(
-                    t.state == TrialState.FAIL for t in study.trials
-                ),
+                "n_not_manufacturable": sum(t.state == TrialState.FAIL for t in study.trials),
                 "space": asdict(space),
                 "rules": asdict(rules),
                 "front": [p["name"] for p in front],
@@ -350,7 +352,9 @@ def run_search(
         f"{', '.join(better) or 'none'}.",
         "",
     ]
-    write_report(out, design, scores, extra_figures=[("trade-off front", FRONT_FIGURE)], intro=intro)
+    write_report(
+        out, design, scores, extra_figures=[("trade-off front", FRONT_FIGURE)], intro=intro
+    )
     return design
 
 
