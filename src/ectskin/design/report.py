@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from ectskin._files import save_figure_atomic, write_text_atomic
 from ectskin.layout import SensorLayout
@@ -90,6 +91,7 @@ def plot_front(points: Sequence[Mapping[str, Any]], paper: Mapping[str, Any] | N
     if paper is not None and paper.get("loc_mm_mean") is not None:
         ax.plot([paper["n_electrodes"]], [paper["loc_mm_mean"]], "k*", ms=12, label="paper")
     ax.set_xlabel("electrodes")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("mean localisation error (mm)")
     ax.legend(fontsize=8)
     return _finish(fig, show)

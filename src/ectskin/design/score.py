@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ectskin._check import EctskinError
 from ectskin._files import json_text, read_json, write_json_atomic, write_text_atomic
@@ -271,7 +272,8 @@ def score_layout(
             run, data, baselines=False, figures=False, seed=config.seed, overwrite=True
         )[task]
     t_learn = time.perf_counter() - t0 - t_sim
-    sensor = sensor_metrics(layout, config.protocol.readout)
+    with threadpool_limits(1):  # one BLAS thread: the same sums wherever the task runs
+        sensor = sensor_metrics(layout, config.protocol.readout)
     contact = metrics["contact"]
     score = {
         "name": layout.name,
