@@ -79,7 +79,12 @@ def _common(p: argparse.ArgumentParser) -> None:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="design_command", metavar="{score,search}")
     s = sub.add_parser("score", help="score layout files (and the paper's) in the twin")
-    s.add_argument("layouts", nargs="*", help="layout JSON files (each named after its file)")
+    s.add_argument(
+        "layouts",
+        nargs="*",
+        help="layout JSON files (each named after its file; a search's layouts/NAME/layout.json "
+        "after NAME)",
+    )
     s.add_argument("--out", required=True, help="folder for design.json, design.md/.html")
     _common(s)
     q = sub.add_parser("search", help="Optuna study: localisation error vs electrode count")
@@ -129,7 +134,9 @@ def run(args: argparse.Namespace) -> int:
         named = []
         for path in args.layouts:
             layout = load_layout(path)
-            named.append((Path(path).stem, replace(layout, source=str(path))))
+            p = Path(path)  # a search's proposal, <study>/layouts/<name>/layout.json: <name>
+            name = p.parent.name if p.stem == "layout" and p.parent.name else p.stem
+            named.append((name, replace(layout, source=str(path))))
         design = score_layouts(
             named,
             args.out,

@@ -111,7 +111,7 @@ def open_runner(n_workers: int = 2, scheduler: str | None = None) -> Iterator[An
         n_workers=n_workers,
         threads_per_worker=1,
         processes=True,
-        dashboard_address=None,
+        dashboard_address=":0",  # any free port: never clashes with another cluster
         silence_logs=logging.WARNING,
         env={"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},
     )
