@@ -15,5 +15,6 @@ COMMANDS = (
     ("record", "record"),
     ("live", "live"),
     ("import", "import_"),
+    ("design", "design"),
     ("variability", "variability"),
 )

@@ -1,0 +1,185 @@
+"""``ectskin design score|search``: score electrode layouts in the twin, search the layout family.
+
+Thin wrapper over :mod:`ectskin.design` (see ``docs/design.md``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from dataclasses import replace
+from pathlib import Path
+
+from ectskin._check import EctskinError, parse_floats
+
+HELP = "score electrode layouts in the twin, or search the layout family (Optuna on Dask)"
+EXAMPLES = """\
+  ectskin design score my_layout.json other.json --out scores   # + the paper's layout
+  ectskin design score my_layout.json --out scores --workers 4
+  ectskin design score my_layout.json --out scores --scheduler tcp://10.0.0.5:8786
+  ectskin design search study                    # defaults: 6 trials on 2 local workers
+  ectskin design search study --trials 200 --scheduler tcp://10.0.0.5:8786
+  ectskin simulate --layout study/layouts/design-0003/layout.json -o rec.h5
+"""
+log = logging.getLogger(__name__)
+
+
+def _pair(text: str, name: str) -> tuple[float, float]:
+    v = parse_floats(name, text, 2)
+    return float(v[0]), float(v[1])
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=2,
+        help="Dask LocalCluster worker processes, one layout each at a time "
+        "(default 2; 0: in this process, one after another)",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        help="a running Dask scheduler, tcp://HOST:PORT (default: a local cluster)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="protocol, split and model seed")
+    p.add_argument(
+        "--levels", default="0,20", help="inflation levels per chamber, ml (default 0,20: 8 states)"
+    )
+    p.add_argument(
+        "--touch-trials", type=int, default=2, help="touch trials per inflation state (default 2)"
+    )
+    p.add_argument("--duration", type=float, default=3.0, help="seconds per trial (default 3)")
+    p.add_argument(
+        "--epochs",
+        default="15,6,3",
+        help="quick-profile epochs of the touch, contact and track models (default 15,6,3)",
+    )
+    p.add_argument("--no-track", action="store_true", help="skip the tracking model")
+    p.add_argument(
+        "--min-width",
+        type=float,
+        default=0.5,
+        help="manufacturing rule: narrowest wire, mm (default 0.5)",
+    )
+    p.add_argument(
+        "--min-spacing",
+        type=float,
+        default=1.0,
+        help="manufacturing rule: smallest gap between conductors, mm (default 1)",
+    )
+    p.add_argument(
+        "--edge-margin",
+        type=float,
+        default=0.0,
+        help="manufacturing rule: conductors this far inside the skin, mm (default 0)",
+    )
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest="design_command", metavar="{score,search}")
+    s = sub.add_parser("score", help="score layout files (and the paper's) in the twin")
+    s.add_argument(
+        "layouts",
+        nargs="*",
+        help="layout JSON files (each named after its file; a search's layouts/NAME/layout.json "
+        "after NAME)",
+    )
+    s.add_argument("--out", required=True, help="folder for design.json, design.md/.html")
+    _common(s)
+    q = sub.add_parser("search", help="Optuna study: localisation error vs electrode count")
+    q.add_argument("out", help="folder of the study (resumed when it exists)")
+    q.add_argument("--trials", type=int, default=6, help="trials to finish (default 6)")
+    q.add_argument("--sampler", default="tpe", help="tpe (default) or nsga2")
+    q.add_argument("--min-wires", type=int, default=2, help="wires per face, at least (default 2)")
+    q.add_argument("--max-wires", type=int, default=8, help="wires per face, at most (default 8)")
+    q.add_argument("--length-mm", default="15,105", help="wire lengths, mm (default 15,105)")
+    q.add_argument("--width-mm", default="0.5,2", help="wire widths, mm (default 0.5,2)")
+    _common(q)
+
+
+def _config(args):
+    from ectskin.design.score import ScoreConfig, design_protocol
+
+    epochs = [int(x) for x in parse_floats("--epochs", args.epochs, 3)]
+    tasks = ("touch", "contact") if args.no_track else ("touch", "contact", "track")
+    protocol = design_protocol(
+        args.seed,
+        levels_ml=tuple(parse_floats("--levels", args.levels)),
+        touch_trials=args.touch_trials,
+        duration_s=args.duration,
+    )
+    return ScoreConfig(
+        protocol=protocol,
+        epochs=dict(zip(("touch", "contact", "track"), epochs)),
+        seed=args.seed,
+        tasks=tasks,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    # imported here: dask, optuna, torch and the twin take seconds to import
+    from ectskin.design.family import ManufacturingRules
+    from ectskin.layout import load_layout
+
+    if args.design_command is None:
+        raise EctskinError("design: choose a subcommand, score or search (ectskin design -h)")
+    if args.workers is not None and args.workers < 0:
+        raise EctskinError(f"--workers must be >= 0, got {args.workers}")
+    rules = ManufacturingRules(args.min_width, args.min_spacing, args.edge_margin)
+    config = _config(args)
+    if args.design_command == "score":
+        from ectskin.design.sweep import score_layouts
+
+        named = []
+        for path in args.layouts:
+            layout = load_layout(path)
+            p = Path(path)  # a search's proposal, <study>/layouts/<name>/layout.json: <name>
+            name = p.parent.name if p.stem == "layout" and p.parent.name else p.stem
+            named.append((name, replace(layout, source=str(path))))
+        design = score_layouts(
+            named,
+            args.out,
+            config,
+            n_workers=args.workers,
+            scheduler=args.scheduler,
+            rules=rules,
+        )
+        out = Path(args.out)
+    else:
+        from ectskin.design.search import SearchSpace, run_search
+
+        space = SearchSpace(
+            args.min_wires,
+            args.max_wires,
+            _pair(args.length_mm, "--length-mm"),
+            _pair(args.width_mm, "--width-mm"),
+        )
+        design = run_search(
+            args.out,
+            n_trials=args.trials,
+            space=space,
+            config=config,
+            rules=rules,
+            sampler=args.sampler,
+            seed=args.seed,
+            n_workers=args.workers,
+            scheduler=args.scheduler,
+        )
+        out = Path(args.out)
+    for e in design["layouts"]:
+        log.info(
+            "%-14s %2d electrodes  loc %s mm  region acc %s  force %s N  track %s mm",
+            e["name"],
+            e["n_electrodes"],
+            _num(e["loc_mm_mean"], ".1f"),
+            _num(e["region_accuracy"], ".3f"),
+            _num(e["force_mae_n"], ".3f"),
+            _num(e["track_ad_mm"], ".2f"),
+        )
+    log.info("wrote %s, %s", out / "design.json", out / "design.html")
+    return 0
+
+
+def _num(v, spec: str) -> str:
+    return "n/a" if v is None else format(v, spec)
