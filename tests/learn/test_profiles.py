@@ -27,7 +27,7 @@ def test_paper_profile_is_the_papers_settings(blobs):
         profile_settings("touch", "paper", batch_size=0)
     with pytest.raises(EctskinError, match="unknown training setting"):
         profile_settings("touch", "paper", momentum=0.9)
-    with pytest.raises(EctskinError, match="allowed values are 'touch', 'track'; got 'shape'"):
+    with pytest.raises(EctskinError, match="allowed values are 'touch', 'track', 'contact'; got 'shape'"):
         profile_settings("shape")
 
 
@@ -41,13 +41,22 @@ def test_robust_profile_settings_and_track_refusal(tmp_path):
         "val_metric",
     )
     for name in ("paper", "quick"):  # the paper's recipe: no augmentation, lowest val loss
-        for t in PROFILES[name].values():
+        for task in ("touch", "track"):
+            t = PROFILES[name][task]
             assert (t.inflation_shift, t.mixup_alpha, t.label_smoothing, t.select) == (
                 False,
                 0.0,
                 0.0,
                 "val_loss",
             )
+        # contact (ours, not the paper's): the inflation shift only, the best localisation kept
+        c = PROFILES[name]["contact"]
+        assert (c.inflation_shift, c.mixup_alpha, c.label_smoothing, c.select) == (
+            True,
+            0.0,
+            0.0,
+            "val_metric",
+        )
     msg = (
         r"profile 'robust' has no settings for task 'track'.*profiles for 'track': 'paper', 'quick'"
     )

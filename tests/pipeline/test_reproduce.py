@@ -145,10 +145,10 @@ def test_config_protocol_or_recording_and_epochs_per_run():
         ReproduceConfig("o", protocol=Protocol(), recording=synthetic_recording(levels=(0.0,)))
     assert ReproduceConfig("o", seed=3).simulation_protocol() == Protocol(seed=3)
     c = ReproduceConfig("o", epochs={"touch": 7, "track": 2})
-    assert [c.epochs_for(n) for n in RUNS] == [7, 7, 2, 2, 2]
+    assert [c.epochs_for(n) for n in RUNS] == [7, 7, 2, 2, 2, None]  # contact: its profile's
     quick, paper = ReproduceConfig("o"), ReproduceConfig("o", profile="paper")
-    assert [quick.epochs_for(n) for n in RUNS] == [None, None, None, 12, 12]
-    assert [paper.epochs_for(n) for n in RUNS] == [None] * 5
+    assert [quick.epochs_for(n) for n in RUNS] == [None, None, None, 12, 12, None]
+    assert [paper.epochs_for(n) for n in RUNS] == [None] * 6
     assert quick.run_profile("touch_robust") == "robust" and quick.run_profile("track") == "quick"
     assert ReproduceConfig("o", robust=False, ablations=False).run_names == ("touch", "track")
 
