@@ -59,7 +59,9 @@ def _margin(model: Any, best: tuple[str, float] | None, unit: str, lower: bool) 
     return f"{'better' if diff >= 0 else 'worse'} by {_value(abs(diff), unit)}"
 
 
-def contact_table(block: Mapping[str, Any], rows=CONTACT_ROWS) -> list[tuple[str, ...]]:
+def contact_table(
+    block: Mapping[str, Any], rows=CONTACT_ROWS, goals: Mapping[str, str] = GOALS
+) -> list[tuple[str, ...]]:
     """Rows "metric · goal · model · strongest baseline · margin" of a contact-like block."""
     baselines = lookup(block, "baselines") or {}
     out = []
@@ -69,7 +71,7 @@ def contact_table(block: Mapping[str, Any], rows=CONTACT_ROWS) -> list[tuple[str
         out.append(
             (
                 label,
-                GOALS.get(key, DASH),
+                goals.get(key, DASH),
                 _value(model, unit),
                 f"{baseline_name(best[0])} {_value(best[1], unit)}" if best else DASH,
                 _margin(model, best, unit, lower),
@@ -124,7 +126,7 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
                 "a point on the wrong face is charged the way around the body's side edge (the "
                 "same rule as the ECT images below). Baselines: "
                 + ", ".join(baseline_name(b) for b in (c.get("baselines") or {}))
-                + " (the region classifier's region centre, k-nearest neighbours, ridge).",
+                + " (the region centre is the touch classifier's answer turned into a point).",
             )
         )
         s.append(("table", (header, contact_table(c))))
@@ -161,7 +163,8 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
             ("loc_mm_mean", "Per finger, matched (Hungarian): mean error", "mm", True),
             ("loc_mm_p90", "Per finger, matched: 90th percentile", "mm", True),
         )
-        s.append(("table", (header, contact_table(multi, rows))))
+        goals = {"count_accuracy": GOALS["count_accuracy"]}
+        s.append(("table", (header, contact_table(multi, rows, goals))))
         by_true = multi.get("count_accuracy_by_true") or {}
         if by_true:
             s.append(
@@ -178,12 +181,16 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
     if isinstance(ect, Mapping) and ect:
         s.append(("h2", "ECT images without training"))
         learned = lookup(metrics, "contact.loc_mm_mean")
+        settings = ect.get("settings") or {}
         s.append(
             (
                 "p",
-                "Images of the permittivity change from the readouts alone, with the sensitivity "
-                "(Jacobian) of the current deformation from the method of moments; the contact "
-                "point is the image's peak. No training data. Goal: "
+                "Images from the readouts alone (no training data): the change of each frame "
+                "from the no-contact readout of its inflation state, reconstructed with the "
+                "sensitivity (Jacobian) of the current deformation from the method of moments "
+                f"(voxel kind: {settings.get('kind', DASH)}; a grounded conductor is how the "
+                "finger acts), located at the image's "
+                f"{settings.get('localisation', DASH)}. Goal: "
                 + GOALS["ect_loc"]
                 + (f" (here ≤ {2 * learned:.2f} mm)." if isinstance(learned, int | float) else "."),
             )
@@ -216,6 +223,10 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
         )
         s.append(("table", (("method", "mean error", "median", "face right", "× learned"), rows)))
         timing = ect.get("timing") or {}
-        if timing:
-            s.append(("p", "Timing: " + "; ".join(f"{k} {v}" for k, v in timing.items()) + "."))
+        jac = timing.get("jacobian_s_per_state")
+        per_frame = timing.get("reconstruct_us_per_frame") or {}
+        if jac is not None or per_frame:
+            parts = [f"sensitivity {jac:.2f} s per inflation state"] if jac is not None else []
+            parts += [f"{m} {us:.0f} µs per frame" for m, us in per_frame.items()]
+            s.append(("p", "Timing (this run, on its machine): " + "; ".join(parts) + "."))
     return s
