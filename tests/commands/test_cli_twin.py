@@ -118,7 +118,14 @@ def test_killed_simulate_leaves_no_worker_alive(tmp_path, sig):
     for good (blocked on a task queue whose pipe they hold open themselves)."""
     argv = [sys.executable, "-m", "ectskin", "simulate", "-o", str(tmp_path / "s.h5"),
             "--workers", "2", "--duration", "30", "--no-progress"]
-    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    # the driver gets SIGINT's default disposition, as from a terminal: a test earlier in the
+    # same pytest process may leave SIGINT ignored, and a child inherits that
+    proc = subprocess.Popen(
+        argv,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     workers: list[int] = []
     try:
         deadline = time.monotonic() + 120
