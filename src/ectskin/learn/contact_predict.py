@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from ectskin._check import EctskinError
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
 from ectskin.learn.predict import _as_input, _Predictor, forward_batches
 
@@ -82,7 +83,10 @@ class ContactPredictor(_Predictor):
         """One window → its :class:`ContactReading` (the first ``count`` slots are fingers)."""
         row = np.asarray(self.predict(window_calibrated), dtype=np.float64)
         if row.ndim != 1:
-            raise ValueError("ContactPredictor.read takes one window; use predict for a batch")
+            raise EctskinError(
+                f"ContactPredictor({self.source}).read takes one window ({self.window}, "
+                f"{self.n_pairs}); use predict for a batch"
+            )
         count = int(row[PRED_COLUMNS.index("count")])
         fingers = []
         faces = self.faces
