@@ -39,6 +39,7 @@ from ectskin._check import EctskinError
 from ectskin.io import Recording, require_ground_truth
 from ectskin.io.calibration import calibrate, touch_reference
 from ectskin.learn.channels import channel_names, measured_channels
+from ectskin.learn.datasets import _group_mask
 
 log = logging.getLogger(__name__)
 
@@ -99,12 +100,7 @@ class ContactData:
 
     def select(self, groups: Sequence[int] | np.ndarray) -> ContactData:
         """The samples of the given group ids (e.g. ``split["train"]``); group ids are kept."""
-        ids = np.asarray(groups)
-        if ids.size and (ids.dtype.kind not in "iu" or ids.min() < 0 or ids.max() >= self.n_groups):
-            raise EctskinError(
-                f"group ids must be integers in 0..{self.n_groups - 1}, got {ids.tolist()[:10]}"
-            )
-        m = np.isin(self.group, ids)
+        m = _group_mask(self.group, groups, self.n_groups)
         per_sample = (
             "x",
             "count",
