@@ -27,6 +27,11 @@ attached (as ``ectskin live --record``), and checks zero lost frames (nothing sk
 engine, no sequence gaps, every frame recorded) and flat memory (RSS sampled every
 ``--rss-every`` seconds; start / end / max reported).
 
+Runtime: ``--runtime onnx`` (default, as ``ectskin live``) answers each frame with ONNX Runtime
+exports of the models (:mod:`ectskin.learn.runtime`); ``--runtime torch`` runs them eagerly. With
+onnx the per-stage costs are measured both ways in the same run (``stages_ms_torch`` beside
+``stages_ms``), and ``export_s`` gives each model's one-off export time.
+
 Models: the run directories given with ``--touch-run`` / ``--track-run`` / ``--contact-run``
 (``model.pt`` from ``ectskin train``), else randomly initialised TouchMLP and C2DT of the paper's
 size and a ContactNet of the ``ectskin train contact`` default size (window 10; latency is what
@@ -465,6 +470,12 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--max-lag-ms", type=float, default=50.0, help="soak: engine max_lag_ms (default 50)"
     )
+    ap.add_argument(
+        "--runtime",
+        choices=("onnx", "torch"),
+        default="onnx",
+        help="what runs the models on each frame (default onnx, as ectskin live)",
+    )
     ap.add_argument("--no-pin", action="store_true", help="do not pin to one CPU core")
     ap.add_argument("--out", type=Path, help="write the results as JSON here")
     args = ap.parse_args(argv)
@@ -488,10 +499,23 @@ def main(argv=None) -> int:
             "contact": _contact(layout, args.contact_run, Path(tmp)),
             "imager": imager,
         }
+        stages_torch, export_s = None, {}
+        if args.runtime == "onnx":
+            if args.soak_seconds is None:
+                stages_torch = _stage_costs(heads, layout)
+            for name in ("touch", "track", "contact"):
+                t0 = time.perf_counter()
+                heads[name].use_runtime("onnx")
+                export_s[name] = time.perf_counter() - t0
         if args.soak_seconds is not None:
             result = soak(args, layout, heads)
         else:
             result = throughput(args, layout, heads)
+    result["runtime"] = args.runtime
+    if stages_torch is not None:
+        result["stages_ms_torch"] = stages_torch
+    if export_s:
+        result["export_s"] = export_s
     result["machine"] = {
         "python": sys.version.split()[0],
         "torch": torch.__version__,

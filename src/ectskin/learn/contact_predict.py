@@ -15,7 +15,7 @@ import numpy as np
 
 from ectskin._check import EctskinError
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
-from ectskin.learn.predict import _as_input, _Predictor, forward_batches
+from ectskin.learn.predict import _as_input, _Predictor
 
 
 @dataclass(frozen=True)
@@ -51,10 +51,14 @@ class ContactPredictor(_Predictor):
     """Contact count, points, forces and hover from a window of calibrated frames."""
 
     kind = "contact_net"
+    _output = "decode"  # ContactNet.decode, the model's own
 
     @property
     def window(self) -> int:
         return int(self.config.window)
+
+    def _single_shapes(self) -> list[tuple[int, ...]]:
+        return [(1, self.window, self.n_pairs)]
 
     @property
     def faces(self) -> list[str]:
@@ -76,7 +80,7 @@ class ContactPredictor(_Predictor):
             f"ContactPredictor({self.source})",
             self.pair_names,
         )
-        out = forward_batches(self.model, [x], output=self.model.decode, device=self.device)
+        out = self._forward([x], batched)
         return out if batched else out[0]
 
     def read(self, window_calibrated: Any) -> ContactReading:

@@ -8,7 +8,9 @@ hold them. A touch run that selected a classical model (``candidates.json``, see
 part of the model), through ``predict_proba``, with the same output.
 
 Calls run in eval mode under ``torch.inference_mode`` on the CPU by default (latency
-figures: ``benchmarks/bench_train.py`` and ``BENCHMARKS.md``).
+figures: ``benchmarks/bench_train.py`` and ``BENCHMARKS.md``). ``use_runtime("onnx")`` answers
+single frames with an ONNX Runtime export of the model instead (:mod:`ectskin.learn.runtime`,
+several times faster per frame; the live engine's default); batches stay on PyTorch.
 
 :func:`forward_batches` is the one batched inference path: the predictors and the evaluation of
 a run (:mod:`ectskin.learn.tasks`) both run their model through it.
@@ -31,6 +33,7 @@ from ectskin.learn.candidates import (
     read_candidates,
 )
 from ectskin.learn.checkpoint import load_checkpoint
+from ectskin.learn.runtime import RUNTIMES, OnnxModel
 
 
 def forward_batches(
@@ -106,6 +109,7 @@ def _as_input(
 
 class _Predictor:
     kind = ""
+    _onnx: OnnxModel | None = None  # single frames through ONNX Runtime (use_runtime)
 
     def __init__(self, model: torch.nn.Module, config: Any, payload: dict, source: str) -> None:
         self.model = model.eval()
@@ -138,6 +142,48 @@ class _Predictor:
     def n_pairs(self) -> int:
         return int(self.config.n_pairs)
 
+    # ------------------------------------------------------------------ runtime
+    def _single_shapes(self) -> list[tuple[int, ...]]:
+        """The model's input shapes for one sample, batch axis first."""
+        raise NotImplementedError
+
+    #: the map of the model's output predict applies: a function, or the name of the model's
+    #: method (ContactNet's "decode"), or None
+    _output: Any = None
+
+    def _output_map(self) -> Callable[[torch.Tensor], torch.Tensor] | None:
+        output = self._output
+        return getattr(self.model, output) if isinstance(output, str) else output
+
+    @property
+    def runtime(self) -> str:
+        """What answers single frames: "onnx" or "torch"."""
+        return "torch" if self._onnx is None else "onnx"
+
+    def use_runtime(self, runtime: str):
+        """Answer single frames with ``runtime``: "onnx" exports the model once (seconds;
+        checked against the PyTorch model, :class:`~ectskin.learn.runtime.OnnxModel`), "torch"
+        runs it eagerly. Returns self."""
+        if runtime not in RUNTIMES:
+            raise EctskinError(f"runtime must be one of {RUNTIMES}, got {runtime!r}")
+        self._onnx = None
+        if runtime == "onnx" and self.model is not None:
+            self._onnx = OnnxModel(
+                self.model,
+                self._single_shapes(),
+                output=self._output_map(),
+                name=f"{type(self).__name__}({self.source})",
+            )
+        return self
+
+    def _forward(self, inputs: list[torch.Tensor | None], batched: bool) -> np.ndarray:
+        """The (mapped) model output for ``inputs`` (batch first; None passes None)."""
+        if self._onnx is not None and not batched:
+            return self._onnx(*(v.numpy() for v in inputs if v is not None))
+        return forward_batches(
+            self.model, inputs, output=self._output_map(), device=self.device
+        )
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.source!r}, n_pairs={self.n_pairs})"
 
@@ -147,6 +193,7 @@ class TouchPredictor(_Predictor):
     model its ``candidates.json`` selects (``classical``; ``model`` is then None)."""
 
     kind = "touch_mlp"
+    _output = staticmethod(_softmax)
 
     def __init__(
         self,
@@ -193,6 +240,13 @@ class TouchPredictor(_Predictor):
     def n_classes(self) -> int:
         return int(self.config.n_classes)
 
+    @property
+    def runtime(self) -> str:
+        return "skops" if self.classical is not None else super().runtime
+
+    def _single_shapes(self) -> list[tuple[int, ...]]:
+        return [(1, self.n_pairs)]
+
     def predict(self, c_calibrated: Any) -> np.ndarray:
         """(n_pairs,) → (n_classes,) probabilities; (B, n_pairs) → (B, n_classes). Class 0 = no
         touch, k = region k."""
@@ -206,7 +260,7 @@ class TouchPredictor(_Predictor):
         if self.classical is not None:
             probs = self.classical.predict_proba(x.numpy())
         else:
-            probs = forward_batches(self.model, [x], output=_softmax, device=self.device)
+            probs = self._forward([x], batched)
         return probs if batched else probs[0]
 
     def classify(self, c_calibrated: Any) -> np.ndarray | int:
@@ -231,6 +285,10 @@ class TrackPredictor(_Predictor):
     @property
     def prior(self) -> bool:
         return bool(self.config.prior)
+
+    def _single_shapes(self) -> list[tuple[int, ...]]:
+        shapes = [(1, self.window, self.n_pairs)]
+        return shapes + [(1, self.n_markers, 3)] if self.prior else shapes
 
     def predict(self, window_calibrated: Any, init: Any = None) -> np.ndarray:
         """(k, n_pairs) window (oldest first) and (n_markers, 3) initial coordinates (mm) →
@@ -257,5 +315,5 @@ class TrackPredictor(_Predictor):
                     f"{owner}: window and init disagree in batch size "
                     f"({tuple(x.shape)} vs {tuple(i.shape)})"
                 )
-        out = forward_batches(self.model, [x, i], device=self.device)
+        out = self._forward([x, i], batched)
         return out if batched else out[0]
