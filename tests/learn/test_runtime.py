@@ -29,7 +29,9 @@ def _inputs(pred, rng):
 
 
 @pytest.mark.parametrize("kind", ["touch", "track", "track_no_prior", "contact"])
-def test_onnx_predictor_answers_as_pytorch(tmp_path, kind, make_c2dt, make_touch_mlp, randomise_head):
+def test_onnx_predictor_answers_as_pytorch(
+    tmp_path, kind, make_c2dt, make_touch_mlp, randomise_head
+):
     torch.manual_seed(3)
     if kind == "touch":
         model, cls = make_touch_mlp(), TouchPredictor
@@ -86,7 +88,9 @@ def test_an_export_that_does_not_reproduce_its_model_is_refused():
 
 def test_wrong_input_shape_and_unknown_runtime(tmp_path, make_touch_mlp):
     m = OnnxModel(torch.nn.Linear(4, 2), [(1, 4)], name="lin")
-    with pytest.raises(EctskinError, match=r"lin \(ONNX\): input x0 must have shape \(1, 4\), got \(1, 3\)"):
+    with pytest.raises(
+        EctskinError, match=r"lin \(ONNX\): input x0 must have shape \(1, 4\), got \(1, 3\)"
+    ):
         m(np.zeros((1, 3)))
     save_checkpoint(tmp_path / "model.pt", make_touch_mlp())
     with pytest.raises(EctskinError, match="runtime must be one of"):

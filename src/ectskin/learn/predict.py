@@ -180,9 +180,7 @@ class _Predictor:
         """The (mapped) model output for ``inputs`` (batch first; None passes None)."""
         if self._onnx is not None and not batched:
             return self._onnx(*(v.numpy() for v in inputs if v is not None))
-        return forward_batches(
-            self.model, inputs, output=self._output_map(), device=self.device
-        )
+        return forward_batches(self.model, inputs, output=self._output_map(), device=self.device)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.source!r}, n_pairs={self.n_pairs})"

@@ -175,9 +175,11 @@ def second_finger_path(n: int, fps: float, aimed_uv, lo_uv, hi_uv, protocol, rng
 
 
 def hand_push(n: int, fps: float, protocol, rng, manipulator_config) -> Handling:
-    """The experimenter's hand over one trial (``protocol.push_max_n`` = 0: no hand)."""
-    if protocol.push_max_n <= 0:
-        return Handling()
+    """The experimenter's hand over one trial (``protocol.push_max_n`` = 0: no hand).
+
+    The hand's random numbers are drawn either way, so that a trial simulated without the hand
+    is the same trial (finger, readout noise, markers' noise) as with it, less the hand: the
+    metrics with manual handling on and off compare like with like."""
     c = manipulator_config
     surface = ("front", "back", "right", "left")[int(rng.integers(4))]
     z = rng.uniform(c.length_mm / 2, c.length_mm - 5.0)
@@ -189,6 +191,8 @@ def hand_push(n: int, fps: float, protocol, rng, manipulator_config) -> Handling
     inward = {"front": (1, -1.0), "back": (1, 1.0), "right": (0, -1.0), "left": (0, 1.0)}[surface]
     direction[inward[0]] = inward[1] * abs(direction[inward[0]])
     magnitude = smooth_walk(n, fps, protocol.push_knot_s, 0.0, protocol.push_max_n, rng)
+    if protocol.push_max_n <= 0:
+        return Handling()
     force = np.zeros((n, 3))
     force[:, :2] = magnitude[:, None] * direction[None, :]
     return Handling(push=point, push_force_n=force)

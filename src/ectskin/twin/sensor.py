@@ -119,7 +119,10 @@ def _strip_quads(a, b, width: float, d: Discretisation, free_end: bool) -> np.nd
     a3, b3 = np.r_[a, 0.0], np.r_[b, 0.0]
     return _planar(
         strip_quads(
-            a3, b3, width, (0.0, 0.0, 1.0),
+            a3,
+            b3,
+            width,
+            (0.0, 0.0, 1.0),
             n_across=d.wire_panels_across,
             panel_length=d.wire_panel_length_mm,
             end_panel=d.end_panel_fraction * width,
@@ -132,8 +135,16 @@ def _strip_quads(a, b, width: float, d: Discretisation, free_end: bool) -> np.nd
 def _pad_quads(centre, size, d: Discretisation) -> np.ndarray:
     return _planar(
         rectangle_quads(
-            (centre[0], centre[1], 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), size[0], size[1],
-            d.pad_panels, d.pad_panels, spacing_u="cosine", spacing_v="cosine", edge_correction=True,
+            (centre[0], centre[1], 0.0),
+            (1.0, 0.0, 0.0),
+            (0.0, 1.0, 0.0),
+            size[0],
+            size[1],
+            d.pad_panels,
+            d.pad_panels,
+            spacing_u="cosine",
+            spacing_v="cosine",
+            edge_correction=True,
         )
     )
 
@@ -206,7 +217,10 @@ class SensorModel:
 
     # ------------------------------------------------------------------ geometry
     def electrode_panels(
-        self, inflation_ml, touch: Touch | tuple[Touch, ...] | None, forces,
+        self,
+        inflation_ml,
+        touch: Touch | tuple[Touch, ...] | None,
+        forces,
         handling: Handling | None = None,
     ) -> list[Panels]:
         """Deformed electrode panels, one :class:`Panels` per frame (row of ``forces``)."""
@@ -307,7 +321,10 @@ class SensorModel:
         return out
 
     def cavity_cells(
-        self, inflation_ml, touch: Touch | tuple[Touch, ...] | None, forces,
+        self,
+        inflation_ml,
+        touch: Touch | tuple[Touch, ...] | None,
+        forces,
         handling: Handling | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Centres (F, M, 3) mm and volumes (F, M) mm³ of the chamber cavities' sample cells.
@@ -341,7 +358,9 @@ class SensorModel:
     def _with_cavities(self) -> bool:
         return self.chamber_eps_r is not None and self.chamber_eps_r != self.eps_r
 
-    def _readout(self, panels: Panels, cells: tuple[np.ndarray | None, np.ndarray | None]) -> np.ndarray:
+    def _readout(
+        self, panels: Panels, cells: tuple[np.ndarray | None, np.ndarray | None]
+    ) -> np.ndarray:
         """(n_pairs,) C_ij = −K_ij of one panel set, with the cavities' first-order term."""
         if not self._with_cavities:
             K = maxwell_capacitance(panels, self.eps_r)
@@ -417,7 +436,10 @@ class SensorModel:
         return out
 
     def marker_positions(
-        self, inflation_ml, touch: Touch | tuple[Touch, ...] | None = None, forces=0.0,
+        self,
+        inflation_ml,
+        touch: Touch | tuple[Touch, ...] | None = None,
+        forces=0.0,
         handling: Handling | None = None,
     ) -> np.ndarray:
         """(F, n_markers, 3) marker positions in mm for each frame (row of ``forces``)."""
@@ -429,7 +451,9 @@ class SensorModel:
             by_surface.setdefault(m.surface, []).append(k)
         for surface, idx in by_surface.items():
             uv = np.asarray([self.layout.markers[k].uv_mm for k in idx])
-            out[:, idx] = self.manipulator.deform(surface, uv, inflation_ml, touch, forces, handling)
+            out[:, idx] = self.manipulator.deform(
+                surface, uv, inflation_ml, touch, forces, handling
+            )
         return out
 
 
@@ -480,6 +504,7 @@ def _heights(heights_mm, shape: tuple[int, int]) -> np.ndarray:
 
 def _handling_rows(handling: Handling, f: int) -> Handling:
     """The loads of row ``f`` only."""
+
     def row(a):
         return None if a is None else np.asarray(a)[f : f + 1]
 

@@ -27,6 +27,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, fields, replace
 from typing import Any
@@ -122,7 +123,10 @@ class TouchResponse:
         self.ref_forces, self.ref_heights, self.centre = forces, heights, centre
         d = self.slide_step_mm
         stencil = np.stack(
-            [self._solve(forces, du=du, heights=heights)[0] for du in ((d, 0), (-d, 0), (0, d), (0, -d), (d, d))]
+            [
+                self._solve(forces, du=du, heights=heights)[0]
+                for du in ((d, 0), (-d, 0), (0, d), (0, -d), (d, d))
+            ]
         )
         self.g_u = (stencil[0] - stencil[1]) / (2 * d)
         self.g_v = (stencil[2] - stencil[3]) / (2 * d)
@@ -183,7 +187,10 @@ class TouchResponse:
         du = path.uv_mm[where] - self.uv0
         u, v = du[:, :1], du[:, 1:]
         out[where] += (
-            self.g_u * u + self.g_v * v + 0.5 * self.g_uu * u**2 + 0.5 * self.g_vv * v**2
+            self.g_u * u
+            + self.g_v * v
+            + 0.5 * self.g_uu * u**2
+            + 0.5 * self.g_vv * v**2
             + self.g_uv * u * v
         )
         mags = self._push_magnitude(handling)
@@ -474,9 +481,17 @@ def _stop_workers(ex: ProcessPoolExecutor) -> None:
         p.join(timeout=5)
 
 
-def _init_worker(driver_pid: int | None, layout_json: str, manip: dict, disc: dict,
-                 eps_r: float, finger: dict, protocol: dict, chamber_eps_r: float | None,
-                 limit_threads: bool = True) -> None:
+def _init_worker(
+    driver_pid: int | None,
+    layout_json: str,
+    manip: dict,
+    disc: dict,
+    eps_r: float,
+    finger: dict,
+    protocol: dict,
+    chamber_eps_r: float | None,
+    limit_threads: bool = True,
+) -> None:
     if driver_pid is not None:  # a worker process: it dies with the driver
         _die_with_parent(driver_pid)
     if limit_threads:  # one BLAS thread per worker process: the workers are the parallelism
@@ -498,6 +513,18 @@ def _run_trial(args) -> Trial:
     return simulate_trial(plan, _WORKER["protocol"], _WORKER["sensor"], drift_phase)
 
 
+def _only(plans: list[TrialPlan], names: Sequence[str]) -> list[TrialPlan]:
+    """The plans named in ``names`` (plan order)."""
+    wanted = set(names)
+    unknown = sorted(wanted - {p.name for p in plans})
+    if unknown:
+        raise EctskinError(
+            f"simulate: trial(s) {unknown[:5]} are not in the protocol's plan ({len(plans)} "
+            f"trials, e.g. {[p.name for p in plans[:3]]})"
+        )
+    return [p for p in plans if p.name in wanted]
+
+
 def simulate_experiment(
     protocol: Protocol | None = None,
     *,
@@ -508,11 +535,14 @@ def simulate_experiment(
     chamber_eps_r: float | None = 1.0,
     workers: int | None = None,
     progress: bool = True,
+    trials: Sequence[str] | None = None,
 ) -> Recording:
     """Simulate ``protocol`` (default: the paper's) and return the recording.
 
     ``workers`` processes run trials in parallel (default: all cores); the result is identical
-    for any worker count.
+    for any worker count. ``trials``: only the planned trials of these names, in plan order,
+    each the same as in the whole experiment (its random numbers come from the seed and its
+    index in the plan); a name not in the plan is an error.
     """
     from tqdm.auto import tqdm
 
@@ -522,6 +552,8 @@ def simulate_experiment(
     discretisation = discretisation or Discretisation()
     finger = Finger(radius_mm=protocol.finger_radius_mm)
     plans = plan_trials(protocol, layout)
+    if trials is not None:
+        plans = _only(plans, trials)
     drift_phase = np.random.default_rng([protocol.seed, 2]).uniform(0, 2 * np.pi, layout.n_pairs)
     workers = max(1, min(workers or os.cpu_count() or 1, len(plans)))
     initargs = (
@@ -533,7 +565,9 @@ def simulate_experiment(
         protocol.to_dict(),
         chamber_eps_r,
     )
-    log.info("simulating %d trials x %d frames with %d worker(s)", len(plans), protocol.n_frames, workers)
+    log.info(
+        "simulating %d trials x %d frames with %d worker(s)", len(plans), protocol.n_frames, workers
+    )
     jobs = [(p, drift_phase) for p in plans]
     bar = tqdm(total=len(plans), unit="trial", desc="simulate", disable=not progress)
     trials: list[Trial] = []
@@ -568,4 +602,6 @@ def simulate_experiment(
         "eps_r": float(eps_r),
         "chamber_eps_r": chamber_eps_r,
     }
+    if trials is not None:
+        meta["only_trials"] = [p.name for p in plans]
     return Recording(layout=layout, trials=trials, frame_rate_hz=protocol.frame_rate_hz, meta=meta)
