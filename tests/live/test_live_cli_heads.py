@@ -45,12 +45,10 @@ def _same_reading(got: dict, want: dict, exact: bool) -> None:
         return
     assert got["count"] == want["count"]
     assert [f["face"] for f in got["fingers"]] == [f["face"] for f in want["fingers"]]
-    flat = lambda r: (
-        [r["p_contact"], r["p_hover"]]
-        + [  # noqa: E731
-            f[k] for f in r["fingers"] for k in ("u_mm", "v_mm", "sigma_mm", "force_n")
-        ]
-    )
+    def flat(r):
+        keys = ("u_mm", "v_mm", "sigma_mm", "force_n")
+        return [r["p_contact"], r["p_hover"]] + [f[k] for f in r["fingers"] for k in keys]
+
     np.testing.assert_allclose(flat(got), flat(want), rtol=1e-4, atol=1e-4)
 
 
