@@ -45,6 +45,7 @@ def _same_reading(got: dict, want: dict, exact: bool) -> None:
         return
     assert got["count"] == want["count"]
     assert [f["face"] for f in got["fingers"]] == [f["face"] for f in want["fingers"]]
+
     def flat(r):
         keys = ("u_mm", "v_mm", "sigma_mm", "force_n")
         return [r["p_contact"], r["p_hover"]] + [f[k] for f in r["fingers"] for k in keys]

@@ -390,6 +390,25 @@ def test_reproduce_tiny_twin_experiment(tmp_path, monkeypatch):
     md = (out / "report.md").read_text()
     assert "(characterize/fig3_inflation.png)" in md and "(characterize/fig4_touch.png)" in md
     assert {"simulate", "characterize", "train_touch", "evaluate_track"} <= set(m["timings_s"])
+    # manual handling off: the contact run's test trials simulated again without the hand, in
+    # place of their hand-on versions; everything else as it was
+    from ectskin.io import read_recording
+
+    off = m["contact"]["handling_off"]
+    assert off["loc_mm_mean"] > 0 and set(off["baselines"]) == {"region_centre", "knn", "ridge"}
+    assert "Manual handling on and off" in md
+    test = json.loads((out / "runs" / "contact" / "split.json").read_text())["test"]
+    on_rec, off_rec = (
+        read_recording(out / "contact.h5"),
+        read_recording(out / "contact_handling_off.h5"),
+    )
+    assert [t.name for t in off_rec.trials] == [t.name for t in on_rec.trials]
+    assert off_rec.meta["handling_off_trials"] == sorted(test)
+    for a, b in zip(on_rec.trials, off_rec.trials, strict=True):
+        same = np.array_equal(a.capacitance, b.capacitance)
+        # a test trial with a touch changes (the hand pushed during it); the rest are copies
+        assert same == (a.name not in test or a.meta.get("kind") != "touch"), a.name
+        np.testing.assert_array_equal(a.force, b.force)
     # the same protocol is found in data.h5 by a fresh output folder's state: reuse, no simulation
     (out / "reproduce.json").unlink()
     import ectskin.pipeline.steps

@@ -43,3 +43,36 @@ def test_sections_cover_contact_two_fingers_and_ect_with_the_learned_ratio():
     ]
     ect_table = [p for k, p in items if k == "table"][-1]
     assert ect_table[1][0][-1] == "3.0 ×"  # 6.0 mm / 2.0 mm
+
+
+def test_handling_table_sets_the_hand_off_beside_the_hand_on_with_each_strongest_baseline():
+    m = _metrics()
+    m["contact"]["handling_off"] = {
+        "loc_mm_mean": 1.5,
+        "force_mae_n": 0.2,
+        "count_accuracy": 0.95,
+        "baselines": {
+            "knn": {"loc_mm_mean": 3.5, "count_accuracy": 0.7},
+            "ridge": {"loc_mm_mean": 3.0, "count_accuracy": 0.9},
+        },
+    }
+    items = contact_sections(m)
+    table = next(p for k, p in items if k == "table" and p[0][1] == "hand on")
+    rows = {r[0]: r for r in table[1]}
+    # on: k-NN 4 mm is the strongest; off: ridge 3 mm (not k-NN's 3.5)
+    assert rows["Contact point: mean error"][1:] == (
+        "2.00 mm",
+        "1.50 mm",
+        "k-NN 4.00 mm",
+        "ridge regression 3.00 mm",
+    )
+    # the count accuracy with the hand on comes from the multi block
+    assert rows["Finger count right"][1:] == (
+        "90.00 %",
+        "95.00 %",
+        "k-NN 80.00 %",
+        "ridge regression 90.00 %",
+    )
+    assert rows["Hover detected up to"][1:] == ("—", "—", "—", "—")
+    # without a hand-off block there is no such table
+    assert not any(k == "table" and p[0][1] == "hand on" for k, p in contact_sections(_metrics()))

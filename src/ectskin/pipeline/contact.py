@@ -6,6 +6,9 @@
                                                           the paper's trials of data.h5
     train_contact      OUT_DIR/runs/contact/              ContactNet (quick or paper profile)
     evaluate_contact   OUT_DIR/runs/contact/metrics.json  with its baselines and figures
+    evaluate_contact_handling_off
+                       OUT_DIR/contact_handling_off.h5   the test trials again without the
+                       OUT_DIR/runs/contact/handling_off/ hand, and the run evaluated on them
     ect_images         OUT_DIR/ect/                       training-free ECT images of the
                                                           contact run's test trials
 
@@ -38,6 +41,7 @@ from ectskin.viz.ect import plot_ect_images
 log = logging.getLogger(__name__)
 
 CONTACT_FILE = "contact.h5"
+HANDLING_OFF_FILE = "contact_handling_off.h5"
 #: every this many frames in contact is imaged by the ECT step
 ECT_FRAME_STEP = 10
 
@@ -142,6 +146,71 @@ def contact_run(
     eval_settings = {**settings, "baselines": config.baselines, **config.figure_settings}
     runner.step(f"evaluate_{name}", eval_settings, [run_dir / "metrics.json"], evaluate)
     return read_json(run_dir / "metrics.json", "contact run metrics")
+
+
+def handling_off(
+    runner: StepRunner, config: ReproduceConfig, data_path: Path, data_settings: dict[str, Any]
+) -> dict[str, Any] | None:
+    """Step "evaluate_contact_handling_off": the contact run's test trials simulated again with
+    the experimenter's hand off (``Protocol.push_max_n = 0``; every other draw of a trial is the
+    same, see :func:`ectskin.twin.human.hand_push`), put in place of their hand-on versions in a
+    copy of contact.h5 (``OUT_DIR/contact_handling_off.h5``; training and validation trials
+    unchanged), and the run and its baselines evaluated on that test split
+    (``OUT_DIR/runs/contact/handling_off/metrics.json``). The model trained with the hand on
+    throughout; the hand-on numbers of the same test trials are the run's own metrics.
+
+    Returns that metrics.json, or None with a given recording (it cannot be simulated again).
+    """
+    if config.recording is not None:
+        return None
+    run_dir = runner.out / "runs" / CONTACT_RUN
+    split = read_json(run_dir / "split.json", "contact run split")
+    test = list(split.get("test") or [])
+    path = runner.out / HANDLING_OFF_FILE
+    out_dir = run_dir / "handling_off"
+    settings = {
+        "data": digest(data_settings),
+        "run": digest(run_settings(config, CONTACT_RUN, data_settings)),
+        "test_trials": test,
+        "baselines": config.baselines,
+        "seed": config.seed,
+    }
+    sources = (
+        ("paper_", config.simulation_protocol()),
+        ("contact_", config.contact_protocol()),
+    )
+
+    def make() -> None:
+        rec = read_recording(data_path)
+        off: dict[str, Any] = {}
+        for prefix, protocol in sources:
+            names = [n.removeprefix(prefix) for n in test if n.startswith(prefix)]
+            if not names:
+                continue
+            sim = simulate_experiment(
+                replace(protocol, push_max_n=0.0),
+                workers=config.workers,
+                progress=config.progress,
+                trials=names,
+            )
+            off.update({prefix + t.name: replace(t, name=prefix + t.name) for t in sim.trials})
+        trials = [off.get(t.name, t) for t in rec.trials]
+        meta = {**rec.meta, "handling_off_trials": sorted(off)}
+        write_recording(
+            Recording(rec.layout, trials, rec.frame_rate_hz, meta=meta), path, overwrite=True
+        )
+        evaluate_run(
+            run_dir,
+            path,
+            baselines=config.baselines,
+            figures=False,
+            seed=config.seed,
+            out=out_dir,
+            overwrite=True,
+        )
+
+    runner.step("evaluate_contact_handling_off", settings, [path, out_dir], make)
+    return read_json(out_dir / "metrics.json", "contact metrics with the hand off")
 
 
 def ect_images(

@@ -156,6 +156,18 @@ def contact_blocks(run: Mapping[str, Any]) -> dict[str, Any]:
     return {"contact": contact, "multi": multi}
 
 
+def handling_block(off_run: Mapping[str, Any]) -> dict[str, Any]:
+    """``contact.handling_off`` of metrics.json: the contact metrics (and the baselines') of the
+    same test trials with the experimenter's hand off, with the two-finger count accuracy."""
+    blocks = contact_blocks(off_run)
+    off = {k: v for k, v in blocks["contact"].items() if k in CONTACT_KEYS or k == "baselines"}
+    off["per_state"] = blocks["contact"].get("per_state")
+    off["count_accuracy"] = blocks["multi"].get("count_accuracy")
+    for name, b in off["baselines"].items():
+        b["count_accuracy"] = blocks["multi"]["baselines"].get(name, {}).get("count_accuracy")
+    return off
+
+
 def combine_metrics(
     results: Mapping[str, dict[str, Any]],
     runner: StepRunner,

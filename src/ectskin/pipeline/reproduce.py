@@ -34,8 +34,14 @@ from ectskin._check import EctskinError, check_type
 from ectskin._files import read_json, write_json_atomic
 from ectskin.learn.threads import torch_threads
 from ectskin.pipeline.config import ReproduceConfig
-from ectskin.pipeline.contact import contact_data, contact_run, ect_block, ect_images
-from ectskin.pipeline.metrics import combine_metrics, copy_figures
+from ectskin.pipeline.contact import (
+    contact_data,
+    contact_run,
+    ect_block,
+    ect_images,
+    handling_off,
+)
+from ectskin.pipeline.metrics import combine_metrics, copy_figures, handling_block
 from ectskin.pipeline.runner import StepRunner
 from ectskin.pipeline.steps import characterise, evaluate_runs, simulate_or_load, train_runs
 from ectskin.report import write_report
@@ -70,11 +76,12 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
         characterise(runner, config)
     train_runs(runner, config, data_path, data_settings, threads)
     results = evaluate_runs(runner, config, data_path, data_settings)
-    contact = ect = None
+    contact = ect = off = None
     if config.contact:
         found = contact_data(runner, config, data_settings)
         if found is not None:
             contact = contact_run(runner, config, *found, threads)
+            off = handling_off(runner, config, *found)
             ect = ect_images(runner, config, *found)
 
     metrics = combine_metrics(
@@ -87,6 +94,8 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
         data_path=data_path,
         contact=contact,
     )
+    if off is not None:
+        metrics["contact"]["handling_off"] = handling_block(off)
     if ect is not None:
         metrics["ect_image"] = ect_block(ect, contact)
     if config.command:

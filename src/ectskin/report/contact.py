@@ -33,6 +33,17 @@ CONTACT_ROWS = (
 )
 
 
+#: rows of the manual handling on / off table: (key, label, unit, lower is better)
+HANDLING_ROWS = (
+    ("loc_mm_mean", "Contact point: mean error", "mm", True),
+    ("loc_mm_median", "Contact point: median error", "mm", True),
+    ("loc_mm_p90", "Contact point: 90th percentile error", "mm", True),
+    ("force_mae_n", "Force: mean absolute error", "N", True),
+    ("hover_detect_mm", "Hover detected up to", "mm", False),
+    ("count_accuracy", "Finger count right", "%", False),
+)
+
+
 def _value(v: Any, unit: str) -> str:
     if not isinstance(v, int | float):
         return DASH
@@ -78,6 +89,22 @@ def contact_table(
             )
         )
     return out
+
+
+def handling_table(
+    on: Mapping[str, Any], on_multi: Mapping[str, Any], off: Mapping[str, Any]
+) -> list[tuple[str, ...]]:
+    """Rows "metric · hand on · hand off · strongest baseline on · off" (the count accuracy of
+    the hand-on run is in ``multi``)."""
+    rows = []
+    for key, label, unit, lower in HANDLING_ROWS:
+        src = on_multi if key == "count_accuracy" else on
+        cells = [label, _value(src.get(key), unit), _value(off.get(key), unit)]
+        for block in (src, off):
+            best = _best(block.get("baselines") or {}, key, lower)
+            cells.append(f"{baseline_name(best[0])} {_value(best[1], unit)}" if best else DASH)
+        rows.append(tuple(cells))
+    return rows
 
 
 def candidate_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
@@ -155,6 +182,20 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
                 for name, v in per_face.items()
             ]
             s.append(("table", (("face", "mean", "median", "frames"), rows)))
+        off = c.get("handling_off")
+        if isinstance(off, Mapping) and off:
+            s.append(
+                (
+                    "p",
+                    "Manual handling on and off: the same test trials simulated again without the "
+                    "experimenter's hand (each trial's finger, inflation and readout noise are the "
+                    "same draw); the models were trained with the hand on, and the baselines "
+                    "are fitted on the same training trials.",
+                )
+            )
+            head = ("metric", "hand on", "hand off", "strongest baseline, on", "… off")
+            multi_on = lookup(metrics, "multi") or {}
+            s.append(("table", (head, handling_table(c, multi_on, off))))
     multi = lookup(metrics, "multi")
     if isinstance(multi, Mapping) and multi and multi.get("count_accuracy") is not None:
         s.append(("h2", "Two fingers"))
