@@ -4,6 +4,7 @@ they were put, the live imager and the recording metrics on a hand-built recordi
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -137,6 +138,21 @@ def test_metrics_on_a_hand_built_recording(imager):
                 finger_surface=face,
             )
         )
+    # the first touch again, with a second finger on the back in its second frame (whose
+    # readouts are a far-off touch's): that frame is not imaged, one point cannot answer for two
+    two = trials[1]
+    far = sensor.capacitance(REST, Touch("back", (15.0, 100.0)), [1.0])[0]
+    trials.append(
+        replace(
+            two,
+            name="t3",
+            capacitance=np.stack([two.capacitance[0], far]),
+            contact2=np.array([False, True]),
+            finger2_uv_mm=np.array([[np.nan, np.nan], [15.0, 100.0]]),
+            force2=np.array([0.0, 1.0]),
+            finger2_surface="back",
+        )
+    )
     rec = Recording(layout=layout, trials=trials, frame_rate_hz=1.0)
     out = ect_image_metrics(rec, frame_step=1, grid=imager.grid, sensor=sensor, n_examples=2)
     # the same pipeline by hand: row scale = the no-contact trial's mean (c0)
@@ -147,9 +163,10 @@ def test_metrics_on_a_hand_built_recording(imager):
         dc = sensor.capacitance(REST, Touch(face, uv), [1.0])[0] - c0
         f, p, _ = locate(collapse_layers(r.image(dc), grid.pixel, grid.n_pixels), grid)
         expect.append(on_skin_distance(grid.faces[f], p, face, uv, 50.0, 20.0))
+    frames = expect + expect + [expect[0]]  # two frames per touch trial, t3's single-finger one
     tik = out["tikhonov"]
-    assert tik["n_frames"] == 6
-    assert tik["loc_mm_mean"] == pytest.approx(np.mean(expect), abs=1e-9)
+    assert tik["n_frames"] == 7
+    assert tik["loc_mm_mean"] == pytest.approx(np.mean(frames), abs=1e-9)
     assert set(out["timing"]["reconstruct_us_per_frame"]) == {"lbp", "tikhonov", "landweber"}
     fig = plot_ect_images(out["examples"], out["grid"]["faces"], out["grid"]["extents"])
     assert len(fig.axes) >= 2 * len(out["examples"])

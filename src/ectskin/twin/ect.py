@@ -363,8 +363,10 @@ def ect_image_metrics(
 
     For every inflation state among the touch trials one Jacobian (cached); ``Δc`` = frame −
     that state's no-contact mean (falling back to the recording's touch reference,
-    :func:`~ectskin.io.calibration.touch_reference`); every ``frame_step``-th frame in contact is
-    imaged and located (``localisation``: "peak" or "centroid"); ``kind`` picks the voxel
+    :func:`~ectskin.io.calibration.touch_reference`); every ``frame_step``-th frame with one finger
+    in contact is imaged and located (a frame where a second finger presses too is left out: one
+    located point cannot answer for two, and the learned model's point error is over
+    single-contact frames as well) (``localisation``: "peak" or "centroid"); ``kind`` picks the voxel
     sensitivity (:func:`sensitivity`). The error is the distance on the
     face in rest coordinates; a frame located on the wrong face counts as a face error and its
     error is the on-skin distance around the body (:func:`on_skin_distance`).
@@ -433,7 +435,8 @@ def ect_image_metrics(
         pix_mats = {m: None if r.matrix is None else L @ r.matrix for m, r in builders.items()}
         for t in ts:
             c0 = ref if ref is not None else fallback[t.name]
-            idx = np.flatnonzero(t.contact)[::frame_step]
+            single = t.contact if t.contact2 is None else t.contact & ~t.contact2
+            idx = np.flatnonzero(single)[::frame_step]
             idx = idx[np.all(np.isfinite(t.capacitance[idx]), axis=1)]
             if idx.size == 0:
                 continue
