@@ -168,6 +168,7 @@ def flat_skin_recording(layout=LAYOUT, n_frames=60, n_trials=40, seed=0) -> Reco
     return Recording(layout, trials, 30.0)
 
 
+
 @pytest.fixture
 def make_recording():
     """The :func:`synthetic_recording` factory."""

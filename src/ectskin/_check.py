@@ -69,7 +69,9 @@ def check_array(
         raise EctskinError(f"{where(source, name)} must have shape {want}, got {arr.shape}")
     if finite and arr.size and not np.all(np.isfinite(arr)):
         bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
-        raise EctskinError(f"{where(source, name)} must be finite; found {arr[bad]} at index {bad}")
+        raise EctskinError(
+            f"{where(source, name)} must be finite; found {arr[bad]} at index {bad}"
+        )
     return arr
 
 

@@ -34,9 +34,8 @@ def test_help_ends_with_examples(capsys, argv, example):
     assert out.index("examples:") > out.index("options:")
 
 
-@pytest.mark.parametrize(
-    "argv", [["simulate"], ["import", "generic"], ["import", "build"], ["import", "capacitance"]]
-)
+@pytest.mark.parametrize("argv", [["simulate"], ["import", "generic"], ["import", "build"],
+                                  ["import", "capacitance"]])
 def test_output_and_overwrite_options_are_spelled_the_same(capsys, argv):
     out = _help(capsys, argv)
     assert "-o OUT, --out OUT" in out and "--overwrite, --force" in out
@@ -67,11 +66,8 @@ def test_import_generic_overwrite_and_its_alias(tmp_path, capsys):
 @pytest.mark.parametrize("kind", ["generic", "build"])
 def test_import_without_output_names_the_flag(tmp_path, capsys, kind):
     src = _generic_csv(tmp_path / "g.csv")
-    argv = (
-        ["import", kind, str(src)]
-        if kind == "generic"
-        else ["import", kind, "--capacitance", str(src)]
-    )
+    argv = ["import", kind, str(src)] if kind == "generic" else ["import", kind,
+                                                                  "--capacitance", str(src)]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "give -o/--out PATH" in err and err.count("\n") == 1

@@ -178,9 +178,7 @@ def test_live_record_is_closed_complete_on_sigterm_and_sighup(tmp_path, sig, spa
     src = _replay(tmp_path / "c.h5")
     out = tmp_path / "live.h5"
     argv = ["live", "--source", f"replay:{src}", "--loop", "--record", str(out)]
-    proc, lines, seen, reader = spawn_cli(
-        argv, "| touch"
-    )  # the first status line: frames are flowing
+    proc, lines, seen, reader = spawn_cli(argv, "| touch")  # the first status line: frames are flowing
     try:
         assert seen.wait(60), "".join(lines)
         time.sleep(1.0)

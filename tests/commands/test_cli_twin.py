@@ -16,21 +16,8 @@ from ectskin.io.hdf5 import read_recording
 
 def test_simulate_writes_a_readable_recording(tmp_path, capsys):
     out = tmp_path / "d.h5"
-    args = [
-        "simulate",
-        str(out),
-        "--levels",
-        "0,15",
-        "--touch-trials",
-        "2",
-        "--duration",
-        "1",
-        "--workers",
-        "1",
-        "--no-progress",
-        "--seed",
-        "4",
-    ]
+    args = ["simulate", str(out), "--levels", "0,15", "--touch-trials", "2", "--duration", "1",
+            "--workers", "1", "--no-progress", "--seed", "4"]
     assert main(args) == 0
     rec = read_recording(out)
     assert rec.n_trials == 8 * 3 and rec.trials[0].n_frames == 30
@@ -44,17 +31,8 @@ def test_simulate_writes_a_readable_recording(tmp_path, capsys):
 def test_simulate_output_and_overwrite_options(tmp_path, capsys):
     """-o/--out (the positional OUT kept as an alias) and --overwrite (alias --force)."""
     out = tmp_path / "d.h5"
-    small = [
-        "--levels",
-        "0",
-        "--touch-trials",
-        "1",
-        "--duration",
-        "0.2",
-        "--workers",
-        "1",
-        "--no-progress",
-    ]
+    small = ["--levels", "0", "--touch-trials", "1", "--duration", "0.2", "--workers", "1",
+             "--no-progress"]
     assert main(["simulate", "-o", str(out), *small]) == 0
     first = out.read_bytes()
     assert main(["simulate", "--out", str(out), *small, "--seed", "1"]) == 2
@@ -101,13 +79,7 @@ def test_characterize_writes_figures_and_json(tmp_path):
     assert len(res["pairs"]) == 28 and len(res["touches"]) == 18
     pair = res["pairs"][0]
     assert set(pair) == {
-        "pair",
-        "electrodes",
-        "same_face",
-        "standing_pf",
-        "noise_ff",
-        "snr_db",
-        "inflation_change",
+        "pair", "electrodes", "same_face", "standing_pf", "noise_ff", "snr_db", "inflation_change"
     }
     assert min(p["snr_db"] for p in res["pairs"]) > 60.0  # the paper's readout, every pair
     assert res["readout"]["output_step_ff"] < min(p["noise_ff"] for p in res["pairs"])
@@ -144,19 +116,8 @@ def _running(pid: int) -> bool:
 def test_killed_simulate_leaves_no_worker_alive(tmp_path, sig):
     """Issue 12, defect 9: before, the two workers of a killed `simulate --workers 2` ran on
     for good (blocked on a task queue whose pipe they hold open themselves)."""
-    argv = [
-        sys.executable,
-        "-m",
-        "ectskin",
-        "simulate",
-        "-o",
-        str(tmp_path / "s.h5"),
-        "--workers",
-        "2",
-        "--duration",
-        "30",
-        "--no-progress",
-    ]
+    argv = [sys.executable, "-m", "ectskin", "simulate", "-o", str(tmp_path / "s.h5"),
+            "--workers", "2", "--duration", "30", "--no-progress"]
     # the driver gets SIGINT's default disposition, as from a terminal: a test earlier in the
     # same pytest process may leave SIGINT ignored, and a child inherits that
     proc = subprocess.Popen(

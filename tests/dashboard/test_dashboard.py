@@ -44,10 +44,7 @@ def make_output(k: int, layout=LAYOUT, *, nan_channel: int | None = None) -> dic
     probs[cls] = 1 - 0.01 * (c - 1)
     pred = REST + np.array([0.0, 0.1 * k, 0.0])
     return {
-        "type": "frame",
-        "seq": k,
-        "t": k / 30.0,
-        "raw": raw.tolist(),
+        "type": "frame", "seq": k, "t": k / 30.0, "raw": raw.tolist(),
         "calibrated": (raw / raw[0] - 1).tolist(),
         "touch": {"cls": cls, "probs": probs.tolist()},
         "markers": {"pred": pred.tolist(), "reference": REST.tolist(), "true": None},
@@ -69,13 +66,8 @@ class FakeOutput:
 class FakeEngine:
     """The LiveEngine surface the dashboard uses: layout, stats, capture_reference, run, stop."""
 
-    def __init__(
-        self,
-        layout=LAYOUT,
-        n_frames: int = 0,
-        rate_hz: float | None = None,
-        fail: Exception | None = None,
-    ):
+    def __init__(self, layout=LAYOUT, n_frames: int = 0, rate_hz: float | None = None,
+                 fail: Exception | None = None):
         self.layout = layout
         self.n_frames = n_frames
         self.rate_hz = rate_hz
@@ -87,19 +79,10 @@ class FakeEngine:
 
     @property
     def stats(self) -> dict:
-        return {
-            "frames": self.processed + 3,
-            "processed": self.processed,
-            "dropped": 3,
-            "malformed": 1,
-            "reconnects": 0,
-            "latency_ms_p50": 0.5,
-            "latency_ms_p99": float("nan"),
-            "fps_in": 30.0,
-            "fps_out": 29.0,
-            "policy": "skip-to-newest",
-            "reference_ready": self.captures == 0,
-        }
+        return {"frames": self.processed + 3, "processed": self.processed, "dropped": 3,
+                "malformed": 1, "reconnects": 0, "latency_ms_p50": 0.5,
+                "latency_ms_p99": float("nan"), "fps_in": 30.0, "fps_out": 29.0,
+                "policy": "skip-to-newest", "reference_ready": self.captures == 0}
 
     def capture_reference(self) -> None:
         if isinstance(self.fail, EctskinError):
@@ -184,12 +167,8 @@ def test_meta_takes_reference_markers_from_the_engine(engine):
 
 # --------------------------------------------------------------------------- JSON
 def test_non_finite_numbers_become_null():
-    obj = {
-        "a": np.array([1.0, np.nan, np.inf]),
-        "b": np.float32(2.5),
-        "c": [float("-inf")],
-        "d": np.int64(3),
-    }
+    obj = {"a": np.array([1.0, np.nan, np.inf]), "b": np.float32(2.5), "c": [float("-inf")],
+           "d": np.int64(3)}
     assert json.loads(encode(obj)) == {"a": [1.0, None, None], "b": 2.5, "c": [None], "d": 3}
     assert json.loads(encode({"x": (1, np.nan)})) == {"x": [1, None]}
     assert encode({"a": [1.5, None]}) == '{"a":[1.5,null]}'  # compact
@@ -286,20 +265,10 @@ def test_history_is_sampled_at_the_client_rate():
 def test_page_and_static_files_are_served(client):
     r = client.get("/")
     assert r.status_code == 200 and "text/html" in r.headers["content-type"]
-    for needed in (
-        'id="strip-chart"',
-        'id="capture-reference"',
-        'id="predicted-class"',
-        'id="markers-moved"',
-        'id="frames-count"',
-        "/static/app.js",
-        'id="marker-errors"',
-        'id="trial-info"',
-        'id="reference-detail"',
-        "untouched and uninflated",
-        "estimated (model)",
-        "true (motion capture)",
-    ):
+    for needed in ('id="strip-chart"', 'id="capture-reference"', 'id="predicted-class"',
+                   'id="markers-moved"', 'id="frames-count"', "/static/app.js",
+                   'id="marker-errors"', 'id="trial-info"', 'id="reference-detail"',
+                   "untouched and uninflated", "estimated (model)", "true (motion capture)"):
         assert needed in r.text
     js = client.get("/static/app.js")
     assert js.status_code == 200 and "WebSocket" in js.text
@@ -365,15 +334,8 @@ def test_host_names_and_addresses_are_parsed_and_judged():
     assert split_host("LocalHost.:80") == "localhost" and split_host("rig.lab") == "rig.lab"
     for ok in ("127.0.0.1:8765", "127.3.4.5", "localhost:1", "app.localhost", "[::1]:8765"):
         assert host_allowed(ok), ok
-    for bad in (
-        "evil.example:8765",
-        "127.0.0.1.evil.example",
-        "localhost.evil.example",
-        "",
-        None,
-        "192.168.1.20:8765",
-        "0.0.0.0:8765",
-    ):
+    for bad in ("evil.example:8765", "127.0.0.1.evil.example", "localhost.evil.example", "",
+                None, "192.168.1.20:8765", "0.0.0.0:8765"):
         assert not host_allowed(bad), bad
     assert host_allowed("rig.lab:8765", ["rig.lab"]) and host_allowed("RIG.LAB", ["rig.lab:80"])
 
@@ -397,9 +359,8 @@ def test_dns_rebinding_requests_are_refused(client, engine):
     assert info.value.code == 1008
     # a configured name is served
     with local_client(create_app(Hub(LAYOUT, engine), allowed_hosts=["rig.lab"])) as c:
-        r = c.post(
-            "/api/reference", headers={"Host": "rig.lab:8765", "Origin": "http://rig.lab:8765"}
-        )
+        r = c.post("/api/reference", headers={"Host": "rig.lab:8765",
+                                              "Origin": "http://rig.lab:8765"})
     assert r.status_code == 200 and engine.captures == 1
 
 
@@ -439,9 +400,7 @@ def test_reference_post_errors_are_reported():
     with local_client(create_app(Hub(LAYOUT, eng))) as c:
         r = c.post("/api/reference")
     assert r.status_code == 409 and r.json() == {
-        "ok": False,
-        "error": "reference: source has no frames yet",
-    }
+        "ok": False, "error": "reference: source has no frames yet"}
 
 
 def test_create_app_refuses_a_non_hub():
@@ -595,10 +554,9 @@ def test_pages_are_told_when_the_engine_ends():
     from websockets.sync.client import connect
 
     engine = FakeEngine(n_frames=30, rate_hz=30)
-    with (
-        DashboardServer(engine, port=0) as server,
-        connect(f"ws://127.0.0.1:{server.port}/ws") as ws,
-    ):
+    with DashboardServer(engine, port=0) as server, connect(
+        f"ws://127.0.0.1:{server.port}/ws"
+    ) as ws:
         states, seqs = [], []
         deadline = time.monotonic() + 15
         while "ended" not in states and time.monotonic() < deadline:
@@ -684,9 +642,8 @@ def test_serve_runs_until_ctrl_c(tmp_path):
         f"engine = LiveEngine(open_source({'replay:' + str(path)!r}, loop=True))\n"
         "serve(engine, port=0, on_ready=lambda url: print(url, flush=True))\n"
     )
-    proc = subprocess.Popen(
-        [sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-    )
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
     try:
         url = proc.stdout.readline().strip()
         assert url.startswith("http://127.0.0.1:"), (url, proc.stderr.read() if not url else "")
@@ -768,26 +725,19 @@ def test_make_browser_fails_loudly_when_chromium_cannot_be_installed(tmp_path):
     (fake / "apt-get").write_text('#!/bin/sh\necho "E: Could not resolve host" >&2\nexit 100\n')
     (fake / "apt-get").chmod(0o755)
     argv = [make, "-s", "-C", str(REPO), "browser", f"CHROMIUM={tmp_path / 'no-chromium'}"]
-    r = subprocess.run(
-        argv,
-        env=dict(os.environ, PATH=f"{fake}:{os.environ['PATH']}"),
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    r = subprocess.run(argv, env=dict(os.environ, PATH=f"{fake}:{os.environ['PATH']}"),
+                       capture_output=True, text=True, timeout=60)
     assert r.returncode != 0 and "could not install chromium with apt-get" in r.stderr, r.stderr
     empty = tmp_path / "empty"  # no apt-get at all
     empty.mkdir()
-    r = subprocess.run(
-        argv, env=dict(os.environ, PATH=str(empty)), capture_output=True, text=True, timeout=60
-    )
+    r = subprocess.run(argv, env=dict(os.environ, PATH=str(empty)), capture_output=True,
+                       text=True, timeout=60)
     assert r.returncode != 0 and "apt-get is not available" in r.stderr, r.stderr
     # with the browser there it succeeds and installs nothing
     chromium = tmp_path / "chromium"
     chromium.write_text("#!/bin/sh\n")
     chromium.chmod(0o755)
     argv[-1] = f"CHROMIUM={chromium}"
-    r = subprocess.run(
-        argv, env=dict(os.environ, PATH=str(empty)), capture_output=True, text=True, timeout=60
-    )
+    r = subprocess.run(argv, env=dict(os.environ, PATH=str(empty)), capture_output=True,
+                       text=True, timeout=60)
     assert r.returncode == 0, r.stderr

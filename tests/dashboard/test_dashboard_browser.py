@@ -38,9 +38,7 @@ IN_CI = os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no")
 def _unavailable(why: str) -> None:
     """Skip on a developer machine; fail in CI, where a skip would go unnoticed."""
     if IN_CI:
-        pytest.fail(
-            f"{why}: the dashboard's browser test must run in CI (CI is set)", pytrace=False
-        )
+        pytest.fail(f"{why}: the dashboard's browser test must run in CI (CI is set)", pytrace=False)
     pytest.skip(why, allow_module_level=True)
 
 
@@ -73,9 +71,7 @@ def _patterns() -> np.ndarray:
     rng = np.random.default_rng(7)
     pats = np.zeros((LAYOUT.n_classes, LAYOUT.n_pairs))
     surf = {r.id: r.surface for r in LAYOUT.regions}
-    pair_surf = [
-        (LAYOUT.electrode_surface(i), LAYOUT.electrode_surface(j)) for i, j in LAYOUT.pairs
-    ]
+    pair_surf = [(LAYOUT.electrode_surface(i), LAYOUT.electrode_surface(j)) for i, j in LAYOUT.pairs]
     for r in range(1, LAYOUT.n_classes):
         w = np.array([2.0 if surf[r] in ps else 0.3 for ps in pair_surf])
         p = w * rng.uniform(0.2, 1.0, LAYOUT.n_pairs)
@@ -108,22 +104,14 @@ def write_patterned_recording(path: Path) -> Path:
 
     with RecordingWriter(path, LAYOUT, RATE_HZ) as w:
         w.start_trial("rest", inflation=(0, 0, 0), region=0)
-        w.append(
-            base * (1 + noise()),
-            t,
-            np.zeros(FRAMES_PER_TRIAL, dtype=int),
-            markers=np.repeat(REST[None], FRAMES_PER_TRIAL, 0),
-        )
+        w.append(base * (1 + noise()), t, np.zeros(FRAMES_PER_TRIAL, dtype=int),
+                 markers=np.repeat(REST[None], FRAMES_PER_TRIAL, 0))
         for r in TOUCHED:
             force = 0.6 + 0.4 * np.sin(np.pi * t / t[-1])  # N
             w.start_trial(f"touch-{r}", inflation=(0, 0, 0), region=r)
-            w.append(
-                base * (1 + GAIN * force[:, None] * PATTERNS[r] + noise()),
-                t,
-                np.full(FRAMES_PER_TRIAL, r),
-                markers=np.stack([REST + _bend(f, _side(r)) for f in force]),
-                force=force,
-            )
+            w.append(base * (1 + GAIN * force[:, None] * PATTERNS[r] + noise()), t,
+                     np.full(FRAMES_PER_TRIAL, r), markers=np.stack(
+                         [REST + _bend(f, _side(r)) for f in force]), force=force)
     return path
 
 
@@ -231,10 +219,7 @@ def test_page_follows_a_replayed_recording(tmp_path):
             moved = float(page.get_attribute("#markers-moved", "data-value"))
             assert 0.5 < moved < 1.5 * BEND_MM
             assert page.get_attribute("#markers-moved", "data-source") == "pred"
-            assert (
-                page.locator('#markers-yz circle[data-kind="pred"][visibility="visible"]').count()
-                == 5
-            )
+            assert page.locator('#markers-yz circle[data-kind="pred"][visibility="visible"]').count() == 5
 
             # Marker errors are drawn on their own scale, with a legend (issue 12: sub-mm errors
             # were invisible on the 140-mm views, and nothing said what red, blue and "moved" were).
@@ -306,9 +291,7 @@ def test_page_follows_a_replayed_recording(tmp_path):
             assert resp.status == 200 and resp.json()["ok"] is True
             page.wait_for_selector(
                 '#reference-status:is([data-state="requested"], [data-state="capturing"], '
-                '[data-state="ready"])',
-                timeout=5_000,
-            )
+                '[data-state="ready"])', timeout=5_000)
             stats = json.loads(page.evaluate("() => fetch('/api/stats').then(r => r.text())"))
             assert stats["dashboard"]["reference_requests"] == 1
             page.wait_for_selector('#reference-status[data-state="ready"]', timeout=20_000)

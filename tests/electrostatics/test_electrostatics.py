@@ -529,10 +529,7 @@ def test_dielectric_sensitivity_matches_the_spherical_capacitor():
     derivative of the analytic series formula 1/C = (1/4πε0) Σ (1/ε_k)(1/r_k − 1/r_{k+1})."""
     a, b, r1, r2 = 5.0, 10.0, 6.5, 8.5
     pan = Panels.concatenate(
-        [
-            sphere_panels((0, 0, 0), a, 8, 0, n_conductors=2),
-            sphere_panels((0, 0, 0), b, 8, 1, n_conductors=2),
-        ]
+        [sphere_panels((0, 0, 0), a, 8, 0, n_conductors=2), sphere_panels((0, 0, 0), b, 8, 1, n_conductors=2)]
     )
     _, q = maxwell_capacitance(pan, 1.0, return_charges=True)
     nr, nt, nph = 4, 24, 48  # midpoint cells of the shell r1 < r < r2
@@ -541,9 +538,7 @@ def test_dielectric_sensitivity_matches_the_spherical_capacitor():
     ph = (np.arange(nph) + 0.5) * 2 * np.pi / nph
     R, T, P = np.meshgrid(r, th, ph, indexing="ij")
     pts = np.c_[
-        (R * np.sin(T) * np.cos(P)).ravel(),
-        (R * np.sin(T) * np.sin(P)).ravel(),
-        (R * np.cos(T)).ravel(),
+        (R * np.sin(T) * np.cos(P)).ravel(), (R * np.sin(T) * np.sin(P)).ravel(), (R * np.cos(T)).ravel()
     ]
     vol = (R**2 * np.sin(T)).ravel() * (r2 - r1) / nr * np.pi / nt * 2 * np.pi / nph
     S = dielectric_sensitivity(pan, q, pts, vol, 1.0)

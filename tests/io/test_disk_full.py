@@ -69,9 +69,7 @@ def test_import_generic_beyond_a_write_limit_is_one_clear_error(tmp_path):
     src = _big_npz(tmp_path / "big.npz")
     out_dir = tmp_path / "out"
     out_dir.mkdir()
-    proc = _run_limited(
-        ["-m", "ectskin", "import", "generic", str(src), "-o", str(out_dir / "r.h5")]
-    )
+    proc = _run_limited(["-m", "ectskin", "import", "generic", str(src), "-o", str(out_dir / "r.h5")])
     line = _one_clear_error(proc, "import")
     assert "cannot write the recording (File too large)" in line
     assert "nothing was written there" in line
@@ -132,20 +130,8 @@ def test_write_recording_enospc_leaves_no_file(tmp_path, monkeypatch, make_recor
 def test_simulate_enospc_is_one_clear_error(tmp_path, monkeypatch, capsys):
     out = tmp_path / "s.h5"
     monkeypatch.setattr("ectskin._files.os.fsync", _enospc)
-    argv = [
-        "simulate",
-        "-o",
-        str(out),
-        "--levels",
-        "0",
-        "--touch-trials",
-        "1",
-        "--duration",
-        "0.2",
-        "--workers",
-        "1",
-        "--no-progress",
-    ]
+    argv = ["simulate", "-o", str(out), "--levels", "0", "--touch-trials", "1", "--duration",
+            "0.2", "--workers", "1", "--no-progress"]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "No space left on device" in err and "Traceback" not in err
@@ -207,14 +193,8 @@ def _can_mount_tmpfs() -> bool:
     if sys.platform != "linux" or shutil.which("unshare") is None:
         return False
     probe = subprocess.run(
-        [
-            "unshare",
-            "--mount",
-            "--map-root-user",
-            "sh",
-            "-c",
-            "d=$(mktemp -d) && mount -t tmpfs -o size=64k tmpfs $d && umount $d && rmdir $d",
-        ],
+        ["unshare", "--mount", "--map-root-user", "sh", "-c",
+         "d=$(mktemp -d) && mount -t tmpfs -o size=64k tmpfs $d && umount $d && rmdir $d"],
         capture_output=True,
     )
     return probe.returncode == 0
@@ -250,10 +230,7 @@ def test_real_full_tmpfs(tmp_path):
     )
     proc = subprocess.run(
         ["unshare", "--mount", "--map-root-user", "sh", "-c", script],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        env=os.environ.copy(),
+        capture_output=True, text=True, timeout=120, env=os.environ.copy(),
     )
     out = proc.stdout.splitlines()
     assert out[0] == "rc=2", proc.stderr[-2000:]

@@ -89,59 +89,18 @@ def _imports_or_refuses(read, *args, **kwargs):
 
 # ------------------------------------------------------------------------------ generic CSV
 SPECIAL_CELLS = [
-    "",
-    " ",
-    "0",
-    "1",
-    "-1",
-    "2",
-    "1.5",
-    "1.00239",
-    "1.0",
-    "1.",
-    "nan",
-    "NaN",
-    "inf",
-    "-inf",
-    "1e308",
-    "1.7e308",
-    "-1.7e308",
-    "1e-320",
-    "1000",
-    "1001",
-    "-0",
-    "1,5",
-    "a",
-    "#x",
-    '"',
-    "\x00",
-    "a\x00b",
-    "é",
-    "g1",
-    "1e",
-    "0x10",
-    "١",
+    "", " ", "0", "1", "-1", "2", "1.5", "1.00239", "1.0", "1.", "nan", "NaN", "inf", "-inf",
+    "1e308", "1.7e308", "-1.7e308", "1e-320", "1000", "1001", "-0", "1,5", "a", "#x", '"',
+    "\x00", "a\x00b", "é", "g1", "1e", "0x10", "١",
 ]
 GROUP_CELLS = ["1", "2", "g", "h", "", " ", "a\x00b", "-3", "1.5", "99999999999999999999999"]
 COLUMNS = [
-    "group",
-    "time_s",
-    "label",
-    "c:a",
-    "c:b",
-    "c:c",
-    "ref:a",
-    "ref:b",
-    "m:p.x",
-    "m:p.y",
-    "m:p.z",
-    "m:q.x",
-    "c:",
-    "foo",
-    "Group",
-    " c:a",
+    "group", "time_s", "label", "c:a", "c:b", "c:c", "ref:a", "ref:b", "m:p.x", "m:p.y",
+    "m:p.z", "m:q.x", "c:", "foo", "Group", " c:a",
 ]
-text_cells = st.text(alphabet=st.characters(blacklist_categories=("Cs",)), max_size=6)
+text_cells = st.text(
+    alphabet=st.characters(blacklist_categories=("Cs",)), max_size=6
+)
 number_cells = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True).map(repr),
     st.integers(-3, 1200).map(str),
@@ -312,13 +271,8 @@ def test_fuzz_generic_npz_bytes(data):
     """Damaged archives: bytes of a valid one overwritten or cut."""
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "f.npz"
-        np.savez(
-            path,
-            readouts=np.ones((3, 2)),
-            group=np.arange(3),
-            labels=np.zeros(3),
-            frame_rate_hz=30.0,
-        )
+        np.savez(path, readouts=np.ones((3, 2)), group=np.arange(3), labels=np.zeros(3),
+                 frame_rate_hz=30.0)
         raw = _mutate(data, path.read_bytes())
         path.write_bytes(raw)
         rec = _imports_or_refuses(load_generic, path)
@@ -336,13 +290,11 @@ def _mutate(data, raw: bytes) -> bytes:
             break
         at = data.draw(st.integers(0, len(b) - 1), label="at")
         if op == "set":
-            b[at] = data.draw(st.sampled_from(b'0123456789.,;-eE \t\n"x\x00\xff'), label="byte")
+            b[at] = data.draw(st.sampled_from(b"0123456789.,;-eE \t\n\"x\x00\xff"), label="byte")
         elif op == "insert":
             b[at:at] = data.draw(
-                st.one_of(
-                    st.binary(max_size=8),
-                    st.sampled_from([b",", b"\n", b"1.7e308", b"OL", b";", b"\r"]),
-                ),
+                st.one_of(st.binary(max_size=8), st.sampled_from([b",", b"\n", b"1.7e308",
+                                                                   b"OL", b";", b"\r"])),
                 label="bytes",
             )
         elif op == "delete":
@@ -383,9 +335,8 @@ def test_fuzz_motive_csv(data):
     src = data.draw(st.sampled_from(MOTIVE_FILES), label="file")
     raw = _mutate(data, src.read_bytes())
     strict = data.draw(st.booleans(), label="strict")
-    names = data.draw(
-        st.sampled_from([None, ["M1"], ["M2", "M1"], ["Skin:M3"], ["X"]]), label="marker_names"
-    )
+    names = data.draw(st.sampled_from([None, ["M1"], ["M2", "M1"], ["Skin:M3"], ["X"]]),
+                      label="marker_names")
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / src.name
         path.write_bytes(raw)
@@ -421,13 +372,8 @@ def _valid_recordings(d: Path, layout) -> list[Path]:
     partial = d / "partial.h5"
     w = RecordingWriter(partial, layout, 30.0, flush_interval_s=0)
     w.start_trial("live", region=1)
-    w.append(
-        np.ones((3, layout.n_pairs)),
-        np.arange(3) / 30,
-        contact=np.zeros(3, bool),
-        finger_uv_mm=np.full((3, 2), np.nan),
-        finger_height_mm=np.full(3, np.nan),
-    )
+    w.append(np.ones((3, layout.n_pairs)), np.arange(3) / 30, contact=np.zeros(3, bool),
+             finger_uv_mm=np.full((3, 2), np.nan), finger_height_mm=np.full(3, np.nan))
     w.add_event(0.0, "start")
     w.close(complete=False)
     return [full, partial]
@@ -488,7 +434,9 @@ def _edit_hdf5(data, f: h5py.File) -> None:
         if kind == "U":
             arr = arr.astype(object)
         del f[name]
-        f.create_dataset(name, data=arr, dtype=h5py.string_dtype() if kind == "U" else None)
+        f.create_dataset(
+            name, data=arr, dtype=h5py.string_dtype() if kind == "U" else None
+        )
     elif op == "values":
         ds = f[name]
         if ds.size and ds.dtype.kind in "iufb":
@@ -500,7 +448,8 @@ def _edit_hdf5(data, f: h5py.File) -> None:
             flat[k] = data.draw(st.sampled_from(new), label="new")
             ds[()] = flat.reshape(ds.shape)
         elif ds.size and h5py.check_string_dtype(ds.dtype) is not None and ds.ndim == 1:
-            ds[0] = data.draw(st.sampled_from(["", "t1", "{", "[]", "x" * 50]), label="text")
+            ds[0] = data.draw(st.sampled_from(["", "t1", "{", "[]", "x" * 50]),
+                              label="text")
     else:  # resize
         ds = f[name]
         if ds.maxshape and ds.ndim and ds.maxshape[0] is None:
@@ -534,3 +483,4 @@ def test_fuzz_hdf5_reader_truncated(data, layout):
         rec = _imports_or_refuses(read_recording, path, allow_partial=True)
         if rec is not None:
             _roundtrip(rec)
+

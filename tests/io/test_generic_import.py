@@ -382,11 +382,8 @@ def test_nul_byte_in_a_group_id_is_one_clear_error(tmp_path, fmt):
     group = np.array(["a", "a\x00b", "a\x00b"])
     p = tmp_path / f"nul.{fmt}"
     if fmt == "csv":
-        _csv(
-            tmp_path,
-            "# frame_rate_hz: 30\ngroup,label,c:a\na,0,1\na\x00b,0,1\na\x00b,1,2\n",
-            name="nul.csv",
-        )
+        _csv(tmp_path, "# frame_rate_hz: 30\ngroup,label,c:a\na,0,1\na\x00b,0,1\na\x00b,1,2\n",
+             name="nul.csv")
         where = "line 4, column 'group'"
     else:
         np.savez(p, readouts=np.ones((3, 1)), group=group, labels=np.zeros(3), frame_rate_hz=30.0)
@@ -399,16 +396,11 @@ def test_nul_byte_in_a_group_id_is_one_clear_error(tmp_path, fmt):
 def test_empty_group_id_is_refused_at_import(tmp_path):
     """Before: an NPZ with an empty group id imported, and the reader refused the file written."""
     for group in (["", ""], ["  ", "  "], ["a", ""]):
-        p = _npz(
-            tmp_path,
-            readouts=np.ones((2, 1)),
-            group=np.array(group),
-            labels=np.zeros(2),
-            frame_rate_hz=30.0,
-        )
+        p = _npz(tmp_path, readouts=np.ones((2, 1)), group=np.array(group), labels=np.zeros(2),
+                 frame_rate_hz=30.0)
         with pytest.raises(EctskinError, match="group id at row [01] is empty"):
             load_generic(p)
-    p = _csv(tmp_path, '# frame_rate_hz: 30\ngroup,label,c:a\n"",0,1\n')
+    p = _csv(tmp_path, "# frame_rate_hz: 30\ngroup,label,c:a\n\"\",0,1\n")
     with pytest.raises(EctskinError, match="line 3, column 'group': empty"):
         load_generic(p)
 
@@ -519,14 +511,8 @@ def test_huge_numbers_are_refused_at_import_npz(tmp_path):
     with pytest.raises(EctskinError, match=r"'readouts' row 5, channel 2: readout -1.7e\+308"):
         load_generic(p)
     readouts[5, 2] = 1.0
-    p = _npz(
-        tmp_path,
-        readouts=readouts,
-        group=group,
-        labels=labels,
-        timestamps=t,
-        reference=np.full(3, 1.7e308),
-    )
+    p = _npz(tmp_path, readouts=readouts, group=group, labels=labels, timestamps=t,
+             reference=np.full(3, 1.7e308))
     with pytest.raises(EctskinError, match="reference 1.7e\\+308 is beyond"):
         load_generic(p)
 
@@ -535,48 +521,27 @@ def test_names_with_a_nul_byte_are_refused_before_hdf5(tmp_path):
     """Found by the fuzz suite: a marker name with a NUL byte imported and then failed in h5py
     (ValueError) when the recording was written."""
     group, labels, readouts, markers, t = _data(n_channels=3, n_markers=2)
-    p = _npz(
-        tmp_path,
-        readouts=readouts,
-        group=group,
-        labels=labels,
-        markers=markers,
-        timestamps=t,
-        marker_names=np.array(["tip", "a\x00b"]),
-    )
+    p = _npz(tmp_path, readouts=readouts, group=group, labels=labels, markers=markers,
+             timestamps=t, marker_names=np.array(["tip", "a\x00b"]))
     with pytest.raises(EctskinError, match="field 'marker_names' entry 1 is 'a\\\\x00b'"):
         load_generic(p)
-    p = _csv(
-        tmp_path,
-        "# frame_rate_hz: 30\ngroup,label,c:a,m:a\x00b.x,m:a\x00b.y,m:a\x00b.z\n1,0,1,2,3,4\n",
-    )
+    p = _csv(tmp_path, "# frame_rate_hz: 30\ngroup,label,c:a,m:a\x00b.x,m:a\x00b.y,m:a\x00b.z\n"
+                       "1,0,1,2,3,4\n")
     with pytest.raises(EctskinError, match="column name 'm:a\\\\x00b.x' contains a NUL byte"):
         load_generic(p)
     # a layout built in Python with such a name is refused where it is made
-    with pytest.raises(
-        EctskinError, match="marker name 'a\\\\x00b' must be non-empty text without NUL"
-    ):
+    with pytest.raises(EctskinError, match="marker name 'a\\\\x00b' must be non-empty text without NUL"):
         virtual_layout(3, 2, 2, ["tip", "a\x00b"])
 
 
 def test_group_ids_that_do_not_fit_int64_are_refused(tmp_path):
     """Found by the fuzz suite: float ids like 1e300 were cast to int64 (undefined, one value for
     all), so different groups could merge into one trial."""
-    p = _npz(
-        tmp_path,
-        readouts=np.ones((2, 1)),
-        group=np.array([1e300, 2e300]),
-        labels=np.zeros(2),
-        frame_rate_hz=30.0,
-    )
+    p = _npz(tmp_path, readouts=np.ones((2, 1)), group=np.array([1e300, 2e300]),
+             labels=np.zeros(2), frame_rate_hz=30.0)
     with pytest.raises(EctskinError, match="row 0 is 1e\\+300, expected an integer id"):
         load_generic(p)
-    p = _npz(
-        tmp_path,
-        readouts=np.ones((2, 1)),
-        group=np.array([1, 2**64 - 1], dtype=np.uint64),
-        labels=np.zeros(2),
-        frame_rate_hz=30.0,
-    )
+    p = _npz(tmp_path, readouts=np.ones((2, 1)), group=np.array([1, 2**64 - 1], dtype=np.uint64),
+             labels=np.zeros(2), frame_rate_hz=30.0)
     with pytest.raises(EctskinError, match="row 1 is 18446744073709551615, beyond the int64"):
         load_generic(p)

@@ -171,39 +171,23 @@ def test_capmeter_ms_time_without_unit_needs_time_unit(tmp_path):
     ("old", "new", "pattern"),
     [
         # a row with a missing cell: file, line and the expected count
-        (
-            "66.7,1523.4,0.197,OL,OL,1208.8,-0.099,",
-            "66.7,1523.4,0.197,OL,1208.8,-0.099",
-            r"capmeter_bom_fF\.csv: line 7: expected 8 cells \(as in the header on line 4\), found 6",
-        ),
+        ("66.7,1523.4,0.197,OL,OL,1208.8,-0.099,", "66.7,1523.4,0.197,OL,1208.8,-0.099",
+         r"capmeter_bom_fF\.csv: line 7: expected 8 cells \(as in the header on line 4\), found 6"),
         # a garbage cell: file, line, column and channel
-        (
-            "133.3,1526.1,0.375,983.4,",
-            "133.3,1526.1,0.375,98x3.4,",
-            (
-                r"capmeter_bom_fF\.csv: line 9: column 4 \(channel 'C13', 'C13 \[fF\]'\): expected a "
-                r"number or a missing-value marker .* found '98x3.4'"
-            ),
-        ),
+        ("133.3,1526.1,0.375,983.4,", "133.3,1526.1,0.375,98x3.4,",
+         (r"capmeter_bom_fF\.csv: line 9: column 4 \(channel 'C13', 'C13 \[fF\]'\): expected a "
+         r"number or a missing-value marker .* found '98x3.4'")),
         # time going backwards
-        (
-            "200.0,1528.8",
-            "150.0,1528.8",
-            (
-                r"line 11: time column 'Time \[ms\]': time '150.0' does not increase \(previous frame, "
-                r"line 10: '166.7'\)"
-            ),
-        ),
+        ("200.0,1528.8", "150.0,1528.8",
+         (r"line 11: time column 'Time \[ms\]': time '150.0' does not increase \(previous frame, "
+         r"line 10: '166.7'\)")),
         # an unparseable time
         ("233.3,1530.2", "2x3.3,1530.2", r"line 12: time column 'Time \[ms\]': expected a number"),
         # a channel column with no unit
         ("C23 [fF],", "C23,", r"column 6 'C23' \(header line 4\) has no unit.*value_unit"),
         # a relative-change column whose channel has no value column
-        (
-            "C23 [fF],C23 dC/C [%]",
-            "C23 [V],C24 dC/C [%]",
-            r"column 7 'C24 dC/C \[%\]' is a relative change of channel 'C24', but no capacitance",
-        ),
+        ("C23 [fF],C23 dC/C [%]", "C23 [V],C24 dC/C [%]",
+         r"column 7 'C24 dC/C \[%\]' is a relative change of channel 'C24', but no capacitance"),
         # two columns for one channel
         ("C23 [fF]", "C12 [fF]", r"channel 'C12' appears twice \(columns 2 and 6\)"),
         # no header at all
@@ -217,12 +201,8 @@ def test_capmeter_malformed_inputs_name_file_line_and_channel(tmp_path, old, new
 
 
 def test_capmeter_non_strict_skips_and_reports(tmp_path):
-    p = _copy_with(
-        tmp_path,
-        CAP_BOM,
-        "66.7,1523.4,0.197,OL,OL,1208.8,-0.099,",
-        "66.7,1523.4,0.197,OL,1208.8,-0.099",
-    )
+    p = _copy_with(tmp_path, CAP_BOM, "66.7,1523.4,0.197,OL,OL,1208.8,-0.099,",
+                   "66.7,1523.4,0.197,OL,1208.8,-0.099")
     p.write_text(p.read_text(encoding="utf-8-sig").replace("983.4", "98x3.4"), encoding="utf-8")
     d = read_capmeter_csv(p, strict=False)
     assert d.n_frames == 7  # line 7 skipped
@@ -287,11 +267,8 @@ def test_motive_select_by_name_and_unlabeled():
     assert d.marker_names == ("Skin:M3", "Base:Marker1")
     # the rigid-body marker: 0.001250,-0.002080,0.000010 m
     np.testing.assert_allclose(d.positions[0, 1], [1.25, -2.08, 0.01], atol=1e-9)
-    with pytest.raises(
-        EctskinError,
-        match=r"marker 'M9' is not in the file; markers with "
-        r"positions: Base, Base:Marker1, Skin:M1",
-    ):
+    with pytest.raises(EctskinError, match=r"marker 'M9' is not in the file; markers with "
+                                           r"positions: Base, Base:Marker1, Skin:M1"):
         read_motive_csv(MOTIVE, marker_names=["M9"])
     u = read_motive_csv(MOTIVE, include_unlabeled=True)
     assert u.marker_names[-1] == "Unlabeled 1042"
@@ -305,11 +282,8 @@ def test_motive_length_units(tmp_path):
     )
     np.testing.assert_allclose(cm.positions, ref.positions / 100, equal_nan=True)
     p = _copy_with(tmp_path, MOTIVE, ",Length Units,Meters", "")
-    with pytest.raises(
-        EctskinError,
-        match=r"no 'Length Units' field; give the unit "
-        r"\(length_units='Meters'.*--length-units",
-    ):
+    with pytest.raises(EctskinError, match=r"no 'Length Units' field; give the unit "
+                                           r"\(length_units='Meters'.*--length-units"):
         read_motive_csv(p)
     np.testing.assert_allclose(
         read_motive_csv(p, length_units="Meters").positions, ref.positions, equal_nan=True
@@ -332,50 +306,21 @@ def test_motive_partly_empty_marker_counts_as_occluded(tmp_path):
 @pytest.mark.parametrize(
     ("old", "new", "pattern"),
     [
-        (
-            "0.025000,0.000500,0.072000",
-            "0.025000,abc,0.072000",
-            (
-                r"motive_meters_30fps\.csv: line 9: column 22 \(marker 'Skin:M3', Y\): expected a number "
-                r"or an empty cell \(occluded\), found 'abc'"
-            ),
-        ),
-        (
-            "\r\n5,0.166667,",
-            "\r\n5,0.166667,0,",
-            (
-                r"line 13: expected 26 cells \(as in the column "
-                r"header on line 7\), found 27"
-            ),
-        ),
-        (
-            "\r\n4,0.133333,",
-            "\r\n4,0.033333,",
-            (
-                r"line 12: column 2 \(Time \(Seconds\)\): time "
-                r"0.033333 s does not increase"
-            ),
-        ),
-        (
-            "\r\n4,0.133333,",
-            "\r\nfour,0.133333,",
-            r"line 12: column 1 \(Frame\): expected an integer",
-        ),
-        (
-            "Format Version",
-            "Format",
-            (
-                r"not a Motive CSV export: line 1 should start with 'Format "
-                r"Version'"
-            ),
-        ),
+        ("0.025000,0.000500,0.072000", "0.025000,abc,0.072000",
+         (r"motive_meters_30fps\.csv: line 9: column 22 \(marker 'Skin:M3', Y\): expected a number "
+         r"or an empty cell \(occluded\), found 'abc'")),
+        ("\r\n5,0.166667,", "\r\n5,0.166667,0,", (r"line 13: expected 26 cells \(as in the column "
+                                                   r"header on line 7\), found 27")),
+        ("\r\n4,0.133333,", "\r\n4,0.033333,", (r"line 12: column 2 \(Time \(Seconds\)\): time "
+                                               r"0.033333 s does not increase")),
+        ("\r\n4,0.133333,", "\r\nfour,0.133333,",
+         r"line 12: column 1 \(Frame\): expected an integer"),
+        ("Format Version", "Format", (r"not a Motive CSV export: line 1 should start with 'Format "
+                                     r"Version'")),
         ("Frame,Time (Seconds)", "Fr,Time (Seconds)", r"no column header row starting with 'Frame"),
         (",Name,", ",Label,", r"no ',Name,\.\.\.' row"),
-        (
-            "Export Frame Rate,30.000000",
-            "Export Frame Rate,fast",
-            r"Export Frame Rate must be a number",
-        ),
+        ("Export Frame Rate,30.000000", "Export Frame Rate,fast",
+         r"Export Frame Rate must be a number"),
     ],
 )
 def test_motive_malformed_inputs_name_file_line_and_column(tmp_path, old, new, pattern):
@@ -464,16 +409,15 @@ def test_interp_linear_and_xcorr_against_references():
     a[rng.random(200) < 0.1] = np.nan
     lags, r, counts = normalised_xcorr(a, b, 7, 8)
     for lag, rv, c in zip(lags, r, counts):
-        x = a[max(0, -lag) : 200 - max(0, lag)]
-        y2 = b[max(0, lag) : 200 + min(0, lag)]
+        x = a[max(0, -lag): 200 - max(0, lag)]
+        y2 = b[max(0, lag): 200 + min(0, lag)]
         ok = np.isfinite(x) & np.isfinite(y2)
         assert c == ok.sum()
         assert rv == pytest.approx(np.corrcoef(x[ok], y2[ok])[0, 1], abs=1e-12)
 
 
-def _synthetic_session(
-    delay_s, *, mocap_hz=30.0, seed=0, noise_mm=0.2, duration_s=30.0, occlude=True
-):
+def _synthetic_session(delay_s, *, mocap_hz=30.0, seed=0, noise_mm=0.2, duration_s=30.0,
+                       occlude=True):
     """Readout (28 channels) and markers (5) of one touch trial; the markers lag by ``delay_s``.
 
     A smooth random press force f(t) moves some channels (gain per channel) and bends the body
@@ -518,13 +462,8 @@ def test_lagged_fit_matches_lstsq_reference():
         sse = sst = 0.0
         n_max = 0
         for m in range(2):
-            rows = [
-                n
-                for n in range(120)
-                if 0 <= n + lag < 120
-                and np.isfinite(x[n]).all()
-                and np.isfinite(y[n + lag, m]).all()
-            ]
+            rows = [n for n in range(120) if 0 <= n + lag < 120
+                    and np.isfinite(x[n]).all() and np.isfinite(y[n + lag, m]).all()]
             a = np.column_stack([np.ones(len(rows)), x[rows]])
             b = y[[n + lag for n in rows], m]
             beta = np.linalg.lstsq(a, b, rcond=None)[0]
@@ -593,20 +532,14 @@ def _write_capmeter(path: Path, t: np.ndarray, values_pf: np.ndarray, names: lis
 
 def _write_motive(path: Path, t: np.ndarray, pos_mm: np.ndarray, names: list[str]) -> None:
     """A Motive 1.23 export in Millimeters with the given marker names (Type Marker)."""
-    meta = (
-        "Format Version,1.23,Take Name,synthetic,Capture Frame Rate,30.000000,Export Frame "
-        "Rate,30.000000,Rotation Type,Quaternion,Length Units,Millimeters,Coordinate Space,"
-        "Global"
-    )
-    rows = [
-        meta,
-        "",
-        ",Type," + ",".join(["Marker"] * 3 * len(names)),
-        ",Name," + ",".join(n for n in names for _ in range(3)),
-        ",ID," + ",".join(str(k + 1) for k in range(len(names)) for _ in range(3)),
-        ",," + ",".join(["Position"] * 3 * len(names)),
-        "Frame,Time (Seconds)," + ",".join(["X,Y,Z"] * len(names)),
-    ]
+    meta = ("Format Version,1.23,Take Name,synthetic,Capture Frame Rate,30.000000,Export Frame "
+            "Rate,30.000000,Rotation Type,Quaternion,Length Units,Millimeters,Coordinate Space,"
+            "Global")
+    rows = [meta, "", ",Type," + ",".join(["Marker"] * 3 * len(names)),
+            ",Name," + ",".join(n for n in names for _ in range(3)),
+            ",ID," + ",".join(str(k + 1) for k in range(len(names)) for _ in range(3)),
+            ",," + ",".join(["Position"] * 3 * len(names)),
+            "Frame,Time (Seconds)," + ",".join(["X,Y,Z"] * len(names))]
     for f in range(len(t)):
         cells = []
         for m in range(len(names)):
@@ -635,9 +568,8 @@ def test_build_recording_end_to_end_from_files(tmp_path):
     cp, mp, cap_t, truth, mk_t = _session_files(tmp_path, 0.1)
     cap = read_capmeter_csv(cp, n_pairs=28)
     mocap = read_motive_csv(mp)
-    rec = build_recording(
-        cap, mocap, LAYOUT, trial_name="s1_touch", inflation=(0, 10, 20), region=7
-    )
+    rec = build_recording(cap, mocap, LAYOUT, trial_name="s1_touch", inflation=(0, 10, 20),
+                          region=7)
     t = rec.trials[0]
     assert rec.n_trials == 1 and rec.frame_rate_hz == pytest.approx(30.0, rel=1e-4)
     assert t.name == "s1_touch" and t.region == 7 and t.inflation == (0.0, 10.0, 20.0)
@@ -681,11 +613,8 @@ def test_build_recording_given_delay_no_mocap_and_errors(tmp_path):
     bare = build_recording(cap, None, LAYOUT)
     assert bare.trials[0].markers is None and bare.trials[0].name == "t0_cap"
     small = read_capmeter_csv(CAP_BOM)
-    with pytest.raises(
-        EctskinError,
-        match=r"3 capacitance channels \(C12, C13, C23\), but layout "
-        r"'paper-2x4-wires' has 8 electrodes = 28 pairs",
-    ):
+    with pytest.raises(EctskinError, match=r"3 capacitance channels \(C12, C13, C23\), but layout "
+                                           r"'paper-2x4-wires' has 8 electrodes = 28 pairs"):
         build_recording(small, None, LAYOUT)
     with pytest.raises(EctskinError, match="unknown region 19"):
         build_recording(cap, None, LAYOUT, region=19)
@@ -720,9 +649,8 @@ def test_build_recording_matches_markers_by_name_or_refuses(tmp_path):
     assert "never by their order" in msg and "--markers" in msg
     # names without any match (the old fallback took them in file order)
     other = _take_with(tmp_path, ["Skin:X1", "Skin:X2", "Skin:X3", "Skin:X4", "Skin:X5"], "o.csv")
-    with pytest.raises(
-        EctskinError, match="missing from the take: M1, M2, M3, M4, M5; not in the layout: Skin:X1"
-    ):
+    with pytest.raises(EctskinError, match="missing from the take: M1, M2, M3, M4, M5; not in "
+                                           "the layout: Skin:X1"):
         build_recording(cap, other, LAYOUT, delay=0.0)
     # an extra marker (say, on the finger) is refused too, until the take's markers are selected
     six = ["Skin:M6", "Skin:M2", "Skin:M1", "Skin:M3", "Skin:M5", "Skin:M4"]
@@ -740,20 +668,8 @@ def test_build_recording_matches_markers_by_name_or_refuses(tmp_path):
 def test_cli_build_refuses_markers_that_do_not_match(tmp_path, capsys):
     cp, *_ = _session_files(tmp_path, 0.0)
     _take_with(tmp_path, ["Skin:M1", "Skin:M2", "Skin:M4", "Skin:M5", "Skin:M6"], "gap.csv")
-    code = cli.main(
-        [
-            "import",
-            "build",
-            "--capacitance",
-            str(cp),
-            "--mocap",
-            str(tmp_path / "gap.csv"),
-            "-o",
-            str(tmp_path / "r.h5"),
-            "--region",
-            "3",
-        ]
-    )
+    code = cli.main(["import", "build", "--capacitance", str(cp), "--mocap",
+                     str(tmp_path / "gap.csv"), "-o", str(tmp_path / "r.h5"), "--region", "3"])
     err = capsys.readouterr().err
     assert code == 2 and "missing from the take: M3" in err and "Traceback" not in err
     assert not (tmp_path / "r.h5").exists()
@@ -765,13 +681,8 @@ def test_build_recording_from_manifest(tmp_path):
     manifest = {
         "max_delay_s": 0.4,
         "trials": [
-            {
-                "name": "a_touch",
-                "capacitance": cp0.name,
-                "mocap": mp0.name,
-                "inflation": [0, 0, 10],
-                "region": 12,
-            },
+            {"name": "a_touch", "capacitance": cp0.name, "mocap": mp0.name,
+             "inflation": [0, 0, 10], "region": 12},
             {"name": "b_rest", "capacitance": cp1.name, "inflation": [0, 0, 10]},
         ],
     }
@@ -809,21 +720,8 @@ def test_cli_reports_and_builds_hdf5(tmp_path, capsys):
     assert "markers: Skin:M1, Skin:M3" in capsys.readouterr().out
     cp, mp, *_ = _session_files(tmp_path, 0.1)
     out_h5 = tmp_path / "rec.h5"
-    argv = [
-        "build",
-        "--capacitance",
-        str(cp),
-        "--mocap",
-        str(mp),
-        "-o",
-        str(out_h5),
-        "--region",
-        "4",
-        "--inflation",
-        "0,10,20",
-        "--trial-name",
-        "s1",
-    ]
+    argv = ["build", "--capacitance", str(cp), "--mocap", str(mp), "-o", str(out_h5),
+            "--region", "4", "--inflation", "0,10,20", "--trial-name", "s1"]
     assert _cli(argv) == 0
     assert "delay +" in capsys.readouterr().out
     back = hdf5.read_recording(out_h5)
@@ -841,19 +739,8 @@ def test_cli_reports_and_builds_hdf5(tmp_path, capsys):
 
 def test_cli_manifest_refuses_per_trial_flags(tmp_path):
     with pytest.raises(EctskinError, match=r"--mocap, --region describe one trial"):
-        _cli(
-            [
-                "build",
-                "--manifest",
-                str(tmp_path / "m.json"),
-                "--mocap",
-                "x.csv",
-                "--region",
-                "3",
-                "-o",
-                str(tmp_path / "o.h5"),
-            ]
-        )
+        _cli(["build", "--manifest", str(tmp_path / "m.json"), "--mocap", "x.csv", "--region",
+              "3", "-o", str(tmp_path / "o.h5")])
 
 
 def test_cli_main_prints_clear_error_for_bad_file(tmp_path, capsys):
@@ -905,7 +792,7 @@ def test_capmeter_last_line_cut_short_is_left_out_and_reported(tmp_path, caplog)
         cap = read_capmeter_csv(p, strict=True)
     assert cap.n_frames == 12
     assert "line 14 is cut short (its last number '1207.0' has 1 decimal" in caplog.text
-    ((line, why),) = cap.mask_report.skipped_rows
+    (line, why), = cap.mask_report.skipped_rows
     assert line == 14 and "cut short" in why and "truncated" in why
     assert "line 14 skipped: cut short" in cap.mask_report.summary()
     # cut inside a cell separator: fewer cells
@@ -921,11 +808,8 @@ def test_capmeter_last_line_cut_short_is_left_out_and_reported(tmp_path, caplog)
 
 def test_capmeter_huge_value_is_refused(tmp_path):
     p = _fixed_capmeter(tmp_path / "huge.csv", last_value="1.7e308", newline=True)
-    with pytest.raises(
-        EctskinError,
-        match=r"line 14, column 4 \(channel 'C23'\): 1.7e\+305 pF "
-        r"is beyond ±1e\+30 pF",
-    ):
+    with pytest.raises(EctskinError, match=r"line 14, column 4 \(channel 'C23'\): 1.7e\+305 pF "
+                                           r"is beyond ±1e\+30 pF"):
         read_capmeter_csv(p)
 
 
@@ -943,12 +827,8 @@ def test_build_recording_leaves_out_an_all_zero_channel(tmp_path, caplog):
     assert np.isnan(rec.trials[0].capacitance[:, 5]).all()
     assert rec.trials[0].meta["dropped_channels"] == [LAYOUT.pair_names[5]]
     assert f"channel {LAYOUT.pair_names[5]} reads 0 pF" in caplog.text
-    manifest = {
-        "trials": [
-            {"name": "a", "capacitance": "dead.csv"},
-            {"name": "b", "capacitance": "alive.csv"},
-        ]
-    }
+    manifest = {"trials": [{"name": "a", "capacitance": "dead.csv"},
+                           {"name": "b", "capacitance": "alive.csv"}]}
     _write_capmeter(tmp_path / "alive.csv", t, rng.uniform(0.5, 1.5, (20, 28)), PAIR_NAMES)
     (tmp_path / "m.json").write_text(json.dumps(manifest), encoding="utf-8")
     both = build_recording_from_manifest(tmp_path / "m.json")
@@ -969,7 +849,8 @@ def test_capmeter_two_row_header_channel_row_over_units_row():
     assert d.lines[0] == 5 and d.lines[-1] == 24
     np.testing.assert_allclose(d.timestamps[[0, 1, -1]], [0.0, 0.05, 0.95])
     np.testing.assert_allclose(d.values[0, [0, 1, 3]], [10.0, 12.5, 0.85], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(d.values[-1, [0, 1, 3]], [10.19, 12.405, 0.8595], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d.values[-1, [0, 1, 3]], [10.19, 12.405, 0.8595], rtol=0,
+                               atol=1e-12)
     assert d.meta == {"Instrument": "LCR logger 4ch", "Exported": "2024-05-14 10:12:00"}
     rep = d.mask_report
     # the relative-change columns are ignored (not read, not cross-checked), and the report says so
@@ -995,10 +876,8 @@ def test_build_recording_leaves_out_an_all_overload_channel_of_a_two_row_file(tm
     """A channel reading OL in every row is left out like an all-zero one (unmeasured_pairs)."""
     rng = np.random.default_rng(1)
     vals = rng.uniform(0.5, 1.5, (20, 28))
-    lines = [
-        "," + ",".join(f"{n}," for n in PAIR_NAMES),
-        "Time (s)," + ",".join(["C (pF),ΔC/C0 (%)"] * 28),
-    ]
+    lines = ["," + ",".join(f"{n}," for n in PAIR_NAMES),
+             "Time (s)," + ",".join(["C (pF),ΔC/C0 (%)"] * 28)]
     for k in range(20):
         cells = ["OL,OL" if j == 7 else f"{vals[k, j]:.5f},0.0" for j in range(28)]
         lines.append(f"{k / 30:.5f}," + ",".join(cells))
@@ -1027,9 +906,7 @@ def test_motive_huge_coordinate_is_a_bad_row(tmp_path):
     pos = np.ones((5, 1, 3))
     p = tmp_path / "m.csv"
     _write_motive(p, t, pos, ["Skin:M1"])
-    p.write_text(
-        p.read_text().replace("1.000000,1.000000,1.000000\n", "1.000000,1.7e308,1.0\n", 1),
-        encoding="utf-8",
-    )
+    p.write_text(p.read_text().replace("1.000000,1.000000,1.000000\n", "1.000000,1.7e308,1.0\n",
+                                       1), encoding="utf-8")
     with pytest.raises(EctskinError, match=r"'1.7e308' is beyond ±1e\+30 mm"):
         read_motive_csv(p)

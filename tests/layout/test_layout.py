@@ -51,10 +51,7 @@ def test_any_electrode_count_gives_n_choose_2_pairs():
     [
         (lambda d: d["electrodes"][1].update(name="E1"), "duplicate electrode 'E1'"),
         (lambda d: d["electrodes"][1]["polyline_mm"].__setitem__(1, [-15.0, 25.0]), "overlap"),
-        (
-            lambda d: d["electrodes"][0]["polyline_mm"].__setitem__(1, [-15.0, 140.0]),
-            "off its skin",
-        ),
+        (lambda d: d["electrodes"][0]["polyline_mm"].__setitem__(1, [-15.0, 140.0]), "off its skin"),
         (lambda d: d["electrodes"][0].update(skin="top"), "names skin 'top'"),
         (lambda d: d["electrodes"][0].update(width_mm=-1), "width"),
         (lambda d: d["regions"][3].update(id=1), "duplicate region id 1"),
@@ -94,9 +91,7 @@ def test_layout_json_names_pairs_in_file_order():
     assert lay.pair_names[0] == "E8-E7"
 
 
-@pytest.mark.parametrize(
-    "field, value", [("electrodes", ""), ("electrodes", "E\x001"), ("markers", "M\x00")]
-)
+@pytest.mark.parametrize("field, value", [("electrodes", ""), ("electrodes", "E\x001"), ("markers", "M\x00")])
 def test_names_a_file_cannot_store_are_refused(field, value):
     d = json.loads(default_layout().to_json())
     d[field][0]["name"] = value

@@ -27,9 +27,7 @@ def test_paper_profile_is_the_papers_settings(blobs):
         profile_settings("touch", "paper", batch_size=0)
     with pytest.raises(EctskinError, match="unknown training setting"):
         profile_settings("touch", "paper", momentum=0.9)
-    with pytest.raises(
-        EctskinError, match="allowed values are 'touch', 'track', 'contact'; got 'shape'"
-    ):
+    with pytest.raises(EctskinError, match="allowed values are 'touch', 'track', 'contact'; got 'shape'"):
         profile_settings("shape")
 
 

@@ -461,7 +461,6 @@ def _outlet(name, n_channels, source_id):
 
 def test_lsl_stream_frames_markers_and_reconnect():
     import pylsl  # noqa: F401  (a dependency of the live extra: it must be there)
-
     name = f"ectskin-test-{time.monotonic_ns()}"
     out = _outlet(name, P + 3 * M, "ectskin-test-src")
     src = open_source(f"lsl:{name}", resolve_timeout_s=5.0, backoff_s=(0.05, 0.2))
@@ -502,7 +501,6 @@ def test_lsl_stream_frames_markers_and_reconnect():
 
 def test_lsl_wrong_channel_count_and_unknown_name():
     import pylsl  # noqa: F401  (a dependency of the live extra: it must be there)
-
     name = f"ectskin-test-27-{time.monotonic_ns()}"
     out = _outlet(name, 27, "ectskin-test-27")
     with pytest.raises(

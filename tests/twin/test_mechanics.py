@@ -101,9 +101,7 @@ def test_face_points_follow_the_bulge_and_wires_stretch():
     rest = m.deform("front", np.c_[np.zeros_like(z), z], [0, 0, 0])[0]
     infl = m.deform("front", np.c_[np.zeros_like(z), z], [0, 20, 0])[0]
     # the crest reaches the bulge height (material is pulled towards the base, so take the max)
-    assert infl[:, 1].max() - rest[30, 1] == pytest.approx(
-        m.bulge_height_mm([0, 20, 0])[1], rel=1e-3
-    )
+    assert infl[:, 1].max() - rest[30, 1] == pytest.approx(m.bulge_height_mm([0, 20, 0])[1], rel=1e-3)
     assert infl[30, 2] < rest[30, 2]  # pulled in along z
 
     def length(p):
@@ -116,12 +114,8 @@ def test_face_points_follow_the_bulge_and_wires_stretch():
 
 @pytest.mark.parametrize(
     "p, message",
-    [
-        ([-1, 0, 0], "chamber 1: -1.0 ml"),
-        ([0, 0, 45], "chamber 3: 45.0 ml; expected 0 to 30"),
-        ([0, 0], "one volume per chamber"),
-        ([0, float("nan"), 0], "chamber 2"),
-    ],
+    [([-1, 0, 0], "chamber 1: -1.0 ml"), ([0, 0, 45], "chamber 3: 45.0 ml; expected 0 to 30"),
+     ([0, 0], "one volume per chamber"), ([0, float("nan"), 0], "chamber 2")],
 )
 def test_impossible_inflation_is_a_clear_error(p, message):
     with pytest.raises(EctskinError, match=message):

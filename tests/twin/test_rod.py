@@ -33,9 +33,7 @@ def test_large_deflection_matches_the_elastica(alpha, v, h):
     assert -tip[1] / L == pytest.approx(v, abs=2e-4)
     assert (L - tip[2]) / L == pytest.approx(h, abs=2e-4)
     # the frames stay rotations
-    np.testing.assert_allclose(
-        rot @ np.swapaxes(rot, -1, -2), np.broadcast_to(np.eye(3), rot.shape), atol=1e-9
-    )
+    np.testing.assert_allclose(rot @ np.swapaxes(rot, -1, -2), np.broadcast_to(np.eye(3), rot.shape), atol=1e-9)
 
 
 def test_a_couple_twists_by_tl_over_gj():

@@ -62,58 +62,28 @@ _DELIMITERS = {"comma": ",", "semicolon": ";", "tab": "\t"}
 
 def _add_capacitance_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("capacitance-meter CSV")
-    g.add_argument(
-        "--time-unit",
-        choices=("s", "ms", "hh:mm:ss"),
-        default=None,
-        help="unit of a time column that states none",
-    )
-    g.add_argument(
-        "--value-unit",
-        choices=("aF", "fF", "pF", "nF"),
-        default=None,
-        help="capacitance unit of channel columns that state none",
-    )
-    g.add_argument(
-        "--delimiter",
-        choices=tuple(_DELIMITERS),
-        default=None,
-        help="cell delimiter (default: detected from the data lines)",
-    )
-    g.add_argument(
-        "--pair-order",
-        choices=("auto", "file"),
-        default="auto",
-        help="auto: put channels named like C12 / E1-E2 into the ECT pair order",
-    )
-    g.add_argument(
-        "--no-strict",
-        dest="strict",
-        action="store_false",
-        help="skip malformed rows and mask unparseable cells (reported) instead of "
-        "stopping at the first",
-    )
+    g.add_argument("--time-unit", choices=("s", "ms", "hh:mm:ss"), default=None,
+                   help="unit of a time column that states none")
+    g.add_argument("--value-unit", choices=("aF", "fF", "pF", "nF"), default=None,
+                   help="capacitance unit of channel columns that state none")
+    g.add_argument("--delimiter", choices=tuple(_DELIMITERS), default=None,
+                   help="cell delimiter (default: detected from the data lines)")
+    g.add_argument("--pair-order", choices=("auto", "file"), default="auto",
+                   help="auto: put channels named like C12 / E1-E2 into the ECT pair order")
+    g.add_argument("--no-strict", dest="strict", action="store_false",
+                   help="skip malformed rows and mask unparseable cells (reported) instead of "
+                        "stopping at the first")
 
 
 def _add_mocap_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("OptiTrack Motive CSV")
-    g.add_argument(
-        "--markers",
-        default=None,
-        help="comma-separated marker names to keep, in order (default: every "
-        "labelled marker of Type 'Marker')",
-    )
-    g.add_argument(
-        "--length-units",
-        choices=("Meters", "Centimeters", "Millimeters"),
-        default=None,
-        help="for exports whose header lacks 'Length Units'",
-    )
-    g.add_argument(
-        "--include-unlabeled",
-        action="store_true",
-        help="also keep Motive's 'Unlabeled ...' markers",
-    )
+    g.add_argument("--markers", default=None,
+                   help="comma-separated marker names to keep, in order (default: every "
+                        "labelled marker of Type 'Marker')")
+    g.add_argument("--length-units", choices=("Meters", "Centimeters", "Millimeters"),
+                   default=None, help="for exports whose header lacks 'Length Units'")
+    g.add_argument("--include-unlabeled", action="store_true",
+                   help="also keep Motive's 'Unlabeled ...' markers")
 
 
 def _add_trial_options(p: argparse.ArgumentParser) -> None:
@@ -121,120 +91,72 @@ def _add_trial_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--layout", default=None, help="layout JSON (default: the paper's layout)")
     g.add_argument("--trial-name", default=None, help="default: the capacitance file's name")
     g.add_argument("--inflation", default="", help="chamber volumes in ml, e.g. 0,10,20")
-    g.add_argument(
-        "--region", type=int, default=0, help="touched region for the whole trial (0 = no touch)"
-    )
+    g.add_argument("--region", type=int, default=0,
+                   help="touched region for the whole trial (0 = no touch)")
     add_overwrite(g, help="replace an existing output file (default: refuse)")
 
 
 def _kind(sub, name: str, **kw) -> argparse.ArgumentParser:
-    return sub.add_parser(
-        name,
-        epilog=f"examples:\n{KIND_EXAMPLES[name].rstrip()}",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        **kw,
-    )
+    return sub.add_parser(name, epilog=f"examples:\n{KIND_EXAMPLES[name].rstrip()}",
+                          formatter_class=argparse.RawDescriptionHelpFormatter, **kw)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="import_kind", metavar="KIND", required=True)
 
-    p = _kind(
-        sub,
-        "capacitance",
-        help="read a capacitance-meter CSV: report, or write -o",
-        description="Read a capacitance-meter CSV export, report its channels, masked "
-        "cells and skipped rows; with -o write a one-trial recording without "
-        "markers.",
-    )
+    p = _kind(sub, "capacitance", help="read a capacitance-meter CSV: report, or write -o",
+              description="Read a capacitance-meter CSV export, report its channels, masked "
+                          "cells and skipped rows; with -o write a one-trial recording without "
+                          "markers.")
     p.add_argument("file", help="the CSV export")
     add_out(p, help="HDF5 recording to write (default: only report)")
     _add_capacitance_options(p)
     _add_trial_options(p)
 
-    p = _kind(
-        sub,
-        "mocap",
-        help="read an OptiTrack Motive CSV and report it",
-        description="Read an OptiTrack Motive CSV export and report its markers, frame "
-        "rate and occlusions.",
-    )
+    p = _kind(sub, "mocap", help="read an OptiTrack Motive CSV and report it",
+              description="Read an OptiTrack Motive CSV export and report its markers, frame "
+                          "rate and occlusions.")
     p.add_argument("file", help="the Motive CSV export")
-    p.add_argument(
-        "--no-strict",
-        dest="strict",
-        action="store_false",
-        help="skip malformed rows (reported) instead of stopping at the first",
-    )
+    p.add_argument("--no-strict", dest="strict", action="store_false",
+                   help="skip malformed rows (reported) instead of stopping at the first")
     _add_mocap_options(p)
 
-    p = _kind(
-        sub,
-        "build",
-        help="align readout + Motive files and write a recording",
-        description="Read a capacitance export and a Motive take, estimate their delay, "
-        "resample the markers onto the readout frames and write an HDF5 "
-        "recording; or do that for every trial of a JSON manifest "
-        "(docs/instrument-import.md).",
-    )
+    p = _kind(sub, "build", help="align readout + Motive files and write a recording",
+              description="Read a capacitance export and a Motive take, estimate their delay, "
+                          "resample the markers onto the readout frames and write an HDF5 "
+                          "recording; or do that for every trial of a JSON manifest "
+                          "(docs/instrument-import.md).")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--capacitance", default=None, help="capacitance-meter CSV (one trial)")
     src.add_argument("--manifest", default=None, help="JSON manifest of trials")
     p.add_argument("--mocap", default=None, help="Motive CSV of the same trial (optional)")
     add_out(p, help="HDF5 recording to write (required)")
-    p.add_argument(
-        "--delay",
-        default="auto",
-        help="'auto' (estimate) or the delay in s; > 0 means the markers lag",
-    )
-    p.add_argument(
-        "--max-delay",
-        type=float,
-        default=0.5,
-        help="search the delay within ±this many seconds (default 0.5)",
-    )
-    p.add_argument(
-        "--delay-method",
-        choices=("regression", "energy"),
-        default="regression",
-        help="how 'auto' finds the delay (docs/instrument-import.md)",
-    )
-    p.add_argument(
-        "--clock",
-        choices=("start", "file"),
-        default="start",
-        help="start: both files count from their first sample; file: the files' "
-        "times share one clock",
-    )
-    p.add_argument(
-        "--max-gap-frames",
-        type=int,
-        default=1,
-        help="occluded Motive frames that interpolation may bridge (default 1)",
-    )
+    p.add_argument("--delay", default="auto",
+                   help="'auto' (estimate) or the delay in s; > 0 means the markers lag")
+    p.add_argument("--max-delay", type=float, default=0.5,
+                   help="search the delay within ±this many seconds (default 0.5)")
+    p.add_argument("--delay-method", choices=("regression", "energy"), default="regression",
+                   help="how 'auto' finds the delay (docs/instrument-import.md)")
+    p.add_argument("--clock", choices=("start", "file"), default="start",
+                   help="start: both files count from their first sample; file: the files' "
+                        "times share one clock")
+    p.add_argument("--max-gap-frames", type=int, default=1,
+                   help="occluded Motive frames that interpolation may bridge (default 1)")
     _add_capacitance_options(p)
     _add_mocap_options(p)
     _add_trial_options(p)
 
-    p = _kind(
-        sub,
-        "generic",
-        help="import a generic NPZ/CSV recording (docs/import-format.md)",
-        description="Import a recording in the generic NPZ/CSV format and write it as HDF5.",
-    )
+    p = _kind(sub, "generic", help="import a generic NPZ/CSV recording (docs/import-format.md)",
+              description="Import a recording in the generic NPZ/CSV format and write it as "
+                          "HDF5.")
     p.add_argument("file", help="the .npz or .csv file")
     add_out(p, help="HDF5 recording to write (required)")
-    p.add_argument(
-        "--layout",
-        default=None,
-        help="layout JSON the channels come from (default: a virtual layout built from the data)",
-    )
-    p.add_argument(
-        "--frame-rate",
-        type=float,
-        default=None,
-        help="frames/s, overriding the file's (default: the file's, else the timestamps')",
-    )
+    p.add_argument("--layout", default=None,
+                   help="layout JSON the channels come from (default: a virtual layout built "
+                        "from the data)")
+    p.add_argument("--frame-rate", type=float, default=None,
+                   help="frames/s, overriding the file's (default: the file's, else the "
+                        "timestamps')")
     add_overwrite(p, help="replace an existing output file (default: refuse)")
 
 
@@ -250,13 +172,8 @@ def _read_capacitance(args, path, n_pairs=None):
 
     delim = _DELIMITERS[args.delimiter] if args.delimiter else None
     return read_capmeter_csv(
-        path,
-        n_pairs=n_pairs,
-        strict=args.strict,
-        time_unit=args.time_unit,
-        value_unit=args.value_unit,
-        delimiter=delim,
-        pair_order=args.pair_order,
+        path, n_pairs=n_pairs, strict=args.strict, time_unit=args.time_unit,
+        value_unit=args.value_unit, delimiter=delim, pair_order=args.pair_order,
     )
 
 
@@ -265,10 +182,7 @@ def _read_mocap(args, path):
 
     names = [n.strip() for n in args.markers.split(",") if n.strip()] if args.markers else None
     return read_motive_csv(
-        path,
-        names,
-        strict=args.strict,
-        length_units=args.length_units,
+        path, names, strict=args.strict, length_units=args.length_units,
         include_unlabeled=args.include_unlabeled,
     )
 
@@ -284,10 +198,8 @@ def _write(rec, args) -> None:
 
     _check_out(args)
     path = write_recording(rec, args.out, overwrite=args.overwrite)
-    print(
-        f"wrote {path}: {rec.n_trials} trial(s), {rec.n_frames} frames, {rec.n_pairs} pairs, "
-        f"{rec.frame_rate_hz:.3f} frames/s"
-    )
+    print(f"wrote {path}: {rec.n_trials} trial(s), {rec.n_frames} frames, {rec.n_pairs} pairs, "
+          f"{rec.frame_rate_hz:.3f} frames/s")
 
 
 def _inflation(args) -> tuple[float, ...]:
@@ -295,20 +207,16 @@ def _inflation(args) -> tuple[float, ...]:
 
 
 def _print_capacitance(cap) -> None:
-    print(
-        f"{cap.path}: {cap.n_frames} frames, {cap.n_channels} channels, "
-        f"{cap.frame_rate_hz:.3f} frames/s, time unit {cap.time_unit}, "
-        f"units {', '.join(sorted(set(cap.units)))} (converted to pF)"
-    )
+    print(f"{cap.path}: {cap.n_frames} frames, {cap.n_channels} channels, "
+          f"{cap.frame_rate_hz:.3f} frames/s, time unit {cap.time_unit}, "
+          f"units {', '.join(sorted(set(cap.units)))} (converted to pF)")
     print("channels: " + ", ".join(cap.channels))
     print(cap.mask_report.summary())
 
 
 def _print_mocap(mc) -> None:
-    print(
-        f"{mc.path}: {mc.n_frames} frames, {mc.n_markers} markers, {mc.frame_rate_hz:.3f} "
-        f"frames/s, length units {mc.units} (converted to mm)"
-    )
+    print(f"{mc.path}: {mc.n_frames} frames, {mc.n_markers} markers, {mc.frame_rate_hz:.3f} "
+          f"frames/s, length units {mc.units} (converted to mm)")
     print("markers: " + ", ".join(mc.marker_names))
     print(mc.summary())
 
@@ -320,14 +228,8 @@ def _run_capacitance(args: argparse.Namespace) -> None:
     cap = _read_capacitance(args, args.file)
     _print_capacitance(cap)
     if args.out:
-        rec = build_recording(
-            cap,
-            None,
-            _layout(args),
-            trial_name=args.trial_name,
-            inflation=_inflation(args),
-            region=args.region,
-        )
+        rec = build_recording(cap, None, _layout(args), trial_name=args.trial_name,
+                              inflation=_inflation(args), region=args.region)
         _write(rec, args)
 
 
@@ -338,13 +240,9 @@ def _run_mocap(args: argparse.Namespace) -> None:
 def _build_from_manifest(args: argparse.Namespace):
     from ectskin.io.align import build_recording_from_manifest
 
-    per_trial = {
-        "--mocap": args.mocap,
-        "--trial-name": args.trial_name,
-        "--region": args.region or None,
-        "--inflation": args.inflation.strip(),
-        "--markers": args.markers,
-    }
+    per_trial = {"--mocap": args.mocap, "--trial-name": args.trial_name,
+                 "--region": args.region or None, "--inflation": args.inflation.strip(),
+                 "--markers": args.markers}
     given = [k for k, v in per_trial.items() if v]
     if given:
         raise EctskinError(
@@ -381,17 +279,9 @@ def _build_one_trial(args: argparse.Namespace):
                 f"--delay must be 'auto' or a number of seconds, got {args.delay!r}"
             ) from None
     rec = build_recording(
-        cap,
-        mocap,
-        layout,
-        delay=delay,
-        trial_name=args.trial_name,
-        inflation=_inflation(args),
-        region=args.region,
-        max_delay_s=args.max_delay,
-        delay_method=args.delay_method,
-        clock=args.clock,
-        max_gap_frames=args.max_gap_frames,
+        cap, mocap, layout, delay=delay, trial_name=args.trial_name,
+        inflation=_inflation(args), region=args.region, max_delay_s=args.max_delay,
+        delay_method=args.delay_method, clock=args.clock, max_gap_frames=args.max_gap_frames,
     )
     t = rec.trials[0]
     if "delay_s" in t.meta:
@@ -428,9 +318,7 @@ _RUNS = {
 
 def _require_out(args: argparse.Namespace) -> None:
     if not args.out:
-        raise EctskinError(
-            f"import {args.import_kind} needs the recording to write: give -o/--out PATH"
-        )
+        raise EctskinError(f"import {args.import_kind} needs the recording to write: give -o/--out PATH")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -60,11 +60,10 @@ def create_app(hub: Hub, allowed_hosts: Iterable[str] = ()):
     if not isinstance(hub, Hub):
         raise EctskinError(f"create_app: expected a dashboard Hub, got {type(hub).__name__}")
     if not (STATIC_DIR / "index.html").is_file():
-        raise EctskinError(
-            f"dashboard: page missing at {STATIC_DIR / 'index.html'} (broken install?)"
-        )
+        raise EctskinError(f"dashboard: page missing at {STATIC_DIR / 'index.html'} (broken install?)")
 
-    app = FastAPI(title="ectskin live dashboard", docs_url=None, redoc_url=None, openapi_url=None)
+    app = FastAPI(title="ectskin live dashboard", docs_url=None, redoc_url=None,
+                  openapi_url=None)
     app.state.hub = hub
     app.add_middleware(HostCheck, allowed=tuple(allowed_hosts))
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
@@ -85,9 +84,8 @@ def create_app(hub: Hub, allowed_hosts: Iterable[str] = ()):
     @app.post("/api/reference")
     async def reference(request: Request) -> JSONResponse:
         if not same_origin(request.headers.get("origin"), request.headers.get("host")):
-            return JSONResponse(
-                {"ok": False, "error": "cross-origin request refused"}, status_code=403
-            )
+            return JSONResponse({"ok": False, "error": "cross-origin request refused"},
+                                status_code=403)
         try:
             result = await asyncio.to_thread(hub.capture_reference)
         except EctskinError as exc:

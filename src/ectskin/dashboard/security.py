@@ -116,6 +116,5 @@ def warn_if_public(host: str) -> None:
     if host not in LOCAL_HOSTS:
         logger.warning(
             "dashboard listening on %s: anyone who can reach this address can watch the "
-            "stream and re-capture the reference (there is no authentication)",
-            host,
+            "stream and re-capture the reference (there is no authentication)", host
         )

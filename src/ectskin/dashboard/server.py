@@ -169,9 +169,7 @@ class DashboardServer:
         """Start engine and server in background threads; return when the server is up."""
         server = self._make_server()
         self._server_thread = threading.Thread(
-            target=server.run,
-            kwargs={"sockets": [self._sock]},
-            name="ectskin-dashboard",
+            target=server.run, kwargs={"sockets": [self._sock]}, name="ectskin-dashboard",
             daemon=True,
         )
         self._server_thread.start()

@@ -42,7 +42,6 @@ STRIP_PANELS_ACROSS = 2
 #: Recommended panel length along a 1-mm-wide strip away from its free ends, mm.
 STRIP_PANEL_LENGTH_MM = 2.0
 
-
 def grid_1d(n: int, spacing: str = "uniform") -> np.ndarray:
     """(n + 1,) node positions on ``[-1/2, 1/2]`` for ``n`` cells.
 

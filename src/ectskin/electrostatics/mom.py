@@ -277,7 +277,9 @@ def field_at(panels: Panels, charges, points, eps_r: float = 1.0) -> np.ndarray:
     eps_r = _positive("eps_r", eps_r)
     q = np.asarray(charges, dtype=np.float64)
     if q.ndim != 2 or q.shape[0] != panels.n_panels:
-        raise EctskinError(f"charges must have shape ({panels.n_panels}, n_columns), got {q.shape}")
+        raise EctskinError(
+            f"charges must have shape ({panels.n_panels}, n_columns), got {q.shape}"
+        )
     r = check_array("points", points, (None, 3), finite=True)
     c = panels.centres
     comps = [r[:, k, None] - c[None, :, k] for k in range(3)]  # (M, N) each, mm
@@ -287,9 +289,7 @@ def field_at(panels: Panels, charges, points, eps_r: float = 1.0) -> np.ndarray:
     return E / (4.0 * np.pi * EPS0_PF_PER_MM * eps_r)
 
 
-def dielectric_sensitivity(
-    panels: Panels, charges, points, volumes, eps_r: float = 1.0
-) -> np.ndarray:
+def dielectric_sensitivity(panels: Panels, charges, points, volumes, eps_r: float = 1.0) -> np.ndarray:
     """(n_columns, n_columns) ECT sensitivity ``S_ac = ∫ E_a · E_c dV`` over sample volumes, mm·(V/mm)².
 
     First-order (linearised, "sensitivity map") change of the Maxwell capacitance matrix when the

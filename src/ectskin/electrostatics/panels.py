@@ -19,6 +19,7 @@ from ectskin._check import EctskinError, check_array
 logger = logging.getLogger(__name__)
 
 
+
 @dataclass(frozen=True, eq=False)
 class Panels:
     """Flat parallelogram panels: panel k spans ``centres[k] ± u[k]/2 ± v[k]/2``.

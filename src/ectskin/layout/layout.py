@@ -362,17 +362,13 @@ def _parse_layout(d: Any, src: str | None) -> SensorLayout:
                 f"{_loc(src, f + '.polyline_mm')}: expected at least 2 points of (u, v), "
                 f"got shape {poly.shape}"
             )
-        if not np.all(np.isfinite(poly)) or np.any(
-            np.linalg.norm(np.diff(poly, axis=0), axis=1) <= 0
-        ):
+        if not np.all(np.isfinite(poly)) or np.any(np.linalg.norm(np.diff(poly, axis=0), axis=1) <= 0):
             raise EctskinError(
                 f"{_loc(src, f + '.polyline_mm')}: points must be finite and distinct in sequence"
             )
         width = float(_get(e, "width_mm", src, f))
         if not (0 < width < 50):
-            raise EctskinError(
-                f"{_loc(src, f + '.width_mm')}: expected 0 < width < 50 mm, got {width}"
-            )
+            raise EctskinError(f"{_loc(src, f + '.width_mm')}: expected 0 < width < 50 mm, got {width}")
         pad = _get(e, "pad", src, f)
         pc = _num_pair(_get(pad, "centre_mm", src, f + ".pad"), src, f + ".pad.centre_mm")
         ps = _num_pair(_get(pad, "size_mm", src, f + ".pad"), src, f + ".pad.size_mm")
@@ -389,9 +385,7 @@ def _parse_layout(d: Any, src: str | None) -> SensorLayout:
             )
         electrodes.append(el)
     if len(electrodes) < 2:
-        raise EctskinError(
-            f"{_loc(src, 'electrodes')}: need at least 2 electrodes, got {len(electrodes)}"
-        )
+        raise EctskinError(f"{_loc(src, 'electrodes')}: need at least 2 electrodes, got {len(electrodes)}")
     _unique([e.name for e in electrodes], src, "electrodes", "electrode")
     _check_overlaps(electrodes, skin_by_name, src)
 

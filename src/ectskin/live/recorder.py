@@ -212,9 +212,7 @@ class Recorder:
                     self._write_items(items)
                     self._writer.flush()
                 except BaseException as exc:  # keep the error for the producer; stop writing
-                    logger.debug(
-                        "%s: recording failed: %s", self.path, exc
-                    )  # raised to the producer
+                    logger.debug("%s: recording failed: %s", self.path, exc)  # raised to the producer
                     self._error = exc
             if self.backlog > _BACKLOG_WARN:
                 logger.warning(

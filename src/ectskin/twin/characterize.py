@@ -135,18 +135,8 @@ def characterize(
             (r.id for r in layout.regions if r.surface == "front"), layout.regions[0].id
         )
         _write_figures(
-            out,
-            sensor,
-            p_full,
-            p_touch,
-            region,
-            force_n,
-            change_full,
-            same,
-            cfg,
-            seed,
-            figure_format,
-            dpi,
+            out, sensor, p_full, p_touch, region, force_n, change_full, same, cfg, seed,
+            figure_format, dpi,
         )
         write_json_atomic(out / "characterize.json", result)
         log.info("characterisation written to %s", out)
@@ -171,10 +161,7 @@ def _write_figures(
     meas = readout(c_ramp, t, rng, cfg, phase)
     c0 = meas[: int(3 * fps)].mean(axis=0)
     fig = plot_response(
-        t,
-        relative_change(meas, c0),
-        list(layout.pair_names),
-        selected,
+        t, relative_change(meas, c0), list(layout.pair_names), selected,
         title=f"inflation to p = {tuple(p_full.tolist())} ml",
         stages=[(3.0, "inflate"), (15.0, "hold")],
     )
@@ -190,23 +177,21 @@ def _write_figures(
     lo, hi = region_bounds(reg, 0.15)
     touch_frames = np.flatnonzero((t >= 15.0) & (t < 27.0))
     proto = Protocol(
-        force_range_n=(0.5 * force_n, 1.5 * force_n),
-        approach=True,
-        push_max_n=0.0,
+        force_range_n=(0.5 * force_n, 1.5 * force_n), approach=True, push_max_n=0.0,
         approach_s=1.5,
     )
-    path = finger_path(touch_frames.size, fps, np.asarray([reg.centre_mm]), lo, hi, proto, rng)
+    path = finger_path(
+        touch_frames.size, fps, np.asarray([reg.centre_mm]), lo, hi, proto, rng
+    )
     response = TouchResponse(sensor, p_touch, reg.surface, path, Handling(), None, proto)
     c[touch_frames] = response(path, Handling())
     meas = readout(c, t, rng, cfg, phase)
     c0 = meas[: int(3 * fps)].mean(axis=0)
     on = touch_frames[path.contact]
     fig = plot_response(
-        t,
-        relative_change(meas, c0),
-        list(layout.pair_names),
-        selected,
+        t, relative_change(meas, c0), list(layout.pair_names), selected,
         title=f"two-stage: inflate to {tuple(p_touch.tolist())} ml, then touch region {region}",
         stages=[(3.0, "inflate"), (15.0, "approach"), (t[on[0]], "touch"), (t[on[-1]], "lift")],
     )
     save_figure_atomic(fig, out / figure_file("fig4_touch", fmt), dpi=dpi)
+

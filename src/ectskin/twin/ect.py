@@ -290,7 +290,9 @@ class EctImager:
     def grid_extent(self) -> dict[str, list[list[float]]]:
         """{face: [[u_lo, u_hi], [v_lo, v_hi]]} mm that each face's image spans (row 0 at the
         lowest v)."""
-        return {f: [[e[0], e[1]], [e[2], e[3]]] for f, e in zip(self.grid.faces, self.grid.extents)}
+        return {
+            f: [[e[0], e[1]], [e[2], e[3]]] for f, e in zip(self.grid.faces, self.grid.extents)
+        }
 
     def pixel_image(self, delta_c) -> np.ndarray:
         """(n_pix,) or (F, n_pix) image summed over layers."""

@@ -81,9 +81,7 @@ class LiveTwin:
                 lo, hi = 0.05, _FORCE_MAX_N
                 nodes = chebyshev_nodes(lo, hi, k)
                 c_nodes = self.sensor.capacitance(p, self._touch, nodes)
-                coef = np.polynomial.chebyshev.chebfit(
-                    (2 * nodes - lo - hi) / (hi - lo), c_nodes, k - 1
-                )
+                coef = np.polynomial.chebyshev.chebfit((2 * nodes - lo - hi) / (hi - lo), c_nodes, k - 1)
                 self._cache[key] = lambda f, coef=coef: np.polynomial.chebyshev.chebval(
                     (2 * f - lo - hi) / (hi - lo), coef
                 )

@@ -176,9 +176,7 @@ class Manipulator:
         try:
             p = np.asarray(inflation_ml, dtype=np.float64).reshape(-1)
         except (TypeError, ValueError):
-            raise EctskinError(
-                f"inflation must be {c.n_chambers} numbers (ml), got {inflation_ml!r}"
-            ) from None
+            raise EctskinError(f"inflation must be {c.n_chambers} numbers (ml), got {inflation_ml!r}") from None
         if p.size != c.n_chambers:
             raise EctskinError(
                 f"inflation must give one volume per chamber ({c.n_chambers}), got {p.size}: "
@@ -235,9 +233,7 @@ class Manipulator:
 
     def _window_x(self, x: np.ndarray) -> np.ndarray:
         s = np.asarray(x) / self.config.chamber_size_x_mm
-        return np.where(
-            np.abs(s) < 0.5, 1.0 - np.abs(2.0 * s) ** self.config.bulge_profile_exponent, 0.0
-        )
+        return np.where(np.abs(s) < 0.5, 1.0 - np.abs(2.0 * s) ** self.config.bulge_profile_exponent, 0.0)
 
     def _face_pull_in(self, x: np.ndarray, z: np.ndarray, heights: np.ndarray) -> np.ndarray:
         """Axial pull-in z − ζ(x, z) of face points (mm) under the bulge.
@@ -257,10 +253,7 @@ class Manipulator:
         phis = np.linspace(0.0, 1.0, 41)
         integrand = np.sqrt(1.0 + (phis[:, None] * g[None, :]) ** 2)
         arc = np.concatenate(
-            [
-                np.zeros((phis.size, 1)),
-                np.cumsum(0.5 * (integrand[:, 1:] + integrand[:, :-1]) * np.diff(zg), axis=1),
-            ],
+            [np.zeros((phis.size, 1)), np.cumsum(0.5 * (integrand[:, 1:] + integrand[:, :-1]) * np.diff(zg), axis=1)],
             axis=1,
         )
         mixed = kappa * arc + (1.0 - kappa) * zg[None, :]  # increasing in ζ for every φ
@@ -323,11 +316,7 @@ class Manipulator:
         section = solid[None] + window[:, None] * (hollow - solid)[None]
         pk = self.pressure_kpa(inflation_ml)
         local = np.tensordot(pk, self._chamber_window_z(np.asarray(z, float)), axes=1)
-        return (
-            section
-            * np.array([e, e, g])[None]
-            * (1.0 + c.pressure_stiffening_per_kpa * local)[:, None]
-        )
+        return section * np.array([e, e, g])[None] * (1.0 + c.pressure_stiffening_per_kpa * local)[:, None]
 
     def _load_point(self, point: Touch, inflation_ml) -> tuple[float, tuple[float, float]]:
         """Arc position and section offset (x, y) of a surface point (rest, on the axis grid)."""
@@ -338,9 +327,7 @@ class Manipulator:
             return s_mm, (float(u), SIDE[point.surface] * c.thickness_mm / 2)
         if point.surface in ("right", "left"):
             return s_mm, ((1.0 if point.surface == "right" else -1.0) * c.width_mm / 2, float(u))
-        raise EctskinError(
-            f"unknown surface {point.surface!r}: expected front, back, right or left"
-        )
+        raise EctskinError(f"unknown surface {point.surface!r}: expected front, back, right or left")
 
     def pose(
         self,
@@ -397,9 +384,7 @@ class Manipulator:
         """Indentation depth under the finger, F / k_d with k_d rising with local pressure."""
         c = self.config
         pk = self.pressure_kpa(inflation_ml)
-        local = float(
-            np.tensordot(pk, self._chamber_window_z(np.array([touch.uv_mm[1]])), axes=1)[0]
-        )
+        local = float(np.tensordot(pk, self._chamber_window_z(np.array([touch.uv_mm[1]])), axes=1)[0])
         k = c.dimple_stiffness_n_per_mm * (1.0 + c.dimple_stiffening_per_kpa * local)
         return np.asarray(force_n, dtype=np.float64) / k
 
@@ -454,7 +439,9 @@ class Manipulator:
             z = uv[:, 1]
             xs = np.full(yprime.shape, x0)
         else:
-            raise EctskinError(f"unknown surface {surface!r}: expected front, back, right or left")
+            raise EctskinError(
+                f"unknown surface {surface!r}: expected front, back, right or left"
+            )
         zs, r, rot = self.pose(force_n, touch, p, handling)
         zq = self.axial_position(z, p)
         # the axis and the section frame at each point's stretched axial position (per frame)
@@ -472,12 +459,7 @@ class Manipulator:
         uv = np.asarray(uv_mm, dtype=np.float64).reshape(-1, 2)
         steps = np.array([[h, 0.0], [-h, 0.0], [0.0, h], [0.0, -h]])
         pts = self.deform(
-            surface,
-            (uv[None] + steps[:, None]).reshape(-1, 2),
-            inflation_ml,
-            touch,
-            force_n,
-            handling,
+            surface, (uv[None] + steps[:, None]).reshape(-1, 2), inflation_ml, touch, force_n, handling
         ).reshape(-1, 4, uv.shape[0], 3)
         pu = pts[:, 0] - pts[:, 1]
         pv = pts[:, 2] - pts[:, 3]
@@ -507,7 +489,6 @@ def _bredt_torsion(w: float, t: float, wall_side: float, wall_face: float) -> fl
 
 def _pose_key(force, touch, inflation, handling) -> tuple:
     """A hashable digest of a pose's inputs (arrays by their bytes)."""
-
     def arr(a):
         return None if a is None else np.ascontiguousarray(a, dtype=np.float64).tobytes()
 

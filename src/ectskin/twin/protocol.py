@@ -99,17 +99,11 @@ class Protocol:
                 f"protocol: force_range_n must be 0 < low < high <= {MAX_FINGER_FORCE_N} N (a "
                 f"finger's press), got {self.force_range_n}"
             )
-        check_option(
-            "touch_placement", self.touch_placement, ("aimed", "uniform"), source="protocol"
-        )
+        check_option("touch_placement", self.touch_placement, ("aimed", "uniform"), source="protocol")
         if self.touch_scatter_mm < 0:
-            raise EctskinError(
-                f"protocol: touch_scatter_mm must be >= 0, got {self.touch_scatter_mm}"
-            )
+            raise EctskinError(f"protocol: touch_scatter_mm must be >= 0, got {self.touch_scatter_mm}")
         if not 0 <= self.touch_margin < 0.5:
-            raise EctskinError(
-                f"protocol: touch_margin must be in [0, 0.5), got {self.touch_margin}"
-            )
+            raise EctskinError(f"protocol: touch_margin must be in [0, 0.5), got {self.touch_margin}")
         if self.touch_dwells < 1:
             raise EctskinError(f"protocol: touch_dwells must be >= 1, got {self.touch_dwells}")
         lo_hz, hi_hz = self.tremor_hz
@@ -129,21 +123,13 @@ class Protocol:
             )
         if self.tremor_rel >= 0.5:
             raise EctskinError(f"protocol: tremor_rel must be < 0.5, got {self.tremor_rel}")
-        for name in (
-            "slide_tau_s",
-            "approach_s",
-            "approach_height_mm",
-            "hover_max_mm",
-            "push_knot_s",
-        ):
+        for name in ("slide_tau_s", "approach_s", "approach_height_mm", "hover_max_mm", "push_knot_s"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise EctskinError(f"protocol: {name} must be a finite number > 0, got {v!r}")
         if self.hover_max_mm < 1.0:
             raise EctskinError(f"protocol: hover_max_mm must be >= 1, got {self.hover_max_mm}")
-        if not (
-            isinstance(self.finger_radius_mm, int | float) and 2.0 <= self.finger_radius_mm <= 30.0
-        ):
+        if not (isinstance(self.finger_radius_mm, int | float) and 2.0 <= self.finger_radius_mm <= 30.0):
             raise EctskinError(
                 f"protocol: finger_radius_mm must be a fingertip's radius, 2 to 30 mm, got "
                 f"{self.finger_radius_mm!r}"
@@ -301,9 +287,7 @@ def plan_trials(protocol: Protocol, layout: SensorLayout) -> list[TrialPlan]:
     counters = {f: 0 for f in faces}
     touch_idx = 0
     for s, p in enumerate(states):
-        kinds = (["no_contact"] if protocol.no_contact_trial else []) + [
-            "touch"
-        ] * protocol.touch_trials
+        kinds = (["no_contact"] if protocol.no_contact_trial else []) + ["touch"] * protocol.touch_trials
         for k, kind in enumerate(kinds):
             region, surface, uv, occ = 0, None, None, False
             second: dict = {}

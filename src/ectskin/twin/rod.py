@@ -149,10 +149,7 @@ def solve(
             off = np.array([ld.offset_mm[0], ld.offset_mm[1], 0.0])
             p = _at(s, r, ld.s_mm) + np.einsum("fij,j->fi", _at(s, rot, ld.s_mm), off)  # (F, 3)
             arm = p[:, None, :] - r  # (F, N, 3)
-            m += (
-                np.cross(arm, np.asarray(ld.force_n, dtype=np.float64)[:, None, :])
-                * mask[None, :, None]
-            )
+            m += np.cross(arm, np.asarray(ld.force_n, dtype=np.float64)[:, None, :]) * mask[None, :, None]
         new = np.einsum("fnji,fnj->fni", rot, m) / stiffness[None]  # Rᵀ m / B
         kappa = new if kappa is None else (1.0 - relax) * kappa + relax * new
         r_new, rot = integrate(s, kappa)

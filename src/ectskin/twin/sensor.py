@@ -25,6 +25,9 @@ keeps half the sealing cover (:data:`MIN_COVER_FRACTION` of ``Finger.skin_cover_
 compresses, it does not vanish) below it (:meth:`SensorModel.finger_panels`, ``rest_on_skin``).
 Placing every finger so would be the consistent model; it changes every touch frame and is left
 for a later change of the twin.
+
+Size: the electrodes' panels, the finger's (with its placement on the deformed skin), the
+cavities and the readout are one model of one geometry, read together.
 """
 
 from __future__ import annotations
@@ -138,10 +141,7 @@ def _strip_quads(a, b, width: float, d: Discretisation, free_end: bool) -> np.nd
     a3, b3 = np.r_[a, 0.0], np.r_[b, 0.0]
     return _planar(
         strip_quads(
-            a3,
-            b3,
-            width,
-            (0.0, 0.0, 1.0),
+            a3, b3, width, (0.0, 0.0, 1.0),
             n_across=d.wire_panels_across,
             panel_length=d.wire_panel_length_mm,
             end_panel=d.end_panel_fraction * width,
@@ -154,16 +154,8 @@ def _strip_quads(a, b, width: float, d: Discretisation, free_end: bool) -> np.nd
 def _pad_quads(centre, size, d: Discretisation) -> np.ndarray:
     return _planar(
         rectangle_quads(
-            (centre[0], centre[1], 0.0),
-            (1.0, 0.0, 0.0),
-            (0.0, 1.0, 0.0),
-            size[0],
-            size[1],
-            d.pad_panels,
-            d.pad_panels,
-            spacing_u="cosine",
-            spacing_v="cosine",
-            edge_correction=True,
+            (centre[0], centre[1], 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), size[0], size[1],
+            d.pad_panels, d.pad_panels, spacing_u="cosine", spacing_v="cosine", edge_correction=True,
         )
     )
 
@@ -236,10 +228,7 @@ class SensorModel:
 
     # ------------------------------------------------------------------ geometry
     def electrode_panels(
-        self,
-        inflation_ml,
-        touch: Touch | tuple[Touch, ...] | None,
-        forces,
+        self, inflation_ml, touch: Touch | tuple[Touch, ...] | None, forces,
         handling: Handling | None = None,
     ) -> list[Panels]:
         """Deformed electrode panels, one :class:`Panels` per frame (row of ``forces``)."""
@@ -343,10 +332,10 @@ class SensorModel:
         keep = unit.centres[:, 2] < -1e-6 * fg.radius_mm
         for p, n, force, height, skin in zip(pts, nrm, force_one, heights_one, ring):
             depth = fg.indentation_mm(force) if height <= 0 else 0.0
-            lift = fg.radius_mm + fg.skin_cover_mm + max(height, 0.0) - depth
+            above = fg.radius_mm + fg.skin_cover_mm + max(height, 0.0) - depth  # centre over p
             if skin is not None:
-                lift += self._clearance_lift(p, n, skin, lift, depth)
-            centre = p + n * lift
+                above += self._clearance_lift(p, n, skin, above, depth)
+            centre = p + n * above
             e1, e2 = orthonormal_frame(n)
             rot = np.stack([e1, e2, n], axis=1)  # local (x, y, z) -> world, z onto n
             c_loc, u_loc, v_loc = _flatten_cap(
@@ -372,7 +361,9 @@ class SensorModel:
         kept on the face)."""
         c = self.manipulator.config
         r = self.finger.radius_mm * np.repeat(_UNDER_PAD_RINGS, _UNDER_PAD_POINTS)
-        ang = np.tile(np.linspace(0, 2 * np.pi, _UNDER_PAD_POINTS, endpoint=False), 4)
+        ang = np.tile(
+            np.linspace(0, 2 * np.pi, _UNDER_PAD_POINTS, endpoint=False), len(_UNDER_PAD_RINGS)
+        )
         uv = np.asarray(one.uv_mm) + r[:, None] * np.c_[np.cos(ang), np.sin(ang)]
         half = (c.width_mm if one.surface in ("front", "back") else c.thickness_mm) / 2
         uv[:, 0] = np.clip(uv[:, 0], -half, half)
@@ -400,10 +391,7 @@ class SensorModel:
         return float(need) if need > 0 else 0.0
 
     def cavity_cells(
-        self,
-        inflation_ml,
-        touch: Touch | tuple[Touch, ...] | None,
-        forces,
+        self, inflation_ml, touch: Touch | tuple[Touch, ...] | None, forces,
         handling: Handling | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Centres (F, M, 3) mm and volumes (F, M) mm³ of the chamber cavities' sample cells.
@@ -437,9 +425,7 @@ class SensorModel:
     def _with_cavities(self) -> bool:
         return self.chamber_eps_r is not None and self.chamber_eps_r != self.eps_r
 
-    def _readout(
-        self, panels: Panels, cells: tuple[np.ndarray | None, np.ndarray | None]
-    ) -> np.ndarray:
+    def _readout(self, panels: Panels, cells: tuple[np.ndarray | None, np.ndarray | None]) -> np.ndarray:
         """(n_pairs,) C_ij = −K_ij of one panel set, with the cavities' first-order term."""
         if not self._with_cavities:
             K = maxwell_capacitance(panels, self.eps_r)
@@ -528,10 +514,7 @@ class SensorModel:
         return out
 
     def marker_positions(
-        self,
-        inflation_ml,
-        touch: Touch | tuple[Touch, ...] | None = None,
-        forces=0.0,
+        self, inflation_ml, touch: Touch | tuple[Touch, ...] | None = None, forces=0.0,
         handling: Handling | None = None,
     ) -> np.ndarray:
         """(F, n_markers, 3) marker positions in mm for each frame (row of ``forces``)."""
@@ -543,9 +526,7 @@ class SensorModel:
             by_surface.setdefault(m.surface, []).append(k)
         for surface, idx in by_surface.items():
             uv = np.asarray([self.layout.markers[k].uv_mm for k in idx])
-            out[:, idx] = self.manipulator.deform(
-                surface, uv, inflation_ml, touch, forces, handling
-            )
+            out[:, idx] = self.manipulator.deform(surface, uv, inflation_ml, touch, forces, handling)
         return out
 
 
@@ -596,7 +577,6 @@ def _heights(heights_mm, shape: tuple[int, int]) -> np.ndarray:
 
 def _handling_rows(handling: Handling, f: int) -> Handling:
     """The loads of row ``f`` only."""
-
     def row(a):
         return None if a is None else np.asarray(a)[f : f + 1]
 

@@ -123,10 +123,7 @@ class TouchResponse:
         self.ref_forces, self.ref_heights, self.centre = forces, heights, centre
         d = self.slide_step_mm
         stencil = np.stack(
-            [
-                self._solve(forces, du=du, heights=heights)[0]
-                for du in ((d, 0), (-d, 0), (0, d), (0, -d), (d, d))
-            ]
+            [self._solve(forces, du=du, heights=heights)[0] for du in ((d, 0), (-d, 0), (0, d), (0, -d), (d, d))]
         )
         self.g_u = (stencil[0] - stencil[1]) / (2 * d)
         self.g_v = (stencil[2] - stencil[3]) / (2 * d)
@@ -187,10 +184,7 @@ class TouchResponse:
         du = path.uv_mm[where] - self.uv0
         u, v = du[:, :1], du[:, 1:]
         out[where] += (
-            self.g_u * u
-            + self.g_v * v
-            + 0.5 * self.g_uu * u**2
-            + 0.5 * self.g_vv * v**2
+            self.g_u * u + self.g_v * v + 0.5 * self.g_uu * u**2 + 0.5 * self.g_vv * v**2
             + self.g_uv * u * v
         )
         mags = self._push_magnitude(handling)
@@ -481,17 +475,9 @@ def _stop_workers(ex: ProcessPoolExecutor) -> None:
         p.join(timeout=5)
 
 
-def _init_worker(
-    driver_pid: int | None,
-    layout_json: str,
-    manip: dict,
-    disc: dict,
-    eps_r: float,
-    finger: dict,
-    protocol: dict,
-    chamber_eps_r: float | None,
-    limit_threads: bool = True,
-) -> None:
+def _init_worker(driver_pid: int | None, layout_json: str, manip: dict, disc: dict,
+                 eps_r: float, finger: dict, protocol: dict, chamber_eps_r: float | None,
+                 limit_threads: bool = True) -> None:
     if driver_pid is not None:  # a worker process: it dies with the driver
         _die_with_parent(driver_pid)
     if limit_threads:  # one BLAS thread per worker process: the workers are the parallelism
@@ -565,9 +551,7 @@ def simulate_experiment(
         protocol.to_dict(),
         chamber_eps_r,
     )
-    log.info(
-        "simulating %d trials x %d frames with %d worker(s)", len(plans), protocol.n_frames, workers
-    )
+    log.info("simulating %d trials x %d frames with %d worker(s)", len(plans), protocol.n_frames, workers)
     jobs = [(p, drift_phase) for p in plans]
     bar = tqdm(total=len(plans), unit="trial", desc="simulate", disable=not progress)
     trials: list[Trial] = []
