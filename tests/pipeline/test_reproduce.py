@@ -118,6 +118,34 @@ def test_step_runner_reuses_refuses_and_forces(tmp_path):
     assert (tmp_path / "b.txt").read_text() == "mine"
 
 
+def test_step_runner_runs_independent_steps_in_processes(tmp_path):
+    """Steps that must run go to other processes (their pids are not ours), are recorded done
+    with their own time, and are reused afterwards; a failing one is recorded not done and
+    raised once the others have finished."""
+    import json as _json
+    import os
+    from functools import partial
+    from pathlib import Path as _Path
+
+    from ectskin.pipeline.runner import Job, StepRunner
+
+    runner = StepRunner(tmp_path, force=False)
+    jobs = [Job(f"s{k}", {"k": k}, [tmp_path / f"s{k}.txt"], os.getpid) for k in range(3)]
+    jobs.append(Job("w", {}, [tmp_path / "w.txt"], partial(_Path.write_text, tmp_path / "w.txt", "w")))
+    out = runner.steps(jobs, workers=2)
+    assert set(out) == {"s0", "s1", "s2", "w"} and out["w"] == 1
+    assert os.getpid() not in {out["s0"], out["s1"], out["s2"]}
+    state = _json.loads((tmp_path / "reproduce.json").read_text())["steps"]
+    assert all(state[n]["done"] and state[n]["seconds"] >= 0 for n in out)
+    again = StepRunner(tmp_path, force=False)
+    assert again.steps(jobs[3:], workers=2) == {} and again.reused == ["w"]
+    bad = [Job("bad", {}, [], partial(int, "x")), Job("ok", {}, [], partial(abs, -3))]
+    with pytest.raises(ValueError, match="invalid literal"):
+        again.steps(bad, workers=2)
+    state = _json.loads((tmp_path / "reproduce.json").read_text())["steps"]
+    assert state["ok"]["done"] and not state["bad"]["done"]
+
+
 @pytest.mark.parametrize(
     "kwargs, message",
     [

@@ -81,7 +81,8 @@ class ReproduceConfig:
     seed : int
         Seeds the simulation protocol (when ``protocol`` is None), the splits and the training.
     workers : int, optional
-        Simulation processes (default: all cores).
+        Cores to use (default: all): simulation processes, and the training runs side by side
+        (``workers`` // torch threads of them; :func:`ectskin.pipeline.steps.training_processes`).
     force : bool
         Redo steps whose earlier results in ``out_dir`` were made with other settings (the
         command line's ``--overwrite``).

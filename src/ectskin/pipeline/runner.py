@@ -15,6 +15,10 @@ records per step the settings it ran with, whether it finished and how long it t
 * outputs present but made with other settings, or of unknown origin → :class:`EctskinError`
   naming the differing settings, unless ``force`` (``--overwrite``), which removes them and runs
   the step again.
+
+:meth:`StepRunner.steps` does the same for independent steps, running those that must run in
+several processes at once (the training runs of a reproduction each use one torch thread, so on
+a 2-core machine two train side by side).
 """
 
 from __future__ import annotations
@@ -22,9 +26,12 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import multiprocessing
 import shutil
 import time
 from collections.abc import Callable, Mapping
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -110,6 +117,31 @@ class StepState:
         self.save()
 
 
+@dataclass(frozen=True)
+class Job:
+    """One step for :meth:`StepRunner.steps`: as the arguments of :meth:`StepRunner.step`."""
+
+    name: str
+    settings: Mapping[str, Any]
+    outputs: list[Path]
+    fn: Callable[[], Any]
+
+
+def _timed(fn: Callable[[], T]) -> tuple[T, float]:
+    """``fn()`` and the seconds it took (module level: it runs in worker processes too)."""
+    t0 = time.perf_counter()
+    result = fn()
+    return result, time.perf_counter() - t0
+
+
+def _child_init(level: int) -> None:
+    """A worker process of :meth:`StepRunner.steps`: log at the parent's level, as the command
+    line does (the spawned process has no handlers of its own)."""
+    logging.basicConfig(
+        level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S"
+    )
+
+
 class StepRunner:
     """Runs the steps in order into ``out``, reusing finished ones and refusing conflicting
     leftovers (removed first with ``force``). ``timings`` {step: seconds} and ``reused`` [step]
@@ -125,22 +157,15 @@ class StepRunner:
     def _names(self, paths: list[Path]) -> str:
         return ", ".join(str(p.relative_to(self.out)) for p in paths)
 
-    def step(
-        self, name: str, settings: Mapping[str, Any], outputs: list[Path], fn: Callable[[], T]
-    ) -> T | None:
-        """Run ``fn()`` for step ``name`` unless it finished with ``settings`` before.
-
-        ``outputs``: the files/folders the step writes. Present but made with other settings (or
-        of unknown origin) → error, or removed first with ``force``. Returns ``fn``'s result;
-        a reused step returns None.
-        """
-        settings = plain(settings)
+    def _needs_run(self, name: str, settings: dict[str, Any], outputs: list[Path]) -> bool:
+        """Whether step ``name`` must run: False when it finished with ``settings`` (recorded
+        as reused); outputs of other settings are refused, or removed with ``force``."""
         existing = [p for p in outputs if p.exists()]
         if existing and self.state.done(name, settings):
             self.timings[name] = float(self.state.steps[name].get("seconds", 0.0))
             self.reused.append(name)
             log.info("%s: reusing the finished step (%s)", name, self._names(existing))
-            return None
+            return False
         old = self.state.settings(name)
         resumable = old == settings  # interrupted with the same settings: resume in place
         if existing and not resumable:
@@ -160,14 +185,72 @@ class StepRunner:
                 shutil.rmtree(p) if p.is_dir() else p.unlink()
         elif existing:
             log.info("%s: resuming an interrupted step", name)
+        return True
+
+    def step(
+        self, name: str, settings: Mapping[str, Any], outputs: list[Path], fn: Callable[[], T]
+    ) -> T | None:
+        """Run ``fn()`` for step ``name`` unless it finished with ``settings`` before.
+
+        ``outputs``: the files/folders the step writes. Present but made with other settings (or
+        of unknown origin) → error, or removed first with ``force``. Returns ``fn``'s result;
+        a reused step returns None.
+        """
+        settings = plain(settings)
+        if not self._needs_run(name, settings, outputs):
+            return None
         self.state.start(name, settings)
-        t0 = time.perf_counter()
-        result = fn()
-        dt = time.perf_counter() - t0
-        self.timings[name] = dt
-        self.state.finish(name, dt)
-        log.info("%s: done in %.1f s", name, dt)
+        result, dt = _timed(fn)
+        self._finish(name, dt)
         return result
+
+    def _finish(self, name: str, seconds: float) -> None:
+        self.timings[name] = seconds
+        self.state.finish(name, seconds)
+        log.info("%s: done in %.1f s", name, seconds)
+
+    def steps(self, jobs: list[Job], workers: int) -> dict[str, Any]:
+        """:meth:`step` for each of ``jobs``, those that must run in up to ``workers`` processes
+        at once (``concurrent.futures`` with spawned processes, so each job's ``fn`` must be
+        picklable; its log records go to this process's handlers). Independent steps only:
+        the jobs start in the order given and none sees another's outputs.
+
+        Returns {name: fn's result} of the jobs run now. With ``workers`` 1, or one job to run,
+        they run here in order. A failed job is recorded as not done, the others finish, and the
+        first failure is raised.
+        """
+        todo = []
+        for job in jobs:
+            settings = plain(job.settings)
+            if self._needs_run(job.name, settings, job.outputs):
+                todo.append((job, settings))
+        if workers <= 1 or len(todo) <= 1:
+            return {job.name: self.step(job.name, s, job.outputs, job.fn) for job, s in todo}
+        results: dict[str, Any] = {}
+        errors: list[BaseException] = []
+        ctx = multiprocessing.get_context("spawn")
+        level = logging.getLogger().getEffectiveLevel()
+        n = min(workers, len(todo))
+        with ProcessPoolExecutor(
+            n, mp_context=ctx, initializer=_child_init, initargs=(level,)
+        ) as pool:
+            futures = {}
+            for job, settings in todo:
+                self.state.start(job.name, settings)
+                futures[pool.submit(_timed, job.fn)] = job.name
+            log.info("running %s in %d processes", ", ".join(futures.values()), n)
+            for fut in as_completed(futures):
+                name = futures[fut]
+                try:
+                    results[name], dt = fut.result()
+                except BaseException as exc:  # recorded, raised after the others finish
+                    log.error("%s failed: %s", name, exc)
+                    errors.append(exc)
+                    continue
+                self._finish(name, dt)
+        if errors:
+            raise errors[0]
+        return results
 
     def adopt(self, name: str, settings: Mapping[str, Any]) -> None:
         """Record step ``name`` as finished with ``settings`` without running it (its outputs,

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import os
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ from ectskin.io import Recording, read_recording, write_recording
 from ectskin.learn.evaluate import evaluate_run
 from ectskin.learn.train import TrainConfig, train_from_recording
 from ectskin.pipeline.config import RUNS, ReproduceConfig
-from ectskin.pipeline.runner import StepRunner, digest, plain, settings_diff
+from ectskin.pipeline.runner import Job, StepRunner, digest, plain, settings_diff
 from ectskin.twin import Protocol, simulate_experiment
 from ectskin.twin.characterize import characterize as characterize_twin
 
@@ -137,10 +138,15 @@ def train_runs(
     data_settings: dict[str, Any],
     threads: int | None,
 ) -> dict[str, dict[str, Any]]:
-    """Steps "train_<run>" for every run of ``config``, with ``threads`` torch CPU threads.
-    Returns {run: training summary} of the runs trained now (reused ones are left out)."""
-    summaries: dict[str, dict[str, Any]] = {}
-    for name in config.run_names:
+    """Steps "train_<run>" for every run of ``config``, with ``threads`` torch CPU threads each,
+    side by side in as many processes as the cores allow (:func:`training_processes`; the runs
+    are independent and each is deterministic, so the results do not depend on it). Returns
+    {run: training summary} of the runs trained now (reused ones are left out)."""
+    processes = training_processes(config, threads)
+    jobs = []
+    # the tracking runs first: they take longest, so the short touch runs fill in after them
+    names = sorted(config.run_names, key=lambda n: RUNS[n][0] != "track")
+    for name in names:
         task, window, prior = RUNS[name]
         settings = run_settings(config, name, data_settings)
         run_dir = runner.out / "runs" / name
@@ -153,16 +159,29 @@ def train_runs(
             prior=prior,
             resume=True,
             device=config.device,
-            progress=config.progress,
+            progress=config.progress and processes == 1,  # bars of two processes would mix
             threads=threads,
             model=settings.get("model", "mlp"),
         )
         log.info("train %s: %s, window %d, prior %s, profile %s", name, *RUNS[name], run_profile)
         fit = partial(train_from_recording, task, data_path, run_dir, train_config)
-        summary = runner.step(f"train_{name}", settings, [run_dir], fit)
-        if summary is not None:
-            summaries[name] = summary
-    return summaries
+        jobs.append(Job(f"train_{name}", settings, [run_dir], fit))
+    done = runner.steps(jobs, processes)
+    return {name.removeprefix("train_"): s for name, s in done.items() if s is not None}
+
+
+def training_processes(config: ReproduceConfig, threads: int | None) -> int:
+    """How many runs train at once: the cores (``config.workers``, default all) over the torch
+    threads each uses; 1 on a GPU (``config.device``, or CUDA found when it is None)."""
+    import torch
+
+    gpu = config.device not in (None, "cpu") or (
+        config.device is None and torch.cuda.is_available()
+    )
+    if gpu:
+        return 1
+    cores = config.workers or os.cpu_count() or 1
+    return max(1, cores // max(threads or 1, 1))
 
 
 def evaluate_runs(
