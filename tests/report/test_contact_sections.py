@@ -73,6 +73,6 @@ def test_handling_table_sets_the_hand_off_beside_the_hand_on_with_each_strongest
         "k-NN 80.00 %",
         "ridge regression 90.00 %",
     )
-    assert rows["Hover detected up to"][1:] == ("—", "—", "—", "—")
+    assert rows["Hover detected up to (≥ 90 % of frames)"][1:] == ("—", "—", "—", "—")
     # without a hand-off block there is no such table
     assert not any(k == "table" and p[0][1] == "hand on" for k, p in contact_sections(_metrics()))
