@@ -29,10 +29,9 @@ from ectskin._check import EctskinError
 from ectskin._files import read_json, save_figure_atomic, write_json_atomic
 from ectskin.io import Recording, read_recording, write_recording
 from ectskin.learn.evaluate import evaluate_run
-from ectskin.learn.train import TrainConfig, train_from_recording
-from ectskin.pipeline.config import CONTACT_RUN, RUNS, ReproduceConfig
+from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
 from ectskin.pipeline.runner import StepRunner, digest
-from ectskin.pipeline.steps import DATA_FILE, recording_digest, run_settings
+from ectskin.pipeline.steps import DATA_FILE, recording_digest, run_settings, train_job
 from ectskin.twin import simulate_experiment
 from ectskin.twin.ect import METHODS, ect_image_metrics
 from ectskin.viz import figure_file
@@ -115,22 +114,9 @@ def contact_run(
 ) -> dict[str, Any]:
     """Steps "train_contact" and "evaluate_contact"; returns the run's metrics.json."""
     name = CONTACT_RUN
-    task, window, prior = RUNS[name]
-    settings = run_settings(config, name, data_settings)
-    run_dir = runner.out / "runs" / name
-    train_config = TrainConfig(
-        profile=settings["profile"],
-        seed=config.seed,
-        epochs=settings["epochs"],
-        window=window,
-        prior=prior,
-        resume=True,
-        device=config.device,
-        progress=config.progress,
-        threads=threads,
-    )
-    fit = partial(train_from_recording, task, data_path, run_dir, train_config)
-    runner.step(f"train_{name}", settings, [run_dir], fit)
+    job = train_job(runner, config, name, data_path, data_settings, threads)
+    runner.step(job.name, job.settings, job.outputs, job.fn)
+    settings, run_dir = job.settings, job.outputs[0]
     evaluate = partial(
         evaluate_run,
         run_dir,

@@ -143,31 +143,49 @@ def train_runs(
     are independent and each is deterministic, so the results do not depend on it). Returns
     {run: training summary} of the runs trained now (reused ones are left out)."""
     processes = training_processes(config, threads)
-    jobs = []
     # the tracking runs first: they take longest, so the short touch runs fill in after them
     names = sorted(config.run_names, key=lambda n: RUNS[n][0] != "track")
-    for name in names:
-        task, window, prior = RUNS[name]
-        settings = run_settings(config, name, data_settings)
-        run_dir = runner.out / "runs" / name
-        run_profile = settings["profile"]
-        train_config = TrainConfig(
-            profile=run_profile,
-            seed=config.seed,
-            epochs=settings["epochs"],
-            window=window,
-            prior=prior,
-            resume=True,
-            device=config.device,
-            progress=config.progress and processes == 1,  # bars of two processes would mix
-            threads=threads,
-            model=settings.get("model", "mlp"),
-        )
-        log.info("train %s: %s, window %d, prior %s, profile %s", name, *RUNS[name], run_profile)
-        fit = partial(train_from_recording, task, data_path, run_dir, train_config)
-        jobs.append(Job(f"train_{name}", settings, [run_dir], fit))
+    # progress bars of two processes would mix: none when runs train side by side
+    jobs = [
+        train_job(runner, config, n, data_path, data_settings, threads, processes == 1)
+        for n in names
+    ]
     done = runner.steps(jobs, processes)
     return {name.removeprefix("train_"): s for name, s in done.items() if s is not None}
+
+
+def train_job(
+    runner: StepRunner,
+    config: ReproduceConfig,
+    name: str,
+    data_path: Path,
+    data_settings: dict[str, Any],
+    threads: int | None,
+    progress: bool = True,
+) -> Job:
+    """Step "train_<name>": run ``name`` of :data:`RUNS` trained on ``data_path`` into
+    ``OUT_DIR/runs/<name>`` with the run's settings (:func:`run_settings`), resuming an
+    interrupted training; ``progress`` and ``config.progress`` both to show a bar."""
+    task, window, prior = RUNS[name]
+    settings = run_settings(config, name, data_settings)
+    run_dir = runner.out / "runs" / name
+    train_config = TrainConfig(
+        profile=settings["profile"],
+        seed=config.seed,
+        epochs=settings["epochs"],
+        window=window,
+        prior=prior,
+        resume=True,
+        device=config.device,
+        progress=config.progress and progress,
+        threads=threads,
+        model=settings.get("model", "mlp"),
+    )
+    log.info(
+        "train %s: %s, window %d, prior %s, profile %s", name, *RUNS[name], settings["profile"]
+    )
+    fit = partial(train_from_recording, task, data_path, run_dir, train_config)
+    return Job(f"train_{name}", settings, [run_dir], fit)
 
 
 def training_processes(config: ReproduceConfig, threads: int | None) -> int:
