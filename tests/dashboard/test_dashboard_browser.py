@@ -7,17 +7,14 @@ recording's patterns (the learning is tested elsewhere; here the page is under t
 stand-in confuses each touched region with a neighbour, so the page must light that neighbour (the
 prediction) while it outlines the touched region (the label), and the markers must move.
 
-Needs /usr/bin/chromium (``make browser``, or ``apt-get install chromium``; another path in
-``ECTSKIN_CHROMIUM``); Playwright is never asked to download a browser. Outside CI a machine
-without them skips this test; in CI (``CI`` set, as every CI service does) it FAILS instead: a
-skip there would silently drop the only test of the page.
+Needs Chromium and Playwright (the ``chromium`` fixture of ``conftest.py``: skipped without them
+outside CI, failed in CI).
 """
 
 from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from pathlib import Path
 
@@ -30,28 +27,6 @@ from ectskin.layout import default_layout
 from ectskin.live import LiveEngine, open_source
 
 pytestmark = pytest.mark.browser
-
-CHROMIUM = Path(os.environ.get("ECTSKIN_CHROMIUM", "/usr/bin/chromium"))
-IN_CI = os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no")
-
-
-def _unavailable(why: str) -> None:
-    """Skip on a developer machine; fail in CI, where a skip would go unnoticed."""
-    if IN_CI:
-        pytest.fail(f"{why}: the dashboard's browser test must run in CI (CI is set)", pytrace=False)
-    pytest.skip(why, allow_module_level=True)
-
-
-if not CHROMIUM.exists():
-    _unavailable(f"{CHROMIUM} is not installed (make browser)")
-try:
-    from playwright import sync_api
-except ImportError:
-    _unavailable("playwright is not installed (pip install -e '.[dev]')")
-try:
-    import fastapi  # noqa: F401
-except ImportError:
-    _unavailable("fastapi is not installed (pip install -e '.[live]')")
 
 LAYOUT = default_layout()
 RATE_HZ = 30.0
@@ -152,163 +127,152 @@ class TemplateTrack:
         return init + _bend(force, _side(k))
 
 
-def _launch(p):
-    return p.chromium.launch(
-        executable_path=str(CHROMIUM),
-        args=["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking"],
-    )
-
-
-def test_page_follows_a_replayed_recording(tmp_path):
+def test_page_follows_a_replayed_recording(tmp_path, chromium):
     rec = write_patterned_recording(tmp_path / "synthetic.h5")
     source = open_source(f"replay:{rec}", speed=2.0, loop=True)
     engine = LiveEngine(source, touch=TemplateTouch(), track=TemplateTrack(), reference_frames=30)
     errors: list[str] = []
-    with DashboardServer(engine, port=0) as server, sync_api.sync_playwright() as p:
-        browser = _launch(p)
-        try:
-            page = browser.new_page(viewport={"width": 1400, "height": 1000})
-            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(server.url)
-            page.wait_for_selector('#connection-status[data-state="open"]', timeout=10_000)
-            assert page.locator("#faces .region").count() == 18
-            assert page.locator("#probs .prob-row").count() == 19
-            # the page tells the newcomer how the reference must be taken (issue 12)
-            assert "untouched and uninflated" in page.text_content("#reference-hint")
+    with DashboardServer(engine, port=0) as server:
+        page = chromium.new_page(viewport={"width": 1400, "height": 1000})
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(server.url)
+        page.wait_for_selector('#connection-status[data-state="open"]', timeout=10_000)
+        assert page.locator("#faces .region").count() == 18
+        assert page.locator("#probs .prob-row").count() == 19
+        # the page tells the newcomer how the reference must be taken (issue 12)
+        assert "untouched and uninflated" in page.text_content("#reference-hint")
 
-            # The reference: captured from the rest trial's first 30 frames, shown with its frames.
-            page.wait_for_selector('#reference-detail[data-frames="0..29"]', timeout=15_000)
-            assert "from frames 0..29" in page.text_content("#reference-detail")
-            assert page.locator("#reference-warning").is_hidden()
+        # The reference: captured from the rest trial's first 30 frames, shown with its frames.
+        page.wait_for_selector('#reference-detail[data-frames="0..29"]', timeout=15_000)
+        assert "from frames 0..29" in page.text_content("#reference-detail")
+        assert page.locator("#reference-warning").is_hidden()
 
-            # Regions light up, and the lit region changes as the replay moves on.
-            page.wait_for_selector("#faces .region.lit", timeout=15_000)
-            snapshot = """() => ({
-                lit: [...document.querySelectorAll('#faces .region.lit')]
-                       .map(e => Number(e.dataset.region)),
-                truth: [...document.querySelectorAll('#faces .region.truth')]
-                       .map(e => Number(e.dataset.region)),
-                cls: document.getElementById('predicted-class').textContent,
-                top: [...document.querySelectorAll('#probs .prob-row.top')]
-                       .map(e => Number(e.dataset.class)),
-            })"""
-            lit, pairs = set(), set()
-            deadline = time.monotonic() + 15
-            while len(lit) < 2 and time.monotonic() < deadline:
-                snap = page.evaluate(snapshot)
-                assert len(snap["lit"]) <= 1 and len(snap["truth"]) <= 1, snap
-                if snap["lit"]:
-                    (r,) = snap["lit"]
-                    assert snap["cls"] == str(r) and snap["top"] == [r], snap
-                    lit.add(r)
-                    if snap["truth"]:
-                        pairs.add((snap["truth"][0], r))
-                time.sleep(0.05)
-            assert len(lit) >= 2, f"only region(s) {lit} lit"
-            predicted = {CONFUSED[r] for r in TOUCHED}
-            assert lit <= predicted, f"lit {lit}: the model predicts only {predicted}"
-            assert pairs and all(CONFUSED[t] == r for t, r in pairs), pairs
+        # Regions light up, and the lit region changes as the replay moves on.
+        page.wait_for_selector("#faces .region.lit", timeout=15_000)
+        snapshot = """() => ({
+            lit: [...document.querySelectorAll('#faces .region.lit')]
+                   .map(e => Number(e.dataset.region)),
+            truth: [...document.querySelectorAll('#faces .region.truth')]
+                   .map(e => Number(e.dataset.region)),
+            cls: document.getElementById('predicted-class').textContent,
+            top: [...document.querySelectorAll('#probs .prob-row.top')]
+                   .map(e => Number(e.dataset.class)),
+        })"""
+        lit, pairs = set(), set()
+        deadline = time.monotonic() + 15
+        while len(lit) < 2 and time.monotonic() < deadline:
+            snap = page.evaluate(snapshot)
+            assert len(snap["lit"]) <= 1 and len(snap["truth"]) <= 1, snap
+            if snap["lit"]:
+                (r,) = snap["lit"]
+                assert snap["cls"] == str(r) and snap["top"] == [r], snap
+                lit.add(r)
+                if snap["truth"]:
+                    pairs.add((snap["truth"][0], r))
+            time.sleep(0.05)
+        assert len(lit) >= 2, f"only region(s) {lit} lit"
+        predicted = {CONFUSED[r] for r in TOUCHED}
+        assert lit <= predicted, f"lit {lit}: the model predicts only {predicted}"
+        assert pairs and all(CONFUSED[t] == r for t, r in pairs), pairs
 
-            # Markers move: the page's max displacement from the reference pose is > 0.5 mm
-            # (the recording bends the tip by 7-12 mm during touches).
-            page.wait_for_function(
-                "() => parseFloat(document.getElementById('markers-moved').dataset.value) > 0.5",
-                timeout=15_000,
-            )
-            moved = float(page.get_attribute("#markers-moved", "data-value"))
-            assert 0.5 < moved < 1.5 * BEND_MM
-            assert page.get_attribute("#markers-moved", "data-source") == "pred"
-            assert page.locator('#markers-yz circle[data-kind="pred"][visibility="visible"]').count() == 5
+        # Markers move: the page's max displacement from the reference pose is > 0.5 mm
+        # (the recording bends the tip by 7-12 mm during touches).
+        page.wait_for_function(
+            "() => parseFloat(document.getElementById('markers-moved').dataset.value) > 0.5",
+            timeout=15_000,
+        )
+        moved = float(page.get_attribute("#markers-moved", "data-value"))
+        assert 0.5 < moved < 1.5 * BEND_MM
+        assert page.get_attribute("#markers-moved", "data-source") == "pred"
+        assert page.locator('#markers-yz circle[data-kind="pred"][visibility="visible"]').count() == 5
 
-            # Marker errors are drawn on their own scale, with a legend (issue 12: sub-mm errors
-            # were invisible on the 140-mm views, and nothing said what red, blue and "moved" were).
-            assert page.locator("#marker-errors .mk-row").count() == 5
-            page.wait_for_function(
-                "() => [...document.querySelectorAll('#marker-errors .mk-row')]"
-                ".some(r => parseFloat(r.dataset.moved) > 0.5 && r.dataset.error !== '')",
-                timeout=15_000,
-            )
-            bars = page.evaluate("""() => {
-                const scale = parseFloat(
-                    document.getElementById('marker-scale').dataset.scaleError);
-                return [...document.querySelectorAll('#marker-errors .mk-row')].map(r => ({
-                    scale, moved: parseFloat(r.dataset.moved), error: parseFloat(r.dataset.error),
-                    width: parseFloat(r.querySelector('.bar.err').style.width) }));
-            }""")
-            for b in bars:
-                if math.isfinite(b["error"]):
-                    assert b["width"] == pytest.approx(100 * b["error"] / b["scale"], abs=0.1)
-            mm = [b["error"] for b in bars if math.isfinite(b["error"])]
-            assert mm and bars[0]["scale"] <= max(0.5, 2.5 * max(mm))  # magnified
-            legend = page.text_content("#markers-panel .legend")
-            for words in ("reference pose", "estimated (model)", "true (motion capture)"):
-                assert words in legend
-            assert "moved from the reference pose" in page.text_content("#marker-errors")
+        # Marker errors are drawn on their own scale, with a legend (issue 12: sub-mm errors
+        # were invisible on the 140-mm views, and nothing said what red, blue and "moved" were).
+        assert page.locator("#marker-errors .mk-row").count() == 5
+        page.wait_for_function(
+            "() => [...document.querySelectorAll('#marker-errors .mk-row')]"
+            ".some(r => parseFloat(r.dataset.moved) > 0.5 && r.dataset.error !== '')",
+            timeout=15_000,
+        )
+        bars = page.evaluate("""() => {
+            const scale = parseFloat(
+                document.getElementById('marker-scale').dataset.scaleError);
+            return [...document.querySelectorAll('#marker-errors .mk-row')].map(r => ({
+                scale, moved: parseFloat(r.dataset.moved), error: parseFloat(r.dataset.error),
+                width: parseFloat(r.querySelector('.bar.err').style.width) }));
+        }""")
+        for b in bars:
+            if math.isfinite(b["error"]):
+                assert b["width"] == pytest.approx(100 * b["error"] / b["scale"], abs=0.1)
+        mm = [b["error"] for b in bars if math.isfinite(b["error"])]
+        assert mm and bars[0]["scale"] <= max(0.5, 2.5 * max(mm))  # magnified
+        legend = page.text_content("#markers-panel .legend")
+        for words in ("reference pose", "estimated (model)", "true (motion capture)"):
+            assert words in legend
+        assert "moved from the reference pose" in page.text_content("#marker-errors")
 
-            # Replay shows the trial and its inflation, and the chart marks trial boundaries.
-            page.wait_for_function(
-                "() => window.ectskinDashboard.state.chartBoundaries.length > 0", timeout=15_000
-            )
-            assert page.text_content("#trial-info").startswith("trial ")
-            assert "uninflated 0/0/0 ml" in page.text_content("#trial-info")
-            boundaries = page.evaluate("() => window.ectskinDashboard.state.chartBoundaries")
-            assert set(boundaries) <= {"rest"} | {f"touch-{r}" for r in TOUCHED}
+        # Replay shows the trial and its inflation, and the chart marks trial boundaries.
+        page.wait_for_function(
+            "() => window.ectskinDashboard.state.chartBoundaries.length > 0", timeout=15_000
+        )
+        assert page.text_content("#trial-info").startswith("trial ")
+        assert "uninflated 0/0/0 ml" in page.text_content("#trial-info")
+        boundaries = page.evaluate("() => window.ectskinDashboard.state.chartBoundaries")
+        assert set(boundaries) <= {"rest"} | {f"touch-{r}" for r in TOUCHED}
 
-            # The strip chart has a time axis and never stretches noise to full height: every
-            # pair's vertical span is at least 20 fF (the rest trial's noise is ~0.15 fF).
-            ticks = page.get_attribute("#strip-chart", "data-ticks").split(",")
-            assert ticks == ["-10 s", "-5 s", "now"]
-            spans = page.evaluate("() => window.ectskinDashboard.state.chartSpans")
-            assert len(spans) == LAYOUT.n_pairs and min(spans) >= 0.02
-            flicker = page.evaluate("() => window.ectskinDashboard.chartRange(1.0, 1.001, false)")
-            assert flicker["span"] == pytest.approx(0.02)  # 1 fF is 5 % of the height, not 100 %
+        # The strip chart has a time axis and never stretches noise to full height: every
+        # pair's vertical span is at least 20 fF (the rest trial's noise is ~0.15 fF).
+        ticks = page.get_attribute("#strip-chart", "data-ticks").split(",")
+        assert ticks == ["-10 s", "-5 s", "now"]
+        spans = page.evaluate("() => window.ectskinDashboard.state.chartSpans")
+        assert len(spans) == LAYOUT.n_pairs and min(spans) >= 0.02
+        flicker = page.evaluate("() => window.ectskinDashboard.chartRange(1.0, 1.001, false)")
+        assert flicker["span"] == pytest.approx(0.02)  # 1 fF is 5 % of the height, not 100 %
 
-            # Counters come from the engine and grow.
-            n1 = int(page.text_content("#frames-count"))
-            page.wait_for_function(
-                f"() => parseInt(document.getElementById('frames-count').textContent) > {n1}",
-                timeout=5_000,
-            )
-            assert page.text_content("#policy") == "skip-to-newest"
-            assert float(page.text_content("#latency-p50")) > 0
+        # Counters come from the engine and grow.
+        n1 = int(page.text_content("#frames-count"))
+        page.wait_for_function(
+            f"() => parseInt(document.getElementById('frames-count').textContent) > {n1}",
+            timeout=5_000,
+        )
+        assert page.text_content("#policy") == "skip-to-newest"
+        assert float(page.text_content("#latency-p50")) > 0
 
-            # The strip chart is drawn: bluish pixels (front-front traces, #2f6fdb) appear.
-            page.screenshot(path=str(SCREENSHOT), full_page=True)
-            drawn = page.evaluate("""() => {
-                const c = document.getElementById('strip-chart');
-                const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
-                let n = 0;
-                for (let i = 0; i < d.length; i += 4)
-                  if (d[i + 3] > 100 && d[i + 2] - d[i] > 80) n++;
-                return n; }""")
-            assert drawn > 300, f"{drawn} trace pixels"
+        # The strip chart is drawn: bluish pixels (front-front traces, #2f6fdb) appear.
+        page.screenshot(path=str(SCREENSHOT), full_page=True)
+        drawn = page.evaluate("""() => {
+            const c = document.getElementById('strip-chart');
+            const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+            let n = 0;
+            for (let i = 0; i < d.length; i += 4)
+              if (d[i + 3] > 100 && d[i + 2] - d[i] > 80) n++;
+            return n; }""")
+        assert drawn > 300, f"{drawn} trace pixels"
 
-            # The button asks the engine for a new reference.
-            with page.expect_response("**/api/reference") as resp_info:
-                page.click("#capture-reference")
-            resp = resp_info.value
-            assert resp.status == 200 and resp.json()["ok"] is True
-            page.wait_for_selector(
-                '#reference-status:is([data-state="requested"], [data-state="capturing"], '
-                '[data-state="ready"])', timeout=5_000)
-            stats = json.loads(page.evaluate("() => fetch('/api/stats').then(r => r.text())"))
-            assert stats["dashboard"]["reference_requests"] == 1
-            page.wait_for_selector('#reference-status[data-state="ready"]', timeout=20_000)
+        # The button asks the engine for a new reference.
+        with page.expect_response("**/api/reference") as resp_info:
+            page.click("#capture-reference")
+        resp = resp_info.value
+        assert resp.status == 200 and resp.json()["ok"] is True
+        page.wait_for_selector(
+            '#reference-status:is([data-state="requested"], [data-state="capturing"], '
+            '[data-state="ready"])', timeout=5_000)
+        stats = json.loads(page.evaluate("() => fetch('/api/stats').then(r => r.text())"))
+        assert stats["dashboard"]["reference_requests"] == 1
+        page.wait_for_selector('#reference-status[data-state="ready"]', timeout=20_000)
 
-            # The badge: "live" only while frames keep coming (issue 12).
-            states = page.evaluate("""() => {
-                const b = window.ectskinDashboard.badge;
-                return [b(true, 'running', 100), b(true, 'running', 5000), b(true, 'ended', 100),
-                        b(true, 'error', 100), b(false, 'running', 100), b(true, 'running', null)]
-                       .map(x => x[0]); }""")
-            assert states == ["open", "stale", "ended", "error", "closed", "waiting"]
+        # The badge: "live" only while frames keep coming (issue 12).
+        states = page.evaluate("""() => {
+            const b = window.ectskinDashboard.badge;
+            return [b(true, 'running', 100), b(true, 'running', 5000), b(true, 'ended', 100),
+                    b(true, 'error', 100), b(false, 'running', 100), b(true, 'running', null)]
+                   .map(x => x[0]); }""")
+        assert states == ["open", "stale", "ended", "error", "closed", "waiting"]
 
-            # The source ends: the badge no longer says "live" (issue 12).
-            engine.stop()
-            page.wait_for_selector('#connection-status[data-state="ended"]', timeout=10_000)
-            assert "ended" in page.text_content("#connection-status")
-        finally:
-            browser.close()
+        # The source ends: the badge no longer says "live" (issue 12).
+        engine.stop()
+        page.wait_for_selector('#connection-status[data-state="ended"]', timeout=10_000)
+        assert "ended" in page.text_content("#connection-status")
     assert not errors, f"errors in the page: {errors}"
     assert engine.stats["processed"] > 0 and math.isfinite(engine.stats["latency_ms_p50"])

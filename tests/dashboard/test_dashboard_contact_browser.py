@@ -8,14 +8,13 @@ exactly: the contact stand-in puts a finger at the centre of every pressed regio
 must put the dots at those centres on the right face, with the uncertainty circle, move the force
 bars, light the hover indicator, and draw the heat map where the bump is (and not elsewhere).
 
-Needs /usr/bin/chromium, as ``test_dashboard_browser.py`` (which says why CI fails instead of
-skipping).
+Needs Chromium and Playwright (the ``chromium`` fixture of ``conftest.py``: skipped without them
+outside CI, failed in CI).
 """
 
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -28,29 +27,6 @@ from ectskin.learn.contact_predict import ContactReading, Finger
 from ectskin.live import LiveEngine, open_source
 
 pytestmark = pytest.mark.browser
-
-CHROMIUM = Path(os.environ.get("ECTSKIN_CHROMIUM", "/usr/bin/chromium"))
-IN_CI = os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no")
-
-
-def _unavailable(why: str) -> None:
-    if IN_CI:
-        pytest.fail(
-            f"{why}: the dashboard's browser test must run in CI (CI is set)", pytrace=False
-        )
-    pytest.skip(why, allow_module_level=True)
-
-
-if not CHROMIUM.exists():
-    _unavailable(f"{CHROMIUM} is not installed (make browser)")
-try:
-    from playwright import sync_api
-except ImportError:
-    _unavailable("playwright is not installed (pip install -e '.[dev]')")
-try:
-    import fastapi  # noqa: F401
-except ImportError:
-    _unavailable("fastapi is not installed (pip install -e '.[live]')")
 
 LAYOUT = default_layout()
 RATE_HZ = 30.0
@@ -153,13 +129,6 @@ class BumpImager:
         return (*_centre(r), forces[r])
 
 
-def _launch(p):
-    return p.chromium.launch(
-        executable_path=str(CHROMIUM),
-        args=["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking"],
-    )
-
-
 # One consistent look at the panel, taken inside the page (frames keep arriving meanwhile).
 SNAPSHOT = """() => {
   const s = window.ectskinDashboard.state;
@@ -196,89 +165,85 @@ HEAT_AT = """([u, v, points]) => {
 }"""
 
 
-def test_contact_panel_follows_a_replayed_recording(tmp_path):
+def test_contact_panel_follows_a_replayed_recording(tmp_path, chromium):
     rec = write_recording(tmp_path / "contact.h5")
     source = open_source(f"replay:{rec}", speed=1.0, loop=True)
     engine = LiveEngine(
         source, contact=TemplateContact(), imager=BumpImager(), ect_every=2, reference_frames=30
     )
     errors: list[str] = []
-    with DashboardServer(engine, port=0) as server, sync_api.sync_playwright() as p:
-        browser = _launch(p)
-        try:
-            page = browser.new_page(viewport={"width": 1400, "height": 1800})
-            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(server.url)
-            page.wait_for_selector('#connection-status[data-state="open"]', timeout=10_000)
-            assert page.locator("#contact-panel").is_visible()
-            assert page.locator("#contact-faces svg").count() == 2
-            assert page.locator("#contact-faces canvas.heat").count() == 2
-            assert page.locator("#contact-fingers .cf-row").count() == 2
-            # the existing views are still there
-            assert page.locator("#faces .region").count() == 18
+    with DashboardServer(engine, port=0) as server:
+        page = chromium.new_page(viewport={"width": 1400, "height": 1800})
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(server.url)
+        page.wait_for_selector('#connection-status[data-state="open"]', timeout=10_000)
+        assert page.locator("#contact-panel").is_visible()
+        assert page.locator("#contact-faces svg").count() == 2
+        assert page.locator("#contact-faces canvas.heat").count() == 2
+        assert page.locator("#contact-fingers .cf-row").count() == 2
+        # the existing views are still there
+        assert page.locator("#faces .region").count() == 18
 
-            # One finger on region 3's centre (front), its circle of radius sigma, its force bar.
-            face, u, v = _centre(PRESS)
-            press = f"""() => {{ const s = ({SNAPSHOT})();
-                return s.count === '1' && s.dots.length === 1 && s.dots[0].face === '{face}'
-                       ? s : null; }}"""
-            forces = set()
-            for _ in range(3):  # the force rises during the trial: the bar follows
-                snap = page.wait_for_function(press, timeout=15_000).json_value()
-                (dot,) = snap["dots"]
-                assert (dot["cx"], -dot["cy"]) == (
-                    pytest.approx(u, abs=0.01),
-                    pytest.approx(v, abs=0.01),
-                )
-                assert dot["ring"] == pytest.approx(2.0 + PRESS / 10, abs=0.01)
-                row = snap["rows"][0]
-                assert 0.45 < row["force"] < 1.55 and snap["rows"][1]["force"] is None
-                assert row["width"] == pytest.approx(100 * row["force"] / snap["scale"], abs=0.1)
-                assert snap["scale"] == 2 and snap["hover"] == "contact"
-                forces.add(round(row["force"], 3))
-                page.wait_for_timeout(150)
-            assert len(forces) >= 2, f"the force bar did not move: {forces}"
-
-            # The heat map: hot under region 3's centre, clear at region 7's (same face).
-            far = LAYOUT.region(7).centre_mm
-            points = [[u, v], [float(far[0]), float(far[1])]]
-            heat = page.wait_for_function(HEAT_AT, arg=[u, v, points], timeout=15_000).json_value()
-            assert (heat["w"], heat["h"]) == (NU, NV) and heat["ect"]["drawn"] > 0
-            under, away = heat["px"]
-            # opaque and red under the finger (alpha grows with the value: at least a third of the
-            # colour scale there, which holds the largest recent value), clear far from it
-            assert under["a"] > 100 and under["r"] > 200 and under["b"] < 100, heat
-            assert away["a"] < 10, heat
-            assert "ECT peak front" in page.text_content("#ect-peak")
-
-            # Hovering over region 14: no finger, the indicator says so, its bar shows p_hover.
-            snap = page.wait_for_function(
-                f"() => {{ const s = ({SNAPSHOT})(); return s.hover === 'hover' ? s : null; }}",
-                timeout=15_000,
-            ).json_value()
-            assert snap["count"] == "0" and snap["dots"] == []
-            assert snap["p_hover"] == pytest.approx(0.9) and snap["hover_width"] == pytest.approx(
-                90
+        # One finger on region 3's centre (front), its circle of radius sigma, its force bar.
+        face, u, v = _centre(PRESS)
+        press = f"""() => {{ const s = ({SNAPSHOT})();
+            return s.count === '1' && s.dots.length === 1 && s.dots[0].face === '{face}'
+                   ? s : null; }}"""
+        forces = set()
+        for _ in range(3):  # the force rises during the trial: the bar follows
+            snap = page.wait_for_function(press, timeout=15_000).json_value()
+            (dot,) = snap["dots"]
+            assert (dot["cx"], -dot["cy"]) == (
+                pytest.approx(u, abs=0.01),
+                pytest.approx(v, abs=0.01),
             )
-            assert "hovering" in page.text_content("#hover-indicator")
+            assert dot["ring"] == pytest.approx(2.0 + PRESS / 10, abs=0.01)
+            row = snap["rows"][0]
+            assert 0.45 < row["force"] < 1.55 and snap["rows"][1]["force"] is None
+            assert row["width"] == pytest.approx(100 * row["force"] / snap["scale"], abs=0.1)
+            assert snap["scale"] == 2 and snap["hover"] == "contact"
+            forces.add(round(row["force"], 3))
+            page.wait_for_timeout(150)
+        assert len(forces) >= 2, f"the force bar did not move: {forces}"
 
-            # Two fingers on the back, at regions 10 and 18, each with its own force bar.
-            snap = page.wait_for_function(
-                f"() => {{ const s = ({SNAPSHOT})(); return s.count === '2' ? s : null; }}",
-                timeout=15_000,
-            ).json_value()
-            got = sorted((d["k"], d["face"], d["cx"], -d["cy"]) for d in snap["dots"])
-            want = [(k, *_centre(r)) for k, r in enumerate(PAIR)]
-            assert [g[:2] for g in got] == [w[:2] for w in want]
-            for g, w in zip(got, want):
-                assert g[2:] == (pytest.approx(w[2], abs=0.01), pytest.approx(w[3], abs=0.01))
-            assert [r["force"] for r in snap["rows"]] == [
-                pytest.approx(0.8, abs=0.01),
-                pytest.approx(1.2, abs=0.01),
-            ]
-            page.screenshot(path=str(SCREENSHOT), full_page=True)
-        finally:
-            browser.close()
+        # The heat map: hot under region 3's centre, clear at region 7's (same face).
+        far = LAYOUT.region(7).centre_mm
+        points = [[u, v], [float(far[0]), float(far[1])]]
+        heat = page.wait_for_function(HEAT_AT, arg=[u, v, points], timeout=15_000).json_value()
+        assert (heat["w"], heat["h"]) == (NU, NV) and heat["ect"]["drawn"] > 0
+        under, away = heat["px"]
+        # opaque and red under the finger (alpha grows with the value: at least a third of the
+        # colour scale there, which holds the largest recent value), clear far from it
+        assert under["a"] > 100 and under["r"] > 200 and under["b"] < 100, heat
+        assert away["a"] < 10, heat
+        assert "ECT peak front" in page.text_content("#ect-peak")
+
+        # Hovering over region 14: no finger, the indicator says so, its bar shows p_hover.
+        snap = page.wait_for_function(
+            f"() => {{ const s = ({SNAPSHOT})(); return s.hover === 'hover' ? s : null; }}",
+            timeout=15_000,
+        ).json_value()
+        assert snap["count"] == "0" and snap["dots"] == []
+        assert snap["p_hover"] == pytest.approx(0.9) and snap["hover_width"] == pytest.approx(
+            90
+        )
+        assert "hovering" in page.text_content("#hover-indicator")
+
+        # Two fingers on the back, at regions 10 and 18, each with its own force bar.
+        snap = page.wait_for_function(
+            f"() => {{ const s = ({SNAPSHOT})(); return s.count === '2' ? s : null; }}",
+            timeout=15_000,
+        ).json_value()
+        got = sorted((d["k"], d["face"], d["cx"], -d["cy"]) for d in snap["dots"])
+        want = [(k, *_centre(r)) for k, r in enumerate(PAIR)]
+        assert [g[:2] for g in got] == [w[:2] for w in want]
+        for g, w in zip(got, want):
+            assert g[2:] == (pytest.approx(w[2], abs=0.01), pytest.approx(w[3], abs=0.01))
+        assert [r["force"] for r in snap["rows"]] == [
+            pytest.approx(0.8, abs=0.01),
+            pytest.approx(1.2, abs=0.01),
+        ]
+        page.screenshot(path=str(SCREENSHOT), full_page=True)
     assert not errors, f"errors in the page: {errors}"
     assert engine.stats["errors"] == 0 and math.isfinite(engine.stats["latency_ms_p50"])
