@@ -199,6 +199,10 @@ class StepRunner:
         settings = plain(settings)
         if not self._needs_run(name, settings, outputs):
             return None
+        return self._run_here(name, settings, fn)
+
+    def _run_here(self, name: str, settings: dict[str, Any], fn: Callable[[], T]) -> T:
+        """Run a step that must run (:meth:`_needs_run` said so) in this process, recorded."""
         self.state.start(name, settings)
         result, dt = _timed(fn)
         self._finish(name, dt)
@@ -225,7 +229,7 @@ class StepRunner:
             if self._needs_run(job.name, settings, job.outputs):
                 todo.append((job, settings))
         if workers <= 1 or len(todo) <= 1:
-            return {job.name: self.step(job.name, s, job.outputs, job.fn) for job, s in todo}
+            return {job.name: self._run_here(job.name, s, job.fn) for job, s in todo}
         results: dict[str, Any] = {}
         errors: list[BaseException] = []
         ctx = multiprocessing.get_context("spawn")
