@@ -8,6 +8,7 @@ import pytest
 
 from ectskin import EctskinError
 from ectskin.layout import SensorLayout, default_layout, load_layout
+from ectskin.layout.geometry import sample_polyline
 
 
 def test_default_layout_matches_the_paper():
@@ -97,3 +98,10 @@ def test_names_a_file_cannot_store_are_refused(field, value):
     d[field][0]["name"] = value
     with pytest.raises(EctskinError, match="non-empty text without NUL"):
         SensorLayout.from_dict(d, source="bad.json")
+
+
+def test_sample_polyline_needs_a_step_or_a_count():
+    poly = np.array([[0.0, 0.0], [1.0, 0.0]])
+    assert sample_polyline(poly, n=3).tolist() == [[0.0, 0.0], [0.5, 0.0], [1.0, 0.0]]
+    with pytest.raises(TypeError, match="step_mm or n"):
+        sample_polyline(poly)

@@ -19,7 +19,12 @@ def sample_polyline(poly: np.ndarray, *, step_mm: float | None = None, n: int | 
     poly = np.asarray(poly, dtype=np.float64)
     pts = []
     for a, b in itertools.pairwise(poly):
-        k = n if n is not None else max(2, int(np.ceil(np.linalg.norm(b - a) / step_mm)) + 1)
+        if n is not None:
+            k = n
+        elif step_mm is not None:
+            k = max(2, int(np.ceil(np.linalg.norm(b - a) / step_mm)) + 1)
+        else:
+            raise TypeError("sample_polyline: give step_mm or n")
         pts.append(a + (b - a) * np.linspace(0, 1, k)[:, None])
     return np.concatenate(pts)
 
