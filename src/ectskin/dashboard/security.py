@@ -68,7 +68,9 @@ def same_origin(origin: str | None, host: str | None) -> bool:
         parts = urlsplit(origin)
     except ValueError:
         return False
-    return bool(host) and parts.netloc.lower() == host.lower()
+    if not host:
+        return False
+    return parts.netloc.lower() == host.lower()
 
 
 class HostCheck:

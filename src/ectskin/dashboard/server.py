@@ -16,13 +16,16 @@ import socket
 import threading
 import time
 from collections.abc import Callable, Iterable
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
 from ectskin._check import EctskinError
 from ectskin.dashboard.app import create_app, require_fastapi
 from ectskin.dashboard.hub import DEFAULT_MAX_RATE_HZ, Hub
 from ectskin.dashboard.security import warn_if_public
 from ectskin.layout import SensorLayout
+
+if TYPE_CHECKING:
+    import uvicorn  # optional (the `live` extra): imported at run time by _make_server
 
 logger = logging.getLogger(__name__)
 
@@ -104,7 +107,7 @@ class DashboardServer:
         self._done = threading.Event()  # set by stop(): ends the grace wait early
         self._sock = _bind(host, port)
         self.port = int(self._sock.getsockname()[1])
-        self._server = None
+        self._server: uvicorn.Server | None = None
         self._server_thread: threading.Thread | None = None
         self._engine_thread: threading.Thread | None = None
         self._stopping = False
@@ -115,7 +118,7 @@ class DashboardServer:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"http://{host}:{self.port}/"
 
-    def _make_server(self):
+    def _make_server(self) -> uvicorn.Server:
         import uvicorn  # optional (the `live` extra), like FastAPI
 
         config = uvicorn.Config(
@@ -165,7 +168,7 @@ class DashboardServer:
         )
         self._engine_thread.start()
 
-    def start(self, timeout_s: float = 10.0) -> DashboardServer:
+    def start(self, timeout_s: float = 10.0) -> Self:
         """Start engine and server in background threads; return when the server is up."""
         server = self._make_server()
         self._server_thread = threading.Thread(

@@ -151,9 +151,7 @@ def grid_quads(centre, u_axis, v_axis, nodes_u, nodes_v) -> np.ndarray:
     for name, g in (("nodes_u", gu), ("nodes_v", gv)):
         if g.size < 2 or np.any(np.diff(g) <= 0):
             raise EctskinError(f"{name} must hold at least 2 strictly increasing values, got {g}")
-    i, j = np.meshgrid(np.arange(gu.size - 1), np.arange(gv.size - 1), indexing="ij")
-    i = i.ravel()
-    j = j.ravel()
+    i, j = np.indices((gu.size - 1, gv.size - 1)).reshape(2, -1)  # the cells, i-major
     cu = np.stack([gu[i], gu[i + 1], gu[i + 1], gu[i]], axis=1)  # (n, 4)
     cv = np.stack([gv[j], gv[j], gv[j + 1], gv[j + 1]], axis=1)
     return c + cu[..., None] * eu + cv[..., None] * ev
@@ -330,9 +328,7 @@ def sphere_quads(centre, radius: float, n: int) -> np.ndarray:
     r = _positive_float("radius", radius)
     n = _positive_int("n", n)
     t = np.tan(0.25 * np.pi * np.linspace(-1.0, 1.0, n + 1))
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    i = i.ravel()
-    j = j.ravel()
+    i, j = np.indices((n, n)).reshape(2, -1)  # the cells, i-major
     x = np.stack([t[i], t[i + 1], t[i + 1], t[i]], axis=1)  # (n², 4)
     y = np.stack([t[j], t[j], t[j + 1], t[j + 1]], axis=1)
     out = []
@@ -430,9 +426,7 @@ def cylinder_quads(
     e1, e2 = orthonormal_frame(axis)
     phi = np.linspace(0.0, 2.0 * np.pi, n_around + 1)
     z = np.linspace(0.0, length, n_along + 1)
-    i, j = np.meshgrid(np.arange(n_around), np.arange(n_along), indexing="ij")
-    i = i.ravel()
-    j = j.ravel()
+    i, j = np.indices((n_around, n_along)).reshape(2, -1)  # the cells, i-major
     # corners in order (phi_i, z_j), (phi_i+1, z_j), (phi_i+1, z_j+1), (phi_i, z_j+1):
     # u runs around, v along the axis, and u × v = (d/dphi) × axis points outward.
     pi_ = np.stack([phi[i], phi[i + 1], phi[i + 1], phi[i]], axis=1)
@@ -443,9 +437,7 @@ def cylinder_quads(
         return side
     m = max(2, n_around // 4)
     x, y = _disc_grid(m)
-    ii, jj = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
-    ii = ii.ravel()
-    jj = jj.ravel()
+    ii, jj = np.indices((m, m)).reshape(2, -1)  # the cells, ii-major
     cx = np.stack([x[ii, jj], x[ii + 1, jj], x[ii + 1, jj + 1], x[ii, jj + 1]], axis=1)
     cy = np.stack([y[ii, jj], y[ii + 1, jj], y[ii + 1, jj + 1], y[ii, jj + 1]], axis=1)
     disc = r * (cx[..., None] * e1 + cy[..., None] * e2)  # counter-clockwise about +axis

@@ -188,7 +188,8 @@ def collapse_layers(image, pixel_index, n_pixels: int) -> np.ndarray:
     if idx.shape != y.shape[-1:]:
         raise EctskinError(f"pixel_index must have shape ({y.shape[-1]},), got {idx.shape}")
     out = np.zeros(y.shape[:-1] + (int(n_pixels),))
-    np.add.at(out, (..., idx), y)
+    # numpy's stubs refuse the Ellipsis in ufunc.at's index, which numpy accepts
+    np.add.at(out, (..., idx), y)  # type: ignore[arg-type]
     return out
 
 

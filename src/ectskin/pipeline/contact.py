@@ -81,13 +81,17 @@ def contact_data(
             )
             return None
         recording = config.recording
-        settings = {"source": "given recording", "digest": recording_digest(recording)}
+        settings: dict[str, Any] = {
+            "source": "given recording",
+            "digest": recording_digest(recording),
+        }
 
         def make() -> None:
             write_recording(recording, path, overwrite=True)
 
     else:
         protocol = config.contact_protocol()
+        assert protocol is not None  # None only when a recording is given
         paper_path = runner.out / DATA_FILE
         settings = {
             "source": "ectskin.twin",
@@ -161,10 +165,9 @@ def handling_off(
         "baselines": config.baselines,
         "seed": config.seed,
     }
-    sources = (
-        ("paper_", config.simulation_protocol()),
-        ("contact_", config.contact_protocol()),
-    )
+    paper, contact = config.simulation_protocol(), config.contact_protocol()
+    assert paper is not None and contact is not None  # None only when a recording is given
+    sources = (("paper_", paper), ("contact_", contact))
 
     def make() -> None:
         rec = read_recording(data_path)

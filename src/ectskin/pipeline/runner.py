@@ -196,10 +196,10 @@ class StepRunner:
         of unknown origin) → error, or removed first with ``force``. Returns ``fn``'s result;
         a reused step returns None.
         """
-        settings = plain(settings)
-        if not self._needs_run(name, settings, outputs):
+        saved = plain(settings)  # as the state file holds them
+        if not self._needs_run(name, saved, outputs):
             return None
-        return self._run_here(name, settings, fn)
+        return self._run_here(name, saved, fn)
 
     def _run_here(self, name: str, settings: dict[str, Any], fn: Callable[[], T]) -> T:
         """Run a step that must run (:meth:`_needs_run` said so) in this process, recorded."""

@@ -27,7 +27,7 @@ from ectskin.learn.evaluate import evaluate_run
 from ectskin.learn.train import TrainConfig, train_from_recording
 from ectskin.pipeline.config import RUNS, ReproduceConfig
 from ectskin.pipeline.runner import Job, StepRunner, digest, plain, settings_diff
-from ectskin.twin import Protocol, simulate_experiment
+from ectskin.twin import simulate_experiment
 from ectskin.twin.characterize import characterize as characterize_twin
 
 log = logging.getLogger(__name__)
@@ -74,7 +74,7 @@ def simulate_or_load(runner: StepRunner, config: ReproduceConfig) -> tuple[Path,
     path = runner.out / DATA_FILE
     recording = config.recording
     if recording is not None:
-        settings = {
+        settings: dict[str, Any] = {
             "source": "given recording",
             "digest": recording_digest(recording),
             "n_trials": recording.n_trials,
@@ -84,7 +84,8 @@ def simulate_or_load(runner: StepRunner, config: ReproduceConfig) -> tuple[Path,
             write_recording(recording, path, overwrite=True)
 
     else:
-        protocol: Protocol = config.simulation_protocol()
+        protocol = config.simulation_protocol()
+        assert protocol is not None  # None only when a recording is given
         settings = {"source": "ectskin.twin", "protocol": protocol.to_dict()}
         if path.exists() and runner.state.settings("simulate") is None and not runner.force:
             _check_adoptable(path, settings["protocol"])

@@ -72,7 +72,7 @@ def contact_table(
 ) -> list[tuple[str, ...]]:
     """Rows "metric · goal · model · strongest baseline · margin" of a contact-like block."""
     baselines = lookup(block, "baselines") or {}
-    out = []
+    out: list[tuple[str, ...]] = []
     for key, label, unit, lower in rows:
         model = block.get(key)
         best = _best(baselines, key, lower)
@@ -156,7 +156,7 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
         s.append(("table", (header, contact_table(c))))
         per_state = c.get("per_state") or {}
         if per_state:
-            rows = [
+            rows: list[tuple[str, ...]] = [
                 (
                     name,
                     _value(v.get("loc_mm_mean"), "mm"),
@@ -196,13 +196,13 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
     multi = lookup(metrics, "multi")
     if isinstance(multi, Mapping) and multi and multi.get("count_accuracy") is not None:
         s.append(("h2", "Two fingers"))
-        rows = (
+        multi_rows = (
             ("count_accuracy", "Finger count (0, 1, 2) right", "%", False),
             ("loc_mm_mean", "Per finger, matched (Hungarian): mean error", "mm", True),
             ("loc_mm_p90", "Per finger, matched: 90th percentile", "mm", True),
         )
         goals = {"count_accuracy": GOALS["count_accuracy"]}
-        s.append(("table", (header, contact_table(multi, rows, goals))))
+        s.append(("table", (header, contact_table(multi, multi_rows, goals))))
         by_true = multi.get("count_accuracy_by_true") or {}
         if by_true:
             s.append(

@@ -155,7 +155,7 @@ def _sections(metrics: Mapping[str, Any], figures: list[tuple[str, Path]]) -> li
         s.append(("list", margins))
     confusions = lookup(metrics, "touch.confusions") or []
     if confusions:
-        rows = [
+        rows: list[tuple[str, ...]] = [
             (
                 str(c.get("true")),
                 str(c.get("pred")),

@@ -5,7 +5,7 @@ them, the tracking ablations."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypedDict
 
 from ectskin.report.wording import (
     DASH,
@@ -17,8 +17,21 @@ from ectskin.report.wording import (
     pct,
 )
 
+
+class PaperNumbers(TypedDict):
+    touch_accuracy_pct: float
+    touch_misclassified: str
+    touch_adjacent: str
+    track_ad_mm: tuple[float, float]  # (mean, std)
+    track_worst_example_mm: float
+    touch_training: str
+    track_training: str
+    touch_split: str
+    track_split: str
+
+
 #: The paper's numbers (§4), quoted in the report beside this run's.
-PAPER = {
+PAPER: PaperNumbers = {
     "touch_accuracy_pct": 99.88,
     "touch_misclassified": "34 of 28 800",
     "touch_adjacent": "all",
@@ -118,7 +131,10 @@ def results_table(metrics: Mapping[str, Any]) -> list[tuple[str, str, str, str]]
                     DASH,
                 )
             )
-    for task, key in (("Touch", "touch"), ("Tracking", "track")):
+    for task, key, paper_split in (
+        ("Touch", "touch", PAPER["touch_split"]),
+        ("Tracking", "track", PAPER["track_split"]),
+    ):
         sp = lookup(metrics, f"{key}.split")
         if sp:
             n_test = lookup(
@@ -127,7 +143,7 @@ def results_table(metrics: Mapping[str, Any]) -> list[tuple[str, str, str, str]]
             rows.append(
                 (
                     f"{task}: trials train / val / test",
-                    PAPER[f"{key}_split"],
+                    paper_split,
                     " / ".join(str(lookup(sp, k, "?")) for k in ("train", "val", "test"))
                     + (f" trials ({n_test:,} test frames)".replace(",", " ") if n_test else ""),
                     DASH,
