@@ -50,8 +50,10 @@ test-slow: $(STAMP)
 test-all: $(STAMP) browser
 	$(BIN)/python -m pytest -m "slow or ddp or not slow"
 
+# ruff over all the code; mypy over the packages listed in pyproject.toml ([tool.mypy] files)
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/mypy
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py
