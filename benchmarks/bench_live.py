@@ -138,8 +138,8 @@ def _contact(layout, contact_run, tmp: Path):
     import torch
 
     from ectskin.learn.checkpoint import save_checkpoint
-    from ectskin.learn.contact_predict import ContactPredictor
     from ectskin.learn.models.contact import ContactNet, ContactNetConfig
+    from ectskin.learn.predict import ContactPredictor
 
     if contact_run is None:
         torch.manual_seed(0)

@@ -32,14 +32,14 @@ import torch
 
 from ectskin.layout import default_layout
 from ectskin.learn.checkpoint import save_checkpoint
-from ectskin.learn.datasets import TouchData
+from ectskin.learn.data import TouchData
 from ectskin.learn.distributed import Dist
 from ectskin.learn.engine import Tensors, epoch_indices, evaluate, train_one_epoch
 from ectskin.learn.models import C2DT, C2DTConfig, TouchMLP
 from ectskin.learn.predict import TouchPredictor, TrackPredictor
 from ectskin.learn.tasks import TrackCriterion
 from ectskin.learn.threads import TRAIN_DEFAULT_THREADS, torch_threads
-from ectskin.learn.train import train
+from ectskin.learn.train import TrainConfig, train
 
 
 def touch_data(n: int, seed: int) -> TouchData:
@@ -68,10 +68,7 @@ def bench_touch_training(epochs: int, n_train: int, n_val: int, threads: int | N
             tr,
             va,
             Path(tmp) / "run",
-            profile="paper",
-            epochs=epochs,
-            progress=False,
-            threads=threads,
+            TrainConfig(profile="paper", epochs=epochs, progress=False, threads=threads),
         )
         wall = time.perf_counter() - t0
     return {

@@ -23,7 +23,7 @@ import pytest
 from ectskin.dashboard import DashboardServer
 from ectskin.io.hdf5 import RecordingWriter
 from ectskin.layout import default_layout
-from ectskin.learn.contact_predict import ContactReading, Finger
+from ectskin.learn.predict import ContactReading, FingerEstimate
 from ectskin.live import LiveEngine, open_source
 
 pytestmark = pytest.mark.browser
@@ -100,7 +100,7 @@ class TemplateContact:
     def read(self, w: np.ndarray) -> ContactReading:
         forces = _forces(w[-1])
         on = [r for r in sorted(forces) if forces[r] > 0.3]
-        fingers = tuple(Finger(*_centre(r), 2.0 + r / 10, forces[r]) for r in on)
+        fingers = tuple(FingerEstimate(*_centre(r), 2.0 + r / 10, forces[r]) for r in on)
         top = max(forces.values())
         hover = 0.9 if not on and top > 0.05 else 0.02
         return ContactReading(len(on), 0.95 if on else 0.05, hover, fingers)

@@ -1,47 +1,31 @@
-"""The variability study's parts: data sets merged across skins, fine-tuning, the skins, the
-summary; and (slow) the whole study on a tiny protocol, resumed without redoing a step.
+"""The variability study's parts: fine-tuning, the skins, the summary, the Markdown report; and
+(slow) the whole study on a tiny protocol, resumed without redoing a step. Data sets merged across
+skins: ``TouchData.concat`` (tests/learn/data/test_data_base.py).
 
-What each test catches: group indices not shifted when data sets are merged (samples of skin 2
-would be counted as skin 1's trials); fine-tuning that trains the caller's model in place (the
-baseline would be scored with the fine-tuned weights) or does not train at all; summary means
-that count a missing value as 0; a resumed study that simulates again.
+What each test catches: fine-tuning that trains the caller's model in place (the baseline would
+be scored with the fine-tuned weights), does not train at all, or draws other batches than its
+seed says; summary means that count a missing value as 0; a table cell that breaks the Markdown
+table; a resumed study that simulates again.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
 import pytest
 import torch
 
 from ectskin.design import variability as var
 from ectskin.design.variability import (
     VariabilityConfig,
-    concat_data,
     finetune,
+    report_markdown,
     skin_cases,
     summarise,
 )
-from ectskin.learn.datasets import touch_dataset
+from ectskin.learn.data import touch_dataset
 from ectskin.learn.tasks import get_task
 from ectskin.twin.protocol import Protocol
-
-
-def test_concat_data_renumbers_groups(make_recording):
-    synthetic_recording = make_recording
-    a = touch_dataset(synthetic_recording(seed=0), reference="rest")
-    b = touch_dataset(synthetic_recording(seed=1), reference="rest")
-    m = concat_data([a, b])
-    np.testing.assert_array_equal(m.x, np.concatenate([a.x, b.x]))
-    np.testing.assert_array_equal(m.y, np.concatenate([a.y, b.y]))
-    np.testing.assert_array_equal(m.group[: len(a.group)], a.group)
-    np.testing.assert_array_equal(m.group[len(a.group) :], b.group + a.n_groups)
-    assert m.n_groups == a.n_groups + b.n_groups == len(set(m.group_names))
-    np.testing.assert_array_equal(m.group_region, np.r_[a.group_region, b.group_region])
-    # a trial of the second set is found under its own name
-    g = a.n_groups + 2
-    np.testing.assert_array_equal(m.select([g]).x, b.select([2]).x)
 
 
 def _accuracy(model, data) -> float:
@@ -65,6 +49,46 @@ def test_finetune_learns_and_leaves_the_given_model_alone(make_recording):
     assert acc1 >= 0.75 and acc1 > acc0 + 0.3
     # the normalisation is the trained model's, not refit
     assert torch.equal(tuned.state_dict()["x_mean"], before["x_mean"])
+
+
+def _finetune_by_hand(task, model, data, *, epochs, lr, seed, batch_size=32):
+    """The reference: plain Adam over a seeded permutation per epoch, the task's loss."""
+    import copy
+
+    from ectskin.learn.profiles import TrainSettings
+
+    t = get_task(task)
+    model = copy.deepcopy(model)
+    cpu = torch.device("cpu")
+    criterion = t.criterion(model, TrainSettings(epochs, batch_size, lr=lr), data, cpu)
+    tensors = t.tensors(data, cpu)
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    g = torch.Generator().manual_seed(seed)
+    model.train()
+    for _ in range(epochs):
+        perm = torch.randperm(tensors.n, generator=g)
+        for start in range(0, tensors.n, batch_size):
+            loss = criterion.loss(model, tensors.batch(perm[start : start + batch_size]), None)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+    return model.eval()
+
+
+def test_finetune_through_the_engine_matches_a_loop_by_hand(make_recording):
+    torch.manual_seed(0)
+    data = touch_dataset(make_recording(n_frames=12), reference="rest")
+    t = get_task("touch")
+    model = t.build_model(data, None)
+    t.fit_normalization(model, data)
+    model.eval()
+    torch.manual_seed(9)  # the dropout masks draw from the global generator
+    tuned = finetune("touch", model, data, epochs=3, lr=1e-2, seed=4)
+    torch.manual_seed(9)
+    want = _finetune_by_hand("touch", model, data, epochs=3, lr=1e-2, seed=4)
+    for k, v in want.state_dict().items():
+        assert torch.equal(tuned.state_dict()[k], v), k  # bit for bit
+    assert not tuned.training
 
 
 def test_skin_cases_roles_seeds_and_a_zero_scale():
@@ -141,3 +165,32 @@ def test_tiny_study_end_to_end_and_resumed(tmp_path, monkeypatch):
     monkeypatch.setattr(var, "simulate_skin", refuse)
     again = var.run_variability(tmp_path, replace(cfg))
     assert again["skins"] == doc["skins"]
+
+
+def test_report_tables_go_through_the_escaping_writer():
+    def row(v):
+        keys = ("baseline", "own_reference", "domain_randomisation", "dr_own_reference")
+        return {**dict.fromkeys(keys, v), "finetune": {"0": v, "100": v}}
+
+    skins = {
+        "nominal": {"role": "nominal", "scale": 0.0, "rest_deviation_pct": 0.0},
+        "a|b": {"role": "sampled", "scale": 1.5, "rest_deviation_pct": None},
+    }
+    for r in skins.values():
+        r.update(touch=row(0.5), contact=row(None))
+    cfg = VariabilityConfig()
+    doc = {
+        "config": var._config_dict(cfg),
+        "skins": skins,
+        "summary": summarise(skins),
+        "seconds": 60.0,
+        "figures": {"variability_curves.png": "curves"},
+    }
+    lines = report_markdown(doc).splitlines()
+    i = lines.index("## touch: accuracy")
+    head = "| skin | scale | rest dev. % | baseline | own_reference | domain_randomisation"
+    assert lines[i + 2].startswith(head) and lines[i + 2].endswith("| finetune N=100 |")
+    assert lines[i + 3] == "|" + "---|" * 8
+    assert lines[i + 4] == "| nominal | 0 | 0.0 | 0.500 | 0.500 | 0.500 | 0.500 | 0.500 |"
+    assert lines[i + 5] == "| a\\|b | 1.5 | – | 0.500 | 0.500 | 0.500 | 0.500 | 0.500 |"
+    assert "| a\\|b | 1.5 | – | – | – | – | – | – |" in lines  # contact: no values

@@ -9,7 +9,7 @@ from ectskin import EctskinError
 from ectskin.io import hdf5
 from ectskin.io.generic import load_generic, virtual_layout
 from ectskin.layout import default_layout
-from ectskin.learn.datasets import touch_dataset, track_dataset
+from ectskin.learn.data import touch_dataset, track_dataset
 
 
 def _data(n_channels=5, n_markers=2, seed=0):

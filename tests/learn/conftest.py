@@ -18,7 +18,7 @@ import pytest
 import torch
 
 from ectskin.layout import default_layout
-from ectskin.learn.datasets import TouchData, TrackData
+from ectskin.learn.data import TouchData, TrackData
 from ectskin.learn.models import C2DT, C2DTConfig, TouchMLP, TouchMLPConfig
 
 LAYOUT = default_layout()

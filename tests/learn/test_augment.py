@@ -9,7 +9,7 @@ import torch
 import torch.nn.functional as F
 
 from ectskin.learn.augment import augment_touch_batch, mixup_cross_entropy, no_contact_means
-from ectskin.learn.datasets import TouchData
+from ectskin.learn.data import TouchData
 from ectskin.learn.models import TouchMLP, TouchMLPConfig
 from ectskin.learn.profiles import profile_settings
 from ectskin.learn.tasks import TouchCriterion

@@ -22,7 +22,7 @@ from ectskin.learn.candidates import (
     save_classical,
     select_candidate,
 )
-from ectskin.learn.datasets import TouchData
+from ectskin.learn.data import TouchData
 from ectskin.learn.evaluate import evaluate_run
 from ectskin.learn.predict import TouchPredictor
 from ectskin.learn.train import TrainConfig, train, train_from_recording
@@ -69,7 +69,9 @@ def _accuracy_of_files(run, val: TouchData) -> float:
 def test_auto_selects_trees_by_validation_where_they_win(tmp_path):
     tr, va = _problem("xor", 8, 100, 1), _problem("xor", 4, 100, 2)
     run = tmp_path / "run"
-    s = train("touch", tr, va, run, profile="quick", epochs=1, progress=False, model="auto")
+    s = train(
+        "touch", tr, va, run, TrainConfig(profile="quick", epochs=1, progress=False, model="auto")
+    )
     doc = read_candidates(run)
     assert set(doc["candidates"]) == {"mlp", *CLASSICAL}
     vals = {k: c["val_accuracy"] for k, c in doc["candidates"].items()}
@@ -98,7 +100,9 @@ def test_auto_selects_trees_by_validation_where_they_win(tmp_path):
 def test_auto_keeps_the_mlp_where_it_wins(tmp_path):
     tr, va = _problem("slab", 10, 200, 1), _problem("slab", 4, 200, 2)
     run = tmp_path / "run"
-    s = train("touch", tr, va, run, profile="quick", epochs=30, progress=False, model="auto")
+    s = train(
+        "touch", tr, va, run, TrainConfig(profile="quick", epochs=30, progress=False, model="auto")
+    )
     vals = s["candidates"]
     assert s["selected_model"] == "mlp" and vals["mlp"] > max(vals[k] for k in CLASSICAL) + 0.05
     assert not (run / "model.skops").exists()

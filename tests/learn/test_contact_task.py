@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 import torch
 
-from ectskin.learn.contact_baselines import region_centre_baseline
-from ectskin.learn.contact_data import MAX_FINGERS, contact_dataset
+from ectskin.learn.baselines.contact import region_centre_baseline
+from ectskin.learn.data.contact import MAX_FINGERS, contact_dataset
 from ectskin.learn.models.contact import ContactNet, ContactNetConfig
 from ectskin.learn.tasks import get_task
 from ectskin.learn.tasks.contact import ContactCriterion, contact_report
-from ectskin.learn.train import train
+from ectskin.learn.train import TrainConfig, train
 
 
 def test_dataset_targets_by_hand(layout, contact_recording):
@@ -63,7 +63,13 @@ def test_contact_model_learns_a_flat_skin_better_than_region_centres(
     d = task.dataset(rec, window=2)
     groups = np.arange(d.n_groups)
     tr, va, te = d.select(groups[:-12]), d.select(groups[-12:-6]), d.select(groups[-6:])
-    train("contact", tr, va, tmp_path / "run", profile="quick", seed=0, epochs=12, progress=False)
+    train(
+        "contact",
+        tr,
+        va,
+        tmp_path / "run",
+        TrainConfig(profile="quick", seed=0, epochs=12, progress=False),
+    )
     from ectskin.learn.checkpoint import load_checkpoint
 
     model, _, _ = load_checkpoint(tmp_path / "run" / "model.pt", kind="contact_net")

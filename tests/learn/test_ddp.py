@@ -29,7 +29,7 @@ from ectskin.learn.engine import Tensors, train_one_epoch
 from ectskin.learn.models import TouchMLP
 from ectskin.learn.runfiles import read_metrics
 from ectskin.learn.tasks import TouchCriterion
-from ectskin.learn.train import train
+from ectskin.learn.train import TrainConfig, train
 
 pytestmark = pytest.mark.ddp
 
@@ -58,15 +58,15 @@ SCRIPT = textwrap.dedent(
     T.epoch_indices = recording
     result = {}
     tr, va = data["touch"]
-    result["touch"] = T.train("touch", tr, va, out + "/touch", profile="quick", epochs=3,
-                              batch_size=64, model_options={"dropout": 0.0}, progress=False)
+    result["touch"] = T.train("touch", tr, va, out + "/touch", T.TrainConfig(
+        profile="quick", epochs=3, batch_size=64, model_options={"dropout": 0.0}, progress=False))
     tr, va = data["track"]
-    result["track"] = T.train("track", tr, va, out + "/track", profile="quick", epochs=2,
-                              batch_size=32, model_options=small_c2dt, progress=False,
-                              settings={"samples_per_epoch": None, "val_samples": None})
+    result["track"] = T.train("track", tr, va, out + "/track", T.TrainConfig(
+        profile="quick", epochs=2, batch_size=32, model_options=small_c2dt, progress=False,
+        settings={"samples_per_epoch": None, "val_samples": None}))
     tr, va = data["robust"]
-    result["robust"] = T.train("touch", tr, va, out + "/robust", profile="robust", epochs=2,
-                               batch_size=64, progress=False)
+    result["robust"] = T.train("touch", tr, va, out + "/robust", T.TrainConfig(
+        profile="robust", epochs=2, batch_size=64, progress=False))
     with open(f"{out}/rank{rank}.json", "w") as fh:
         json.dump({"result": result, "seen": seen}, fh)
     """
@@ -175,11 +175,9 @@ def test_ddp_matches_a_single_process_run(ddp_run, tmp_path, blobs, displacement
         tr,
         va,
         tmp_path / "touch",
-        profile="quick",
-        epochs=3,
-        batch_size=64,
-        model_options={"dropout": 0.0},
-        progress=False,
+        TrainConfig(
+            profile="quick", epochs=3, batch_size=64, model_options={"dropout": 0.0}, progress=False
+        ),
     )
     tr, va = displacements(4, 60, seed=0), displacements(2, 60, seed=1)
     train(
@@ -187,12 +185,14 @@ def test_ddp_matches_a_single_process_run(ddp_run, tmp_path, blobs, displacement
         tr,
         va,
         tmp_path / "track",
-        profile="quick",
-        epochs=2,
-        batch_size=32,
-        model_options=small_c2dt,
-        progress=False,
-        settings={"samples_per_epoch": None, "val_samples": None},
+        TrainConfig(
+            profile="quick",
+            epochs=2,
+            batch_size=32,
+            model_options=small_c2dt,
+            progress=False,
+            settings={"samples_per_epoch": None, "val_samples": None},
+        ),
     )
     for task in ("touch", "track"):
         single = read_checkpoint(tmp_path / task / "last.pt")["state_dict"]

@@ -13,10 +13,11 @@ import pytest
 from ectskin._check import EctskinError
 from ectskin.io import read_recording, write_recording
 from ectskin.learn.checkpoint import read_checkpoint
-from ectskin.learn.datasets import split_from_names, touch_dataset, track_dataset
+from ectskin.learn.data import touch_dataset, track_dataset
 from ectskin.learn.evaluate import evaluate_run, read_run
 from ectskin.learn.predict import TouchPredictor, TrackPredictor
 from ectskin.learn.runfiles import read_metrics
+from ectskin.learn.splits import split_from_names
 from ectskin.learn.train import TrainConfig, train_from_recording
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ectskin import EctskinError
-from ectskin.learn.datasets import touch_dataset
+from ectskin.learn.data import touch_dataset
 from ectskin.learn.normalizer import Normalizer
 from ectskin.learn.splits import split_groups
 

@@ -6,7 +6,7 @@ import pytest
 
 from ectskin._check import EctskinError
 from ectskin.learn.profiles import PROFILES, describe_recipe, profile_settings
-from ectskin.learn.train import train
+from ectskin.learn.train import TrainConfig, train
 
 
 def test_paper_profile_is_the_papers_settings(blobs):
@@ -18,7 +18,7 @@ def test_paper_profile_is_the_papers_settings(blobs):
     assert profile_settings("touch", "quick", epochs=3).epochs == 3
     assert profile_settings("track", "quick", samples_per_epoch=None).samples_per_epoch is None
     with pytest.raises(EctskinError, match="'epochs' must be a positive integer, got 0"):
-        train("touch", blobs(2, 5, seed=0), blobs(1, 5, seed=1), "unused", epochs=0)
+        train("touch", blobs(2, 5, seed=0), blobs(1, 5, seed=1), "unused", TrainConfig(epochs=0))
     with pytest.raises(
         EctskinError, match="allowed values are 'paper', 'quick', 'robust'; got 'fast'"
     ):
@@ -63,7 +63,7 @@ def test_robust_profile_settings_and_track_refusal(tmp_path):
     with pytest.raises(EctskinError, match=msg):
         profile_settings("track", "robust")
     with pytest.raises(EctskinError, match=msg):
-        train("track", None, None, tmp_path, profile="robust")
+        train("track", None, None, tmp_path, TrainConfig(profile="robust"))
     with pytest.raises(EctskinError, match="apply to task 'touch' only"):
         profile_settings("track", "quick", mixup_alpha=0.2)
     with pytest.raises(EctskinError, match="'label_smoothing' must be in"):

@@ -11,9 +11,9 @@ import pytest
 import torch
 
 from ectskin.learn.checkpoint import load_checkpoint, read_checkpoint
-from ectskin.learn.datasets import TouchData
+from ectskin.learn.data import TouchData
 from ectskin.learn.runfiles import read_metrics, training_summary
-from ectskin.learn.train import train
+from ectskin.learn.train import TrainConfig, train
 
 SEEN, UNSEEN = 0, 1  # parities of the states_data fixture: (state + class) % 2
 
@@ -30,11 +30,11 @@ def test_robust_training_is_deterministic_and_resumes_exactly(tmp_path, states_d
     tr = states_data(0, SEEN, per=20)
     va = states_data(1, SEEN, per=20, no_contact=False)
     kw = {"profile": "robust", "batch_size": 64, "settings": {"step_size": 1}, "progress": False}
-    train("touch", tr, va, tmp_path / "a", epochs=4, seed=3, **kw)
-    train("touch", tr, va, tmp_path / "b", epochs=4, seed=3, **kw)
-    first = train("touch", tr, va, tmp_path / "c", epochs=2, seed=3, **kw)
-    resumed = train("touch", tr, va, tmp_path / "c", epochs=4, seed=3, **kw)
-    train("touch", tr, va, tmp_path / "d", epochs=4, seed=4, **kw)
+    train("touch", tr, va, tmp_path / "a", TrainConfig(epochs=4, seed=3, **kw))
+    train("touch", tr, va, tmp_path / "b", TrainConfig(epochs=4, seed=3, **kw))
+    first = train("touch", tr, va, tmp_path / "c", TrainConfig(epochs=2, seed=3, **kw))
+    resumed = train("touch", tr, va, tmp_path / "c", TrainConfig(epochs=4, seed=3, **kw))
+    train("touch", tr, va, tmp_path / "d", TrainConfig(epochs=4, seed=4, **kw))
     assert first["epochs_run"] == 2 and resumed["resumed_from"] == 2
     for run in ("b", "c"):
         for name in ("last.pt", "model.pt"):
@@ -81,7 +81,7 @@ def test_selection_by_validation_accuracy_not_loss(tmp_path, monkeypatch, states
         calls = iter(script)
         monkeypatch.setattr(T, "evaluate", lambda *a, calls=calls, **k: next(calls))
         run = tmp_path / profile
-        s = train("touch", tr, va, run, profile=profile, epochs=4, progress=False)
+        s = train("touch", tr, va, run, TrainConfig(profile=profile, epochs=4, progress=False))
         assert s["best_epoch"] == want
         assert (s["best_val_loss"], s["best_val_metric"]) == script[want - 1]
         kept = read_checkpoint(run / "model.pt")["extra"]
@@ -98,7 +98,7 @@ def test_inflation_shift_is_skipped_with_a_warning_without_two_rest_trials(
     tr = states_data(0, SEEN, per=10, n_states=1)  # one no-contact trial only
     va = states_data(1, SEEN, per=10, n_states=1, no_contact=False)
     with caplog.at_level(logging.WARNING, logger="ectskin.learn.train"):
-        train("touch", tr, va, tmp_path, profile="robust", epochs=1, progress=False)
+        train("touch", tr, va, tmp_path, TrainConfig(profile="robust", epochs=1, progress=False))
     assert "inflation shift skipped" in caplog.text and "1 no-contact trial" in caplog.text
     cfg = json.loads((tmp_path / "config.json").read_text())
     assert cfg["recipe"]["inflation_shift_states"] == 0 and cfg["recipe"]["mixup_alpha"] == 0.4
@@ -114,8 +114,8 @@ def test_robust_recipe_generalises_to_unseen_state_class_combinations(tmp_path, 
     va = states_data(100 + seed, SEEN, no_contact=False)
     te = states_data(200 + seed, UNSEEN, no_contact=False)
     kw = {"epochs": 10, "batch_size": 64, "seed": seed, "progress": False}
-    train("touch", tr, va, tmp_path / "paper", profile="quick", **kw)
-    train("touch", tr, va, tmp_path / "robust", profile="robust", **kw)
+    train("touch", tr, va, tmp_path / "paper", TrainConfig(profile="quick", **kw))
+    train("touch", tr, va, tmp_path / "robust", TrainConfig(profile="robust", **kw))
     plain, robust = _accuracy(tmp_path / "paper", te), _accuracy(tmp_path / "robust", te)
     assert robust > 0.75, (plain, robust)
     assert robust - plain > 0.5, (plain, robust)

@@ -10,9 +10,8 @@ import torch
 
 from ectskin._check import EctskinError
 from ectskin.learn.checkpoint import save_checkpoint
-from ectskin.learn.contact_predict import ContactPredictor
 from ectskin.learn.models.contact import ContactNet, ContactNetConfig
-from ectskin.learn.predict import TouchPredictor, TrackPredictor
+from ectskin.learn.predict import ContactPredictor, TouchPredictor, TrackPredictor
 from ectskin.learn.runtime import OnnxModel
 
 TOL = {"rtol": 1e-4, "atol": 1e-4}

@@ -27,7 +27,11 @@ def test_touch_training_writes_the_run_and_keeps_the_best_weights(tmp_path, blob
     tr, va, te = blobs(20, 50, seed=0), blobs(5, 50, seed=1), blobs(5, 50, seed=2)
     out = tmp_path / "run"
     s = train(
-        "touch", tr, va, out, profile="quick", epochs=6, settings={"step_size": 2}, progress=False
+        "touch",
+        tr,
+        va,
+        out,
+        TrainConfig(profile="quick", epochs=6, settings={"step_size": 2}, progress=False),
     )
     assert sorted(p.name for p in out.iterdir()) == [
         "config.json",
@@ -78,22 +82,14 @@ def test_resume_equals_an_uninterrupted_run(tmp_path, blobs):
         tr,
         va,
         tmp_path / "a",
-        profile="quick",
-        epochs=4,
-        seed=3,
-        settings={"step_size": 1},
-        progress=False,
+        TrainConfig(profile="quick", epochs=4, seed=3, settings={"step_size": 1}, progress=False),
     )
     first = train(
         "touch",
         tr,
         va,
         tmp_path / "b",
-        profile="quick",
-        epochs=2,
-        seed=3,
-        settings={"step_size": 1},
-        progress=False,
+        TrainConfig(profile="quick", epochs=2, seed=3, settings={"step_size": 1}, progress=False),
     )
     assert first["epochs_run"] == 2
     resumed = train(
@@ -101,11 +97,7 @@ def test_resume_equals_an_uninterrupted_run(tmp_path, blobs):
         tr,
         va,
         tmp_path / "b",
-        profile="quick",
-        epochs=4,
-        seed=3,
-        settings={"step_size": 1},
-        progress=False,
+        TrainConfig(profile="quick", epochs=4, seed=3, settings={"step_size": 1}, progress=False),
     )
     assert resumed["resumed_from"] == 2 and resumed["epochs_run"] == 2
     for name in ("last.pt", "model.pt"):
@@ -128,11 +120,7 @@ def test_resume_equals_an_uninterrupted_run(tmp_path, blobs):
         tr,
         va,
         tmp_path / "b",
-        profile="quick",
-        epochs=4,
-        seed=3,
-        settings={"step_size": 1},
-        progress=False,
+        TrainConfig(profile="quick", epochs=4, seed=3, settings={"step_size": 1}, progress=False),
     )
     assert again["epochs_run"] == 0 and again["best_val_loss"] == resumed["best_val_loss"]
 
@@ -140,35 +128,48 @@ def test_resume_equals_an_uninterrupted_run(tmp_path, blobs):
 def test_resume_drops_metrics_rows_written_after_last_checkpoint(tmp_path, blobs):
     tr, va = blobs(10, 20, seed=0), blobs(4, 20, seed=1)
     kw = {"profile": "quick", "progress": False}
-    train("touch", tr, va, tmp_path, epochs=2, **kw)
+    train("touch", tr, va, tmp_path, TrainConfig(epochs=2, **kw))
     with open(tmp_path / "metrics.csv", "a") as fh:  # a crash after the CSV, before last.pt
         fh.write("3,9,9,0,0.001,1\n")
-    train("touch", tr, va, tmp_path, epochs=3, **kw)
+    train("touch", tr, va, tmp_path, TrainConfig(epochs=3, **kw))
     rows = read_metrics(tmp_path / "metrics.csv")
     assert [r["epoch"] for r in rows] == [1, 2, 3] and rows[2]["train_loss"] != 9
 
 
 def test_resume_refuses_other_settings_or_data(tmp_path, blobs):
     tr, va = blobs(10, 20, seed=0), blobs(4, 20, seed=1)
-    train("touch", tr, va, tmp_path, profile="quick", epochs=1, progress=False)
+    train("touch", tr, va, tmp_path, TrainConfig(profile="quick", epochs=1, progress=False))
     with pytest.raises(EctskinError, match=r"last\.pt: training settings differ \(batch_size"):
-        train("touch", tr, va, tmp_path, profile="quick", epochs=2, batch_size=64, progress=False)
+        train(
+            "touch",
+            tr,
+            va,
+            tmp_path,
+            TrainConfig(profile="quick", epochs=2, batch_size=64, progress=False),
+        )
     with pytest.raises(EctskinError, match="different training data"):
         train(
-            "touch", blobs(10, 20, seed=5), va, tmp_path, profile="quick", epochs=2, progress=False
+            "touch",
+            blobs(10, 20, seed=5),
+            va,
+            tmp_path,
+            TrainConfig(profile="quick", epochs=2, progress=False),
         )
     with pytest.raises(EctskinError, match="seed"):
-        train("touch", tr, va, tmp_path, profile="quick", epochs=2, seed=1, progress=False)
+        train(
+            "touch",
+            tr,
+            va,
+            tmp_path,
+            TrainConfig(profile="quick", epochs=2, seed=1, progress=False),
+        )
     with pytest.raises(EctskinError, match="model differs"):
         train(
             "touch",
             tr,
             va,
             tmp_path,
-            profile="quick",
-            epochs=2,
-            progress=False,
-            model_options={"hidden": 64},
+            TrainConfig(profile="quick", epochs=2, progress=False, model_options={"hidden": 64}),
         )
     # resume=False starts over
     s = train(
@@ -176,11 +177,7 @@ def test_resume_refuses_other_settings_or_data(tmp_path, blobs):
         tr,
         va,
         tmp_path,
-        profile="quick",
-        epochs=1,
-        batch_size=64,
-        resume=False,
-        progress=False,
+        TrainConfig(profile="quick", epochs=1, batch_size=64, resume=False, progress=False),
     )
     assert s["resumed_from"] == 0 and s["epochs_run"] == 1
 
@@ -188,9 +185,9 @@ def test_resume_refuses_other_settings_or_data(tmp_path, blobs):
 def test_training_is_deterministic_for_a_seed(tmp_path, blobs):
     tr, va = blobs(10, 30, seed=0), blobs(4, 30, seed=1)
     kw = {"profile": "quick", "epochs": 2, "progress": False}
-    train("touch", tr, va, tmp_path / "a", seed=7, **kw)
-    train("touch", tr, va, tmp_path / "b", seed=7, **kw)
-    train("touch", tr, va, tmp_path / "c", seed=8, **kw)
+    train("touch", tr, va, tmp_path / "a", TrainConfig(seed=7, **kw))
+    train("touch", tr, va, tmp_path / "b", TrainConfig(seed=7, **kw))
+    train("touch", tr, va, tmp_path / "c", TrainConfig(seed=8, **kw))
     sd = {k: read_checkpoint(tmp_path / k / "last.pt")["state_dict"] for k in "abc"}
     assert all(torch.equal(sd["a"][k], sd["b"][k]) for k in sd["a"])
     assert not torch.equal(sd["a"]["net.0.weight"], sd["c"]["net.0.weight"])
@@ -201,19 +198,19 @@ def test_bad_inputs_are_clear_errors(tmp_path, blobs):
     bad = blobs(6, 10, seed=0)
     bad.x[23, 4] = np.nan
     with pytest.raises(EctskinError, match=r"train_data: x of trial 's0-t2' \(sample 23\)"):
-        train("touch", bad, va, tmp_path, epochs=1, progress=False)
+        train("touch", bad, va, tmp_path, TrainConfig(epochs=1, progress=False))
     bad = blobs(6, 10, seed=0)
     bad.y[5] = 9
     with pytest.raises(EctskinError, match="has label 9, expected 0..4"):
-        train("touch", bad, va, tmp_path, epochs=1, progress=False)
+        train("touch", bad, va, tmp_path, TrainConfig(epochs=1, progress=False))
     narrow = blobs(2, 10, seed=1)
     narrow.x = narrow.x[:, :27]
     with pytest.raises(EctskinError, match="disagree"):
-        train("touch", tr, narrow, tmp_path, epochs=1, progress=False)
+        train("touch", tr, narrow, tmp_path, TrainConfig(epochs=1, progress=False))
     with pytest.raises(EctskinError, match="allowed values are 'touch', 'track'"):
-        train("shape", tr, va, tmp_path, epochs=1, progress=False)
+        train("shape", tr, va, tmp_path, TrainConfig(epochs=1, progress=False))
     with pytest.raises(EctskinError, match="TrackData"):
-        train("track", tr, va, tmp_path, epochs=1, progress=False)
+        train("track", tr, va, tmp_path, TrainConfig(epochs=1, progress=False))
 
 
 def test_non_finite_loss_stops_naming_epoch_and_batch(tmp_path, blobs):
@@ -224,10 +221,7 @@ def test_non_finite_loss_stops_naming_epoch_and_batch(tmp_path, blobs):
             tr,
             va,
             tmp_path,
-            epochs=3,
-            batch_size=32,
-            settings={"lr": 1e38},
-            progress=False,
+            TrainConfig(epochs=3, batch_size=32, settings={"lr": 1e38}, progress=False),
         )
 
 
@@ -239,12 +233,14 @@ def test_track_training_beats_no_motion(tmp_path, displacements, small_c2dt):
         tr,
         va,
         tmp_path,
-        profile="quick",
-        epochs=8,
-        batch_size=64,
-        settings={"step_size": 4, "samples_per_epoch": None, "val_samples": None},
-        model_options=small_c2dt,
-        progress=False,
+        TrainConfig(
+            profile="quick",
+            epochs=8,
+            batch_size=64,
+            settings={"step_size": 4, "samples_per_epoch": None, "val_samples": None},
+            model_options=small_c2dt,
+            progress=False,
+        ),
     )
     assert s["metric"] == "ad_mm"
     no_motion = np.linalg.norm(va.y - va.init, axis=-1).mean()
@@ -293,12 +289,14 @@ def test_track_without_prior_and_with_subsampled_epochs(
         tr,
         va,
         tmp_path,
-        profile="quick",
-        epochs=3,
-        settings={"samples_per_epoch": 64, "val_samples": 30},
-        batch_size=32,
-        model_options=small_c2dt,
-        progress=False,
+        TrainConfig(
+            profile="quick",
+            epochs=3,
+            settings={"samples_per_epoch": 64, "val_samples": 30},
+            batch_size=32,
+            model_options=small_c2dt,
+            progress=False,
+        ),
     )
     # group the spied batches into epochs: a run of train batches, then a run of val batches
     epochs: list[dict[str, list[float]]] = []
@@ -415,18 +413,20 @@ def test_progress_bars_on_a_tty_and_epoch_logs_otherwise(tmp_path, monkeypatch, 
     tr, va = blobs(6, 20, seed=0), blobs(2, 20, seed=1)
     tty = Tty()
     monkeypatch.setattr(sys, "stderr", tty)
-    train("touch", tr, va, tmp_path / "a", profile="quick", epochs=2)
+    train("touch", tr, va, tmp_path / "a", TrainConfig(profile="quick", epochs=2))
     assert "train touch" in tty.getvalue() and "2/2" in tty.getvalue()
     monkeypatch.setattr(sys, "stderr", io.StringIO())  # not a terminal: one log line per epoch
     with caplog.at_level(logging.INFO, logger="ectskin.learn.engine"):
-        train("touch", tr, va, tmp_path / "b", profile="quick", epochs=2)
+        train("touch", tr, va, tmp_path / "b", TrainConfig(profile="quick", epochs=2))
     assert [r.getMessage()[:9] for r in caplog.records if "epoch" in r.getMessage()][:2] == [
         "epoch 1/2",
         "epoch 2/2",
     ]
     caplog.clear()
     with caplog.at_level(logging.INFO, logger="ectskin.learn.engine"):
-        train("touch", tr, va, tmp_path / "c", profile="quick", epochs=2, progress=False)
+        train(
+            "touch", tr, va, tmp_path / "c", TrainConfig(profile="quick", epochs=2, progress=False)
+        )
     assert not [r for r in caplog.records if r.getMessage().startswith("epoch")]
 
 
@@ -438,7 +438,9 @@ def test_training_says_its_profile_and_warns_of_the_paper_profile_on_a_cpu(tmp_p
 
     tr, va = blobs(6, 20, seed=0), blobs(2, 20, seed=1)
     with caplog.at_level(logging.INFO, logger="ectskin.learn.train"):
-        train("touch", tr, va, tmp_path / "a", profile="paper", epochs=3, progress=False)
+        train(
+            "touch", tr, va, tmp_path / "a", TrainConfig(profile="paper", epochs=3, progress=False)
+        )
     text = "\n".join(r.getMessage() for r in caplog.records)
     assert "training touch with profile 'paper' (3 epochs, batch 256) on cpu" in text
     warning = [r for r in caplog.records if r.levelno == logging.WARNING]
@@ -446,6 +448,8 @@ def test_training_says_its_profile_and_warns_of_the_paper_profile_on_a_cpu(tmp_p
     assert "epoch 1 took" in text and "left for the other 2 epoch(s)" in text
     caplog.clear()
     with caplog.at_level(logging.INFO, logger="ectskin.learn.train"):
-        train("touch", tr, va, tmp_path / "b", profile="quick", epochs=1, progress=False)
+        train(
+            "touch", tr, va, tmp_path / "b", TrainConfig(profile="quick", epochs=1, progress=False)
+        )
     assert "with profile 'quick'" in caplog.text
     assert not [r for r in caplog.records if r.levelno == logging.WARNING]

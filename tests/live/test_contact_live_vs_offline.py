@@ -15,9 +15,9 @@ import math
 import numpy as np
 
 from ectskin.io.recording import Recording, Trial
-from ectskin.learn.contact_predict import ContactPredictor
+from ectskin.learn.predict import ContactPredictor
 from ectskin.learn.tasks import get_task
-from ectskin.learn.train import train
+from ectskin.learn.train import TrainConfig, train
 from ectskin.live import LiveEngine, ReplaySource
 
 WINDOW = 4
@@ -80,11 +80,13 @@ def test_live_contact_readings_equal_the_offline_predictor_on_the_same_windows(t
         data,
         data,
         tmp_path / "run",
-        profile="quick",
-        epochs=1,
-        progress=False,
-        settings={"samples_per_epoch": 128, "val_samples": 64},
-        model_options={"hidden": 16, "channels": 8},
+        TrainConfig(
+            profile="quick",
+            epochs=1,
+            progress=False,
+            settings={"samples_per_epoch": 128, "val_samples": 64},
+            model_options={"hidden": 16, "channels": 8},
+        ),
     )
     predictor = ContactPredictor.from_run(tmp_path / "run", layout=layout)
     assert predictor.window == WINDOW and predictor.faces == ["front", "back"]

@@ -16,7 +16,7 @@ import pytest
 from ectskin._check import EctskinError
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import default_layout
-from ectskin.learn.contact_predict import ContactReading, Finger
+from ectskin.learn.predict import ContactReading, FingerEstimate
 from ectskin.live import EctHead, LiveEngine, ReplaySource
 from ectskin.live.output import ECT_LEVELS, quantise
 
@@ -43,7 +43,7 @@ class FakeContact:
             raise RuntimeError("broken model")
         self.inputs.append(np.array(w))
         u = float(np.mean(w))
-        return ContactReading(1, 0.9, 0.05, (Finger("front", u, 50.0, 3.0, 0.7),))
+        return ContactReading(1, 0.9, 0.05, (FingerEstimate("front", u, 50.0, 3.0, 0.7),))
 
 
 class FakeTrack:

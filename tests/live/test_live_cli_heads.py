@@ -16,8 +16,8 @@ from ectskin.io.hdf5 import read_recording, write_recording
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import default_layout
 from ectskin.learn.checkpoint import save_checkpoint
-from ectskin.learn.contact_predict import ContactPredictor
 from ectskin.learn.models.contact import ContactNet, ContactNetConfig
+from ectskin.learn.predict import ContactPredictor
 
 LAYOUT = default_layout()
 P = LAYOUT.n_pairs
@@ -131,10 +131,10 @@ def test_cli_ect_every_must_be_positive(capsys):
 
 
 def test_status_line_names_each_finger():
-    from ectskin.learn.contact_predict import ContactReading, Finger
+    from ectskin.learn.predict import ContactReading, FingerEstimate
 
     two = ContactReading(
-        2, 0.99, 0.01, (Finger("front", 3.2, 40.6, 2.0, 0.8), Finger("back", -1, 99.5, 3, 1.25))
+        2, 0.99, 0.01, (FingerEstimate("front", 3.2, 40.6, 2.0, 0.8), FingerEstimate("back", -1, 99.5, 3, 1.25))
     )
     assert live_cmd._contact_text(two) == (
         "contact 2: front (3, 41) mm 0.80 N, back (-1, 100) mm 1.25 N hover 0.01"

@@ -15,9 +15,9 @@ import math
 import numpy as np
 
 from ectskin.io.calibration import relative_change, touch_reference
-from ectskin.learn.datasets import touch_dataset
+from ectskin.learn.data import touch_dataset
 from ectskin.learn.predict import TouchPredictor
-from ectskin.learn.train import train
+from ectskin.learn.train import TrainConfig, train
 from ectskin.live import LiveEngine, ReplaySource
 
 
@@ -26,7 +26,13 @@ def test_replay_through_the_engine_matches_offline_prediction_exactly(tmp_path, 
     rec = make_recording(n_frames=n, markers=False)
     assert rec.trials[0].name == "s0_rest"  # the rest state comes first, as it must live
     data = touch_dataset(rec)  # offline: Eq. 2 against the rest-state mean, float32
-    train("touch", data, data, tmp_path / "run", profile="quick", epochs=3, progress=False)
+    train(
+        "touch",
+        data,
+        data,
+        tmp_path / "run",
+        TrainConfig(profile="quick", epochs=3, progress=False),
+    )
     predictor = TouchPredictor.from_run(tmp_path / "run")
 
     engine = LiveEngine(

@@ -210,8 +210,7 @@ def run(args: argparse.Namespace) -> int:
         if args.touch_model or args.track_model or args.contact_model:
             # torch is imported only when a model is given: a run without models, and every
             # other `ectskin` command, starts without it
-            from ectskin.learn.contact_predict import ContactPredictor
-            from ectskin.learn.predict import TouchPredictor, TrackPredictor
+            from ectskin.learn.predict import ContactPredictor, TouchPredictor, TrackPredictor
             from ectskin.learn.threads import torch_threads
 
             stack.enter_context(torch_threads(args.threads))

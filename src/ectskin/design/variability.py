@@ -33,19 +33,21 @@ Steps (each cached under ``OUT``, so a stopped run resumes where it stopped):
    * ``finetune`` (recovery c): the nominal model fine-tuned on N labelled samples of the skin
      (N in ``finetune_frames``; drawn at random from its train-split trials, nominal
      reference, so N = 0 is the baseline), ``finetune_epochs`` epochs of Adam at
-     ``finetune_lr`` from the trained weights, the normalisation kept.
+     ``finetune_lr`` from the trained weights (the training loop of :mod:`ectskin.learn.engine`),
+     the normalisation kept.
 
    Touch: test accuracy; contact: ``loc_mm_mean`` (mm over the skin, frames with one finger).
    ``OUT/eval/<skin>.json`` per skin.
 5. ``OUT/variability.json``, the figures ``OUT/variability_curves.png`` (metric against the
    perturbation scale, per recovery) and ``OUT/variability_finetune.png`` (metric against N),
-   and ``OUT/variability.md``.
+   drawn by :mod:`ectskin.viz.variability`, and ``OUT/variability.md`` (its tables through the
+   report's :func:`~ectskin.report.render.markdown_table`).
 
 The perturbation of each skin is also measured: ``rest_deviation_pct``, the RMS over pairs of
 the relative change of its rest readout from the nominal one.
 
-Size: the study's steps, its evaluation matrix, its two figures and its report read one
-results document; apart they would each re-learn its shape.
+Size: the study's steps, its evaluation matrix and its report read one results document; apart
+they would each re-learn its shape.
 """
 
 from __future__ import annotations
@@ -71,11 +73,15 @@ from ectskin.io import Recording, read_recording, write_recording
 from ectskin.io.calibration import touch_reference
 from ectskin.layout import SensorLayout, default_layout
 from ectskin.learn.checkpoint import load_checkpoint
-from ectskin.learn.evaluate import read_run
+from ectskin.learn.data import SampleData
+from ectskin.learn.distributed import Dist
+from ectskin.learn.engine import Tensors, train_one_epoch
+from ectskin.learn.evaluate import Run, read_run
 from ectskin.learn.profiles import TrainSettings
 from ectskin.learn.tasks import EvalCase, get_task
 from ectskin.learn.threads import torch_threads
 from ectskin.learn.train import TrainConfig, train, train_from_recording
+from ectskin.report.render import markdown_table
 from ectskin.twin.fabrication import (
     FabricatedSkin,
     FabricationVariation,
@@ -85,6 +91,7 @@ from ectskin.twin.fabrication import (
     simulate_skin,
 )
 from ectskin.twin.protocol import Protocol
+from ectskin.viz.variability import plot_degradation, plot_finetune
 
 log = logging.getLogger(__name__)
 
@@ -321,25 +328,20 @@ def _train_dr(
     if done.exists():
         return run
     t = get_task(task)
-    parts = {"train": [], "val": []}
+    parts: dict[str, list[SampleData]] = {"train": [], "val": []}
     for rec in recs:
         ds = t.dataset(rec, reference=reference, **_dataset_options(task))
         for k in parts:
-            parts[k].append(ds.select(_group_ids(ds, split[k], rec)))
-    train_data = {k: concat_data(v) for k, v in parts.items()}
+            parts[k].append(_trials(ds, split[k], rec))
+    joined = {k: type(v[0]).concat(v) for k, v in parts.items()}
     names = {k: [f"{i}/{n}" for i in range(len(recs)) for n in split[k]] for k in parts}
     log.info("training %s on %d skins (domain randomisation)", task, len(recs))
     summary = train(
         task,
-        train_data["train"],
-        train_data["val"],
+        joined["train"],
+        joined["val"],
         run,
-        profile=_profile(task, config),
-        seed=config.seed,
-        resume=True,
-        epochs=config.epochs,
-        progress=config.progress,
-        threads=config.threads,
+        _train_config(task, config),
         split={**names, "test": [], "task": task, "data": "domain randomisation"},
     )
     write_json_atomic(done, summary)
@@ -351,45 +353,10 @@ def _dataset_options(task: str) -> dict[str, Any]:
     return {"window": TrainConfig().window} if task == "contact" else {}
 
 
-def _group_ids(ds: Any, names: list[str], rec: Recording) -> np.ndarray:
-    index = {n: i for i, n in enumerate(ds.group_names)}
-    missing = [n for n in names if n not in index]
-    if missing:
-        raise EctskinError(
-            f"recording {rec.source or ''}: lacks trial(s) {missing[:3]} of the nominal split; "
-            "every skin must run the same protocol"
-        )
-    return np.array([index[n] for n in names], dtype=np.int64)
-
-
-def concat_data(parts: list[Any]) -> Any:
-    """One data set (TouchData or ContactData) of several with the same channels: sample arrays
-    concatenated, groups renumbered, group names kept (made unique with a skin index)."""
-    first = parts[0]
-    per_sample = [
-        k
-        for k, v in vars(first).items()
-        if isinstance(v, np.ndarray) and v.shape[:1] == first.x.shape[:1]
-    ]
-    per_group = ["group_region"]
-    for p in parts[1:]:
-        if p.pair_names != first.pair_names or getattr(p, "states", None) != getattr(
-            first, "states", None
-        ):
-            raise EctskinError(
-                "concat_data: the data sets differ in their channels or inflation states"
-            )
-    changes: dict[str, Any] = {}
-    for k in per_sample:
-        if k == "group":
-            offsets = np.cumsum([0] + [p.n_groups for p in parts[:-1]])
-            changes[k] = np.concatenate([p.group + o for p, o in zip(parts, offsets)])
-        else:
-            changes[k] = np.concatenate([getattr(p, k) for p in parts])
-    for k in per_group:
-        changes[k] = np.concatenate([getattr(p, k) for p in parts])
-    changes["group_names"] = [f"{i}/{n}" for i, p in enumerate(parts) for n in p.group_names]
-    return replace(first, **changes)
+def _trials(ds: SampleData, names: list[str], rec: Recording) -> SampleData:
+    """The samples of the trials ``names`` of ``ds`` (built from ``rec``)."""
+    source = f"recording {rec.source or ''} (every skin must run the nominal protocol)"
+    return ds.select(ds.group_ids(names, source=source))
 
 
 # ----------------------------------------------------------------------------- evaluation
@@ -453,7 +420,7 @@ def score(
     frame calibrated against ``reference`` (n_pairs,) pF."""
     t = get_task(task)
     ds = t.dataset(rec, reference=reference, **t.dataset_options(model_config))
-    test = ds.select(_group_ids(ds, names, rec))
+    test = _trials(ds, names, rec)
     pred = t.predict(model, test)
     m = t.test_metrics(EvalCase(data=ds, test=test, pred=pred, recording=rec, config=model_config))
     v = m[TASKS[task]]
@@ -462,7 +429,7 @@ def score(
 
 def _finetuned_score(
     task: str,
-    run: Any,
+    run: Run,
     rec: Recording,
     reference: np.ndarray,
     n: int,
@@ -474,13 +441,13 @@ def _finetuned_score(
         return score(task, run.model, run.config, rec, reference, names)
     t = get_task(task)
     ds = t.dataset(rec, reference=reference, **t.dataset_options(run.config))
-    pool = ds.select(_group_ids(ds, run.split["train"], rec))
+    pool = _trials(ds, run.split["train"], rec)
     rng = np.random.default_rng([config.seed, 17, n, sum(map(ord, case.name))])
-    take = rng.choice(pool.x.shape[0], size=min(n, pool.x.shape[0]), replace=False)
+    take = rng.choice(pool.n_samples, size=min(n, pool.n_samples), replace=False)
     model = finetune(
         task,
         run.model,
-        _subset(pool, np.sort(take)),
+        pool.take(np.sort(take)),
         epochs=config.finetune_epochs,
         lr=config.finetune_lr,
         seed=config.seed,
@@ -488,21 +455,10 @@ def _finetuned_score(
     return score(task, model, run.config, rec, reference, names)
 
 
-def _subset(data: Any, rows: np.ndarray) -> Any:
-    """``data`` cut to the samples ``rows`` (per-sample arrays only; groups kept)."""
-    n = data.x.shape[0]
-    changes = {
-        k: v[rows]
-        for k, v in vars(data).items()
-        if isinstance(v, np.ndarray) and v.shape[:1] == (n,)
-    }
-    return replace(data, **changes)
-
-
 def finetune(
     task: str,
     model: torch.nn.Module,
-    data: Any,
+    data: SampleData,
     *,
     epochs: int,
     lr: float,
@@ -510,24 +466,20 @@ def finetune(
     batch_size: int = 32,
 ) -> torch.nn.Module:
     """A copy of ``model`` trained ``epochs`` more epochs on ``data`` with Adam at ``lr`` (the
-    task's training loss, no augmentation; the model's normalisation is kept)."""
+    task's training loss, no augmentation; the model's normalisation is kept), one
+    :func:`~ectskin.learn.engine.train_one_epoch` per epoch on the CPU over a permutation drawn
+    from a generator seeded by ``seed``."""
     t = get_task(task)
     model = copy.deepcopy(model)
     settings = TrainSettings(epochs=max(epochs, 1), batch_size=batch_size, lr=lr)
-    criterion = t.criterion(model, settings, data, torch.device("cpu"))
-    tensors = t.tensors(data, torch.device("cpu"))
+    cpu = Dist()
+    criterion = t.criterion(model, settings, data, cpu.device)
+    tensors: Tensors = t.tensors(data, cpu.device)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     g = torch.Generator().manual_seed(seed)
-    model.train()
-    for _ in range(epochs):
+    for epoch in range(epochs):
         perm = torch.randperm(tensors.n, generator=g)
-        for start in range(0, tensors.n, batch_size):
-            loss = criterion.loss(model, tensors.batch(perm[start : start + batch_size]), None)
-            if not torch.isfinite(loss):
-                raise EctskinError(f"fine-tuning {task}: the loss is not finite ({loss.item()})")
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
+        train_one_epoch(model, criterion, opt, tensors, perm, batch_size, epoch=epoch, d=cpu)
     model.eval()
     return model
 
@@ -574,75 +526,6 @@ def _figures(out: Path, results: dict[str, Any], config: VariabilityConfig) -> d
     return {name: caption for name, (_, caption) in figs.items()}
 
 
-_LABELS = {
-    "baseline": "nominal model, nominal reference",
-    "own_reference": "(b) own rest reference",
-    "domain_randomisation": "(a) domain randomisation",
-    "dr_own_reference": "(a) + (b)",
-}
-_YLABEL = {"touch": "touch accuracy", "contact": "contact loc_mm_mean (mm)"}
-
-
-def plot_degradation(results: dict[str, Any]) -> Any:
-    """Touch accuracy and contact error of every evaluation against the skins' perturbation
-    scale (the nominal skin at 0; fault cases as separate markers at the right)."""
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    pts = sorted(
-        ((r["scale"], r) for r in results.values() if r["role"] in ("nominal", "sampled")),
-        key=lambda p: p[0],
-    )
-    faults = [(k, r) for k, r in results.items() if r["role"] == "fault"]
-    x_fault = (pts[-1][0] if pts else 1.0) + 0.5
-    for ax, task in zip(axes, TASKS):
-        x = [p[0] for p in pts]
-        for name, label in _LABELS.items():
-            y = [np.nan if p[1][task][name] is None else p[1][task][name] for p in pts]
-            line = ax.plot(x, y, "o-", label=label)[0]
-            for j, (_, r) in enumerate(faults):
-                v = r[task][name]
-                if v is not None:
-                    ax.plot(x_fault + 0.25 * j, v, "s", color=line.get_color())
-        for j, (fname, _) in enumerate(faults):
-            ax.annotate(
-                fname,
-                (x_fault + 0.25 * j, 0),
-                xycoords=("data", "axes fraction"),
-                ha="center",
-                va="bottom",
-                fontsize=8,
-            )
-        ax.set_xlabel("perturbation scale (× the assumed spreads)")
-        ax.set_ylabel(_YLABEL[task])
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    fig.suptitle("Models trained on the nominal skin, on fabricated skins")
-    fig.tight_layout()
-    return fig
-
-
-def plot_finetune(results: dict[str, Any]) -> Any:
-    """Each skin's metric against the number N of labelled frames fine-tuned on."""
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    for ax, task in zip(axes, TASKS):
-        for name, r in results.items():
-            ft = r[task]["finetune"]
-            ns = sorted(int(k) for k in ft)
-            y = [np.nan if ft[str(n)] is None else ft[str(n)] for n in ns]
-            ax.plot(ns, y, "o-", label=name, alpha=0.9)
-        ax.set_xscale("symlog", linthresh=100)
-        ax.set_xlabel("labelled frames of the new skin N")
-        ax.set_ylabel(_YLABEL[task])
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    fig.suptitle("Fine-tuning the nominal model on N frames of each skin")
-    fig.tight_layout()
-    return fig
-
-
 def _fmt(v: Any, task: str) -> str:
     if v is None:
         return "–"
@@ -669,14 +552,14 @@ def report_markdown(doc: dict[str, Any]) -> str:
         ft_keys = list(first["finetune"].keys())
         head = ["skin", "scale", "rest dev. %"] + [e[0] for e in EVALUATIONS]
         head += [f"finetune N={k}" for k in ft_keys if k != "0"]
-        lines += [f"## {task}: {metric}", "", "| " + " | ".join(head) + " |"]
-        lines.append("|" + "---|" * len(head))
+        rows = []
         for name, r in doc["skins"].items():
             dev = r["rest_deviation_pct"]
             row = [name, f"{r['scale']:g}", "–" if dev is None else f"{dev:.1f}"]
             row += [_fmt(r[task][e[0]], task) for e in EVALUATIONS]
             row += [_fmt(r[task]["finetune"][k], task) for k in ft_keys if k != "0"]
-            lines.append("| " + " | ".join(row) + " |")
+            rows.append(row)
+        lines += [f"## {task}: {metric}", ""] + markdown_table(head, rows)
         mean = doc["summary"][task]["sampled_mean"]
         lines += [
             "",

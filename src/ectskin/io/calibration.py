@@ -8,7 +8,7 @@ every layer above (twin characterisation, learning, live) uses it.
 The paper calibrates every readout against a *reference state*: the uninflated, untouched
 manipulator for touch recognition, and the first frame of each trajectory for deformation tracking
 ("prior knowledge", §4.2). This module holds Eq. 2 itself and the choice of the touch reference;
-the tracking reference (first frame per trajectory) is taken in :mod:`ectskin.learn.datasets`.
+the tracking reference (first frame per trajectory) is taken in :mod:`ectskin.learn.data`.
 
 A reference is checked before it is divided by: a zero, tiny or non-finite c_0 is an
 :class:`~ectskin.EctskinError` naming the channel, and a non-finite frame is an error naming the

@@ -57,7 +57,7 @@ import numpy as np
 from ectskin._check import EctskinError, check_option
 from ectskin._files import atomic_write, read_json_object, write_json_atomic
 from ectskin.learn.checkpoint import check_layout
-from ectskin.learn.datasets import TouchData
+from ectskin.learn.data.touch import TouchData
 
 log = logging.getLogger(__name__)
 

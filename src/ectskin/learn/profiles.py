@@ -1,7 +1,10 @@
-"""Named training profiles: the optimisation settings and the touch recipe of each task.
+"""Named training profiles: the optimisation settings and the touch recipe of each task, and
+:class:`TrainConfig`, how a run trains.
 
-:data:`PROFILES` maps profile → task → :class:`TrainSettings`; :func:`profile_settings` picks one
-and applies overrides, checking every field at the door.
+:data:`PROFILES` maps profile → task → :class:`TrainSettings`; :func:`profile_settings` picks
+one and applies overrides, checking every field at the door. :class:`TrainConfig` names the
+profile, its overrides and the run's other options (seed, device, data-set options, model
+choice); it is what :func:`ectskin.learn.train.train` and ``train_from_recording`` take.
 
 * ``paper``: the paper's settings (§4): Adam, lr 1e-3 divided by 1.2 every 15 epochs (StepLR,
   gamma 1/1.2); touch 100 epochs of batch 256, track 150 epochs of batch 255; the weights with
@@ -148,6 +151,63 @@ def profile_settings(task: str, profile: str = "paper", **overrides: Any) -> Tra
             f"{settings.label_smoothing!r} for {task!r}"
         )
     return settings
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """How :func:`~ectskin.learn.train.train` and
+    :func:`~ectskin.learn.train.train_from_recording` train.
+
+    profile : "paper", "quick" or (touch only) "robust" (:data:`PROFILES`); ``epochs``,
+        ``batch_size`` and ``settings`` (any :class:`TrainSettings` field) override it. The
+        default, "paper", is meant for a GPU: on a CPU training warns so at the start and logs
+        the time left after its first epoch.
+    seed : seeds the trial split (unless ``split_seed``), model initialisation, epoch
+        permutations, dropout and augmentation.
+    window, prior : the data set (frames per window; prior knowledge); read by
+        ``train_from_recording`` only (``train`` takes the data sets built).
+    resume : continue the run in the output folder (same settings and data required); False
+        starts over.
+    device : "cpu", "cuda", "cuda:1"...; default CUDA when available (per rank under torchrun).
+    progress : progress bars on a terminal, one log line per epoch otherwise.
+    counts : trials per split (train, val, test), scaled to the data; default the task's
+        (the paper's 125/32/32 touch, 108/18/20 tracking trials); ``train_from_recording`` only.
+    split_seed : the seed of the trial split (default ``seed``); ``train_from_recording`` only.
+    model_options : model hyper-parameters (e.g. ``{"d_model": 32}``); the shape fields come
+        from the data.
+    threads : torch CPU threads while training (:mod:`ectskin.learn.threads`: an int, "auto");
+        None: :data:`~ectskin.learn.threads.TRAIN_DEFAULT_THREADS`. Ignored on CUDA. The
+        classical candidates use as many native threads.
+    model : touch only: "mlp" (the paper's TouchMLP, default), "auto" (every candidate, the
+        best on validation selected) or one classical candidate
+        (:data:`~ectskin.learn.candidates.TOUCH_MODELS`, see :mod:`ectskin.learn.touch_choice`).
+    settings : overrides of any :class:`TrainSettings` field (e.g. ``{"step_size": 2}``).
+    """
+
+    profile: str = "paper"
+    seed: int = 0
+    epochs: int | None = None
+    batch_size: int | None = None
+    window: int = 10
+    prior: bool = True
+    resume: bool = True
+    device: str | None = None
+    progress: bool = True
+    counts: tuple[float, float, float] | None = None
+    split_seed: int | None = None
+    model_options: dict[str, Any] | None = None
+    threads: int | str | None = None
+    model: str = "mlp"
+    settings: dict[str, Any] | None = None
+
+    def settings_for(self, task: str) -> TrainSettings:
+        """The :class:`TrainSettings` of :attr:`profile` for ``task`` with :attr:`settings`,
+        :attr:`epochs` and :attr:`batch_size` applied (checked: :func:`profile_settings`)."""
+        overrides = dict(self.settings or {})
+        for name in ("epochs", "batch_size"):
+            if getattr(self, name) is not None:
+                overrides[name] = getattr(self, name)
+        return profile_settings(task, self.profile, **overrides)
 
 
 def _check_settings(settings: TrainSettings) -> None:

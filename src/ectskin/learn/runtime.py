@@ -1,16 +1,15 @@
 """Single-frame inference with ONNX Runtime: the live engine's fast path.
 
 A live engine answers one frame at a time. Run eagerly, PyTorch spends most of a small model's
-time dispatching its ~100 operators, not computing: the C2DT takes about 2 ms a frame on one
-core, ContactNet 0.6 ms, TouchMLP 0.2 ms. :class:`OnnxModel` exports a trained model (with its
-output map, e.g. softmax or ContactNet's decode) once, for a batch of one, with
-``torch.onnx.export`` and runs it in an ONNX Runtime session on one thread, where the same
-C2DT takes about 0.3 ms (``benchmarks/bench_live.py``; figures in BENCHMARKS.md).
+time dispatching its ~100 operators, not computing. :class:`OnnxModel` exports a trained model
+(with its output map, e.g. softmax or ContactNet's decode) once, for a batch of one, with
+``torch.onnx.export`` and runs it in an ONNX Runtime session on one thread, which answers a
+frame several times faster (``benchmarks/bench_live.py``; the figures are in BENCHMARKS.md).
 
 The export is checked before it is used: on fixed random inputs it must give what the PyTorch
-model gives, to ``rtol = atol = 1e-4`` (float32 kernels differ in the last bits; measured
-differences are ~1e-6 of the output), else :class:`EctskinError`. Batches stay on PyTorch
-(:func:`ectskin.learn.predict.forward_batches`).
+model gives, to ``rtol = atol = 1e-4`` (float32 kernels differ in the last bits), else
+:class:`EctskinError`. Batches stay on PyTorch
+(:func:`ectskin.learn.predict.base.forward_batches`).
 
 ONNX Runtime, ``onnx`` and ``onnxscript`` (the exporter's) come with the ``live`` extra;
 :func:`available` says whether they import.

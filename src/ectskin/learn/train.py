@@ -2,14 +2,16 @@
 
 * :func:`train_from_recording`: everything ``ectskin train TASK DATA --out RUN`` does, from a
   recording file, with a :class:`TrainConfig`.
-* :func:`train`: the same on in-memory splits (TouchData / TrackData of
-  :mod:`ectskin.learn.datasets`).
+* :func:`train`: the same on in-memory splits (the task's data sets, :mod:`ectskin.learn.data`),
+  with the same :class:`TrainConfig`.
 
 Both write a run directory (files: :mod:`ectskin.learn.runfiles`). The task
 (:mod:`ectskin.learn.tasks`) builds the model and its criterion; the profile
 (:mod:`ectskin.learn.profiles`) gives the optimisation settings: Adam, StepLR, the weights of the
 best validation epoch kept (lowest loss, or best metric for the ``robust`` recipe). The epoch
-loops are :mod:`ectskin.learn.engine`.
+loops are :mod:`ectskin.learn.engine`; the touch model choice (``TrainConfig.model``,
+``--model``: the paper's TouchMLP by default, or classical candidates) is
+:mod:`ectskin.learn.touch_choice`.
 
 Determinism and resume: every random draw of an epoch is seeded from ``(seed, epoch, rank)``
 (see :mod:`ectskin.learn.engine`), so a run that is stopped and resumed from ``last.pt``
@@ -23,17 +25,6 @@ Distributed data parallel: the same :func:`train` runs unchanged under
 ``batch_size`` is divisible by N). Only rank 0 writes files and shows progress. Each rank
 augments its own shard (mixup pairs frames within the rank's batch).
 
-Touch model choice (``model=``, ``--model``; :mod:`ectskin.learn.candidates`): "mlp" (default)
-trains the paper's TouchMLP as above and nothing else; "auto" trains it, then fits the classical
-candidates on the same training split, scores every candidate on the validation split and writes
-``candidates.json`` (and ``model.skops`` when a classical model is selected); a classical name
-("gbt", "random_forest", "logreg", "knn") fits that model alone (no MLP). The choice is recorded in
-``config.json`` (``model_choice``): a run is resumed only with the same choice. Resuming an "auto"
-run refits the classical candidates (seeded: the same models) and selects again. Only rank 0 fits
-them.
-
-Size: the public entry points and the staged steps of one run (set-up, header, epochs,
-summary) share the run's ``_Job`` state; split across modules they would pass it around.
 """
 
 from __future__ import annotations
@@ -49,25 +40,12 @@ import numpy as np
 import torch
 from torch import nn
 
-from ectskin._check import EctskinError, check_option
-from ectskin._files import read_json_object, to_jsonable
+from ectskin._check import EctskinError
+from ectskin._files import to_jsonable
 from ectskin.io import read_recording
-from ectskin.learn.candidates import (
-    CANDIDATES_FILE,
-    CLASSICAL,
-    CLASSICAL_FILE,
-    TOUCH_MODELS,
-    CandidateResult,
-    ClassicalModel,
-    accuracy,
-    candidate_names,
-    fit_candidates,
-    read_candidates,
-    save_classical,
-    select_candidate,
-    write_candidates,
-)
-from ectskin.learn.checkpoint import load_checkpoint, save_checkpoint
+from ectskin.learn.candidates import CLASSICAL
+from ectskin.learn.checkpoint import save_checkpoint
+from ectskin.learn.data import SampleData
 from ectskin.learn.distributed import Dist, barrier, setup, wrap
 from ectskin.learn.engine import (
     Progress,
@@ -79,7 +57,7 @@ from ectskin.learn.engine import (
     train_one_epoch,
     val_indices,
 )
-from ectskin.learn.profiles import RECIPE_FIELDS, TrainSettings, profile_settings
+from ectskin.learn.profiles import RECIPE_FIELDS, TrainConfig, TrainSettings
 from ectskin.learn.runfiles import (
     RunState,
     check_run_folder,
@@ -92,6 +70,12 @@ from ectskin.learn.runfiles import (
 from ectskin.learn.splits import split_groups, split_names
 from ectskin.learn.tasks import Criterion, Task, get_task
 from ectskin.learn.threads import TRAIN_DEFAULT_THREADS, resolve_threads, torch_threads
+from ectskin.learn.touch_choice import (
+    check_model_choice,
+    choose_after_mlp,
+    fit_classical,
+    remove_stale,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -101,50 +85,8 @@ __all__ = ["TrainConfig", "train", "train_from_recording"]
 GPU_PROFILES = ("paper",)
 
 
-@dataclass(frozen=True)
-class TrainConfig:
-    """How :func:`train_from_recording` trains.
-
-    profile : "paper", "quick" or (touch only) "robust" (:data:`~ectskin.learn.profiles.PROFILES`);
-        ``epochs`` and ``batch_size`` override it. The default, "paper", is meant for a GPU: on
-        a CPU training warns so at the start and logs the time left after its first epoch.
-    seed : seeds the trial split (unless ``split_seed``), model initialisation, epoch
-        permutations, dropout and augmentation.
-    window, prior : the tracking data set (frames per window; prior knowledge); track only.
-    resume : continue the run in the output folder (same settings and data required); False
-        starts over.
-    device : "cpu", "cuda", "cuda:1"...; default CUDA when available (per rank under torchrun).
-    progress : progress bars on a terminal, one log line per epoch otherwise.
-    counts : trials per split (train, val, test), scaled to the data; default the task's
-        (the paper's 125/32/32 touch, 108/18/20 tracking trials).
-    model_options : model hyper-parameters (e.g. ``{"d_model": 32}``); the shape fields come
-        from the data.
-    threads : torch CPU threads while training (:mod:`ectskin.learn.threads`: an int, "auto");
-        None: :data:`~ectskin.learn.threads.TRAIN_DEFAULT_THREADS`. Ignored on CUDA. The
-        classical candidates use as many native threads.
-    model : touch only: "mlp" (the paper's TouchMLP, default), "auto" (every candidate, the
-        best on validation selected) or one classical candidate
-        (:data:`~ectskin.learn.candidates.TOUCH_MODELS`, see the module docstring).
-    """
-
-    profile: str = "paper"
-    seed: int = 0
-    epochs: int | None = None
-    batch_size: int | None = None
-    window: int = 10
-    prior: bool = True
-    resume: bool = True
-    device: str | None = None
-    progress: bool = True
-    counts: tuple[float, float, float] | None = None
-    split_seed: int | None = None
-    model_options: dict[str, Any] | None = None
-    threads: int | str | None = None
-    model: str = "mlp"
-
-
 def train_from_recording(
-    task: str, data_path: str | Path, out: str | Path, config: TrainConfig = TrainConfig()
+    task: str, data_path: str | Path, out: str | Path, config: TrainConfig | None = None
 ) -> dict[str, Any]:
     """Train ``task`` on a recording file and write the run directory ``out``.
 
@@ -156,11 +98,11 @@ def train_from_recording(
     :func:`train`. An existing ``out`` must be a run directory (resumed) unless
     ``config.resume`` is False. Runs unchanged under ``torchrun`` (every rank reads the data;
     only rank 0 writes). Returns train's summary plus ``n_train``/``n_val``/``n_test`` samples.
+    ``config`` None: ``TrainConfig()``.
     """
+    config = TrainConfig() if config is None else config
     t = get_task(task)
-    overrides = {"epochs": config.epochs, "batch_size": config.batch_size}
-    # a bad profile or setting fails before the data is read
-    profile_settings(task, config.profile, **{k: v for k, v in overrides.items() if v is not None})
+    config.settings_for(task)  # a bad profile or setting fails before the data is read
     t.check_options(window=config.window, prior=config.prior)
     resolve_threads(config.threads)
     check_run_folder(out, resume=config.resume)
@@ -178,63 +120,37 @@ def train_from_recording(
         "counts": [float(c) for c in counts],
         "split_seed": split_seed,
     }
-    summary = train(
-        task,
-        parts["train"],
-        parts["val"],
-        out,
-        profile=config.profile,
-        seed=config.seed,
-        resume=config.resume,
-        epochs=config.epochs,
-        batch_size=config.batch_size,
-        device=config.device,
-        progress=config.progress,
-        model_options=config.model_options,
-        split=split,
-        threads=config.threads,
-        model=config.model,
-    )
+    summary = train(task, parts["train"], parts["val"], out, config, split=split)
     summary.update({f"n_{k}": int(p.n_samples) for k, p in parts.items()})
     return summary
 
 
 def train(
     task: str,
-    train_data: Any,
-    val_data: Any,
+    train_data: SampleData,
+    val_data: SampleData,
     out_dir: str | Path,
+    config: TrainConfig | None = None,
     *,
-    profile: str = "paper",
-    seed: int = 0,
-    resume: bool = True,
-    epochs: int | None = None,
-    batch_size: int | None = None,
-    device: str | torch.device | None = None,
-    progress: bool = True,
-    model_options: dict[str, Any] | None = None,
     split: dict[str, Any] | None = None,
-    settings: dict[str, Any] | None = None,
-    threads: int | str | None = None,
-    model: str = "mlp",
 ) -> dict[str, Any]:
-    """Train the model of ``task`` ("touch": TouchMLP, "track": C2DT) and write ``out_dir``.
+    """Train the model of ``task`` ("touch": TouchMLP, "track": C2DT, "contact": ContactNet) as
+    ``config`` says and write ``out_dir``.
 
     Parameters
     ----------
-    train_data, val_data : the task's data (TouchData for "touch", TrackData for "track").
-    out_dir : run directory (created). If it holds ``last.pt`` and ``resume`` is true, training
-        continues from it (same settings and data required); ``epochs`` may be raised to extend
-        a finished run. With ``resume=False`` an existing run is overwritten.
-    profile : "paper", "quick" or (touch only) "robust"; ``epochs``, ``batch_size`` and
-        ``settings`` (any :class:`~ectskin.learn.profiles.TrainSettings` field) override it.
-        The robust recipe's inflation shift needs two no-contact trials (``group_region`` 0)
-        in ``train_data``; with fewer it is skipped with a warning, the rest of the recipe
-        applies (config.json's ``recipe``: ``inflation_shift_states`` 0).
-    seed, device, progress, model_options, threads : as in :class:`TrainConfig`.
+    train_data, val_data : the task's data (TouchData for "touch", TrackData for "track",
+        ContactData for "contact").
+    out_dir : run directory (created). If it holds ``last.pt`` and ``config.resume`` is true,
+        training continues from it (same settings and data required); ``config.epochs`` may be
+        raised to extend a finished run. With ``resume=False`` an existing run is overwritten.
+    config : :class:`TrainConfig` (None: the default): the profile and its overrides (the robust recipe's inflation
+        shift needs two no-contact trials (``group_region`` 0) in ``train_data``; with fewer it
+        is skipped with a warning, the rest of the recipe applies, config.json's ``recipe``:
+        ``inflation_shift_states`` 0), seed, device, progress, model options, threads and the
+        touch model choice (:mod:`ectskin.learn.touch_choice`). Its data-set fields (``window``,
+        ``prior``, ``counts``, ``split_seed``) are not read: the data sets are built.
     split : trial names per split to record in ``split.json`` (default: the train/val names).
-    model : "mlp", "auto" or a classical candidate (touch only; see the module docstring and
-        :mod:`ectskin.learn.candidates`).
 
     Returns a summary dict: best_epoch (1-based), best_val_loss, best_val_metric, metric
     (its name), select (the rule that chose best_epoch), recipe (as in config.json), epochs,
@@ -243,13 +159,10 @@ def train(
     selected_because and candidates ({name: validation accuracy}); a classical model alone has
     no epochs (best_val_metric is its validation accuracy).
     """
+    config = TrainConfig() if config is None else config
     t = get_task(task)
-    check_model_choice(t, model, out_dir, resume=resume)
-    overrides = dict(settings or {})
-    overrides.update(
-        {k: v for k, v in (("epochs", epochs), ("batch_size", batch_size)) if v is not None}
-    )
-    s = profile_settings(task, profile, **overrides)
+    check_model_choice(t, config.model, out_dir, resume=config.resume)
+    s = config.settings_for(task)
     t.check_data(train_data, "train_data")
     t.check_data(val_data, "val_data")
     tr_shape, va_shape = train_data.x.shape[1:], val_data.x.shape[1:]
@@ -257,207 +170,35 @@ def train(
         raise EctskinError(
             f"train_data and val_data disagree: x samples of shape {tr_shape} vs {va_shape}"
         )
-    n_threads = TRAIN_DEFAULT_THREADS if threads is None else threads
+    n_threads = TRAIN_DEFAULT_THREADS if config.threads is None else config.threads
     resolve_threads(n_threads)  # an invalid value fails before the process group is set up
-    d = setup(device)
-    job = _Job(
-        t, s, profile, int(seed), resume, d, progress, model_options, split, Path(out_dir), model
-    )
-    if d.main and not resume:
-        _remove_stale(job.out_dir, model)
+    d = setup(config.device)
+    out = Path(out_dir)
+    job = _Job(t, s, config, int(config.seed), d, split, out)
+    if d.main and not config.resume:
+        remove_stale(out, config.model)
     with torch_threads(n_threads if d.device.type == "cpu" else None) as used_threads:
         native = used_threads if d.device.type == "cpu" else resolve_threads(n_threads)
-        if model in CLASSICAL:
-            return _train_classical(job, train_data, val_data, native)
+        if config.model in CLASSICAL:
+            return fit_classical(t, config, out, train_data, val_data, native, d=d, split=split)
         summary = _train(job, train_data, val_data)
-        if model == "auto" and d.main:
-            summary.update(_choose(job, train_data, val_data, summary, native))
+        if config.model == "auto" and d.main:
+            summary.update(choose_after_mlp(t, config, out, train_data, val_data, summary, native))
         return summary
-
-
-# ============================================================================ model choice
-def check_model_choice(task: Task, model: str, out: str | Path, *, resume: bool) -> None:
-    """Refuse a model choice the task does not have ("mlp" only for tracking) or, when resuming,
-    one other than the run's own (config.json's ``model_choice``; "mlp" when absent)."""
-    check_option("model", model, TOUCH_MODELS)
-    if task.name != "touch" and model != "mlp":
-        raise EctskinError(
-            f"--model applies to 'touch' only: {task.name!r} trains its paper model, got "
-            f"model={model!r}"
-        )
-    path = Path(out) / "config.json"
-    if not (resume and path.is_file()):
-        return
-    before = read_json_object(path, "run config").get("model_choice", "mlp")
-    if before != model:
-        raise EctskinError(
-            f"{path}: the run in this folder was trained with --model {before}, not --model "
-            f"{model}; use another output folder, or start over with --overwrite"
-        )
-
-
-def _remove_stale(out: Path, model: str) -> None:
-    """Starting over (``resume=False``): remove the files of an earlier run that this one would
-    not replace, so that no earlier selection or model survives beside the new one."""
-    stale = [CANDIDATES_FILE, CLASSICAL_FILE]
-    if model in CLASSICAL:
-        stale += ["model.pt", "last.pt", "metrics.csv"]  # no MLP in this run
-    gone = [out / n for n in stale if (out / n).is_file()]
-    for p in gone:
-        p.unlink()
-    if gone:
-        logger.warning("starting over (--overwrite): removed %s", ", ".join(str(p) for p in gone))
-
-
-def _fingerprints(train_data: Any, val_data: Any) -> dict[str, str]:
-    return {
-        "train_fingerprint": fingerprint(train_data.x, train_data.y),
-        "val_fingerprint": fingerprint(val_data.x, val_data.y),
-    }
-
-
-def _choose(
-    job: _Job, train_data: Any, val_data: Any, summary: dict[str, Any], threads: int | None
-) -> dict[str, Any]:
-    """``model="auto"`` after the MLP is trained (rank 0): the MLP's kept weights and every
-    classical candidate scored on the whole validation split; the best selected and committed."""
-    mlp, mlp_config, _ = load_checkpoint(job.out_dir / "model.pt")
-    mlp_acc = accuracy(job.task.predict(mlp, val_data), val_data.y)
-    logger.info("touch candidate mlp: validation accuracy %.4f", mlp_acc)
-    names = tuple(n for n in candidate_names("auto") if n != "mlp")
-    results, models = fit_candidates(names, train_data, val_data, seed=job.seed, threads=threads)
-    results = {
-        "mlp": CandidateResult(
-            "mlp",
-            mlp_acc,
-            float(summary["seconds_total"]),
-            int(train_data.x.shape[0]),
-            {"profile": job.profile, "best_epoch": summary["best_epoch"], **asdict(mlp_config)},
-        ),
-        **results,
-    }
-    return _commit(job, train_data, val_data, results, models)
-
-
-def _train_classical(
-    job: _Job, train_data: Any, val_data: Any, threads: int | None
-) -> dict[str, Any]:
-    """``model`` = one classical candidate: fit it alone (rank 0) and commit it; a finished run
-    with the same seed and data is left as it is."""
-    d, out, name = job.d, job.out_dir, job.model_choice
-    t0 = time.perf_counter()
-    if d.main:
-        done = read_candidates(out) if job.resume else None
-        fps = _fingerprints(train_data, val_data)
-        if done is not None:
-            same = done.get("seed") == job.seed and all(done.get(k) == v for k, v in fps.items())
-            if not same:
-                raise EctskinError(
-                    f"{out / CANDIDATES_FILE}: the run was fit with another seed or other data; "
-                    "use another output folder, or start over with --overwrite"
-                )
-            logger.info("%s: %s already fit; nothing to do", out / CANDIDATES_FILE, name)
-            return _classical_summary(job, done, time.perf_counter() - t0)
-        out.mkdir(parents=True, exist_ok=True)
-        header = {
-            "task": job.task.name,
-            "model_choice": name,
-            "seed": job.seed,
-            "n_train": int(train_data.x.shape[0]),
-            "n_val": int(val_data.x.shape[0]),
-            "pair_names": list(getattr(train_data, "pair_names", []) or []),
-            "data_fingerprint": fps["train_fingerprint"],
-        }
-        write_run_config(out / "config.json", header)
-        split = job.split or {
-            "train": split_names_of(train_data),
-            "val": split_names_of(val_data),
-        }
-        write_run_config(out / "split.json", split)
-        results, models = fit_candidates(
-            (name,), train_data, val_data, seed=job.seed, threads=threads
-        )
-        _commit(job, train_data, val_data, results, models)
-    barrier(d)
-    return _classical_summary(job, read_candidates(out), time.perf_counter() - t0)
-
-
-def _commit(
-    job: _Job,
-    train_data: Any,
-    val_data: Any,
-    results: dict[str, CandidateResult],
-    models: dict[str, ClassicalModel],
-) -> dict[str, Any]:
-    """Select among ``results`` and write the selection: candidates.json is removed first and
-    written last (atomically), so a run interrupted in between has no selection, never one that
-    names another model than model.skops holds."""
-    out = job.out_dir
-    name, why = select_candidate({k: r.val_accuracy for k, r in results.items()})
-    (out / CANDIDATES_FILE).unlink(missing_ok=True)
-    if name in models:
-        save_classical(out / CLASSICAL_FILE, models[name])
-    else:
-        (out / CLASSICAL_FILE).unlink(missing_ok=True)  # an earlier selection's
-    doc = {
-        "model": job.model_choice,
-        "selected": name,
-        "selected_because": why,
-        "metric": "validation accuracy (the whole validation split)",
-        "tie_order": list(candidate_names("auto")),
-        "seed": job.seed,
-        **_fingerprints(train_data, val_data),
-        "n_train": int(train_data.x.shape[0]),
-        "n_val": int(val_data.x.shape[0]),
-        "candidates": {k: r.to_json() for k, r in results.items()},
-    }
-    write_candidates(out, doc)
-    logger.info("touch model: selected %s (%s)", name, why)
-    return {
-        "model_choice": job.model_choice,
-        "selected_model": name,
-        "selected_because": why,
-        "candidates": {k: r.val_accuracy for k, r in results.items()},
-    }
-
-
-def _classical_summary(job: _Job, doc: dict[str, Any] | None, seconds: float) -> dict[str, Any]:
-    """train's return value for a classical model alone."""
-    doc = doc or {}
-    cands = doc.get("candidates", {})
-    selected = doc.get("selected", job.model_choice)
-    return {
-        "task": job.task.name,
-        "model_choice": job.model_choice,
-        "selected_model": selected,
-        "selected_because": doc.get("selected_because"),
-        "candidates": {k: c.get("val_accuracy") for k, c in cands.items()},
-        "best_val_metric": cands.get(selected, {}).get("val_accuracy"),
-        "metric": job.task.metric_name,
-        "fit_seconds": cands.get(selected, {}).get("fit_seconds"),
-        "seconds_total": seconds,
-        "world_size": job.d.world_size,
-        "device": "cpu",
-        "out_dir": str(job.out_dir),
-    }
 
 
 # ============================================================================ the run
 @dataclass(frozen=True)
 class _Job:
-    """What :func:`train` was asked to do, checked."""
+    """What :func:`train` was asked to do, checked (``settings``: the profile's, overridden)."""
 
     task: Task
     settings: TrainSettings
-    profile: str
+    config: TrainConfig
     seed: int
-    resume: bool
     d: Dist
-    progress: bool
-    model_options: dict[str, Any] | None
     split: dict[str, Any] | None
     out_dir: Path
-    model_choice: str = "mlp"
 
 
 @dataclass
@@ -472,13 +213,13 @@ class _Model:
     fingerprint: str
 
 
-def _train(job: _Job, train_data: Any, val_data: Any) -> dict[str, Any]:
+def _train(job: _Job, train_data: SampleData, val_data: SampleData) -> dict[str, Any]:
     """The body of :func:`train` once inputs are checked and the process group is set up."""
     task, s, d = job.task, job.settings, job.d
     m = _build(job, train_data)
     state = resume_run(  # the run in last.pt, weights, optimizer and scheduler restored
         job.out_dir,
-        resume=job.resume,
+        resume=job.config.resume,
         model=m.model,
         optimizer=m.optimizer,
         scheduler=m.scheduler,
@@ -502,17 +243,17 @@ def _train(job: _Job, train_data: Any, val_data: Any) -> dict[str, Any]:
     return _summary(job, state, recipe, time.perf_counter() - t_run)
 
 
-def _build(job: _Job, train_data: Any) -> _Model:
+def _build(job: _Job, train_data: SampleData) -> _Model:
     """The model (seeded initialisation, normalisation fitted on the training data), its
     optimizer and scheduler, and the checkpoint metadata."""
     task, s, d = job.task, job.settings, job.d
     torch.manual_seed(job.seed)  # model initialisation: identical on every rank
-    model = task.build_model(train_data, job.model_options)
+    model = task.build_model(train_data, job.config.model_options)
     normalizer = task.fit_normalization(model, train_data)
     extra = {
         "task": task.name,
         "pair_names": list(getattr(train_data, "pair_names", []) or []),
-        "profile": job.profile,
+        "profile": job.config.profile,
         "seed": job.seed,
         "device": str(d.device),
         "world_size": d.world_size,
@@ -527,15 +268,20 @@ def _build(job: _Job, train_data: Any) -> _Model:
 
 
 def _write_header(
-    job: _Job, m: _Model, recipe: dict, rank_batch: int, train_data: Any, val_data: Any
+    job: _Job,
+    m: _Model,
+    recipe: dict,
+    rank_batch: int,
+    train_data: SampleData,
+    val_data: SampleData,
 ) -> None:
     """config.json and split.json of the run (rank 0)."""
     d = job.d
     job.out_dir.mkdir(parents=True, exist_ok=True)
     config = {
         "task": job.task.name,
-        "model_choice": job.model_choice,
-        "profile": job.profile,
+        "model_choice": job.config.model,
+        "profile": job.config.profile,
         "seed": job.seed,
         "settings": asdict(job.settings),
         "recipe": recipe,
@@ -561,7 +307,7 @@ def _write_header(
         "training %s with profile %r (%d epochs, batch %d%s) on %s x %d (batch %d per rank), "
         "%d training samples",
         job.task.name,
-        job.profile,
+        job.config.profile,
         s.epochs,
         s.batch_size,
         f", {s.samples_per_epoch} samples per epoch" if s.samples_per_epoch else "",
@@ -570,12 +316,12 @@ def _write_header(
         rank_batch,
         int(train_data.x.shape[0]),
     )
-    if d.device.type == "cpu" and job.profile in GPU_PROFILES:
+    if d.device.type == "cpu" and job.config.profile in GPU_PROFILES:
         logger.warning(
             "profile %r holds the paper's settings, meant for a GPU: on a CPU they take hours "
             "on the paper's data set (the time left is logged after the first epoch); "
             "--profile quick is the setting for a CPU",
-            job.profile,
+            job.config.profile,
         )
 
 
@@ -584,8 +330,8 @@ def _epochs(
     m: _Model,
     state: RunState,
     criterion: Criterion,
-    train_data: Any,
-    val_data: Any,
+    train_data: SampleData,
+    val_data: SampleData,
     rank_batch: int,
 ) -> None:
     """Train from ``state.epoch`` to the profile's epochs, updating ``state`` and the files."""
@@ -596,7 +342,7 @@ def _epochs(
     val_idx = val_indices(val_t.n, s.val_samples, d.rank, d.world_size)
     n_per_epoch = min(s.samples_per_epoch or train_t.n, train_t.n)
     n_batches = math.ceil(math.ceil(n_per_epoch / d.world_size) / rank_batch)
-    bars = Progress(task.name, s.epochs, state.epoch, n_batches, show=job.progress, d=d)
+    bars = Progress(task.name, s.epochs, state.epoch, n_batches, show=job.config.progress, d=d)
     t_run = time.perf_counter()
     try:
         for epoch in range(state.epoch, s.epochs):

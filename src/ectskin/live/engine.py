@@ -92,7 +92,7 @@ class LiveEngine:
         :mod:`ectskin.learn.predict`, or None.
     contact
         A predictor with the ``ContactPredictor`` protocol of
-        :mod:`ectskin.learn.contact_predict`, or None.
+        :mod:`ectskin.learn.predict.contact`, or None.
     imager, ect_every
         An ECT imager (``faces``, ``grid_extent``, ``image(delta_c)``, ``locate(delta_c)``) run
         on every ``ect_every``-th processed frame, or None.

@@ -1,10 +1,10 @@
 """The live engine's optional heads beside touch and tracking: contact and the ECT image.
 
 :class:`ContactHead` runs a contact model (the ``ContactPredictor`` protocol of
-:mod:`ectskin.learn.contact_predict`: ``n_pairs``, ``window``, ``faces``, ``face_extent``,
+:mod:`ectskin.learn.predict.contact`: ``n_pairs``, ``window``, ``faces``, ``face_extent``,
 optional ``pair_names``, ``read(window) -> ContactReading``) on the newest ``window`` frames,
 calibrated by paper Eq. 2 against the touch reference, exactly as the contact data set is
-(:func:`ectskin.learn.contact_data.contact_dataset`): the model was trained on those inputs.
+(:func:`ectskin.learn.data.contact.contact_dataset`): the model was trained on those inputs.
 
 :class:`EctHead` runs an ECT imager (``faces``, ``grid_extent``, ``image(delta_c)``,
 ``locate(delta_c)``) on ``delta_c = c − c_0`` in pF against the same touch reference (the

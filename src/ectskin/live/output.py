@@ -85,7 +85,7 @@ class Output:
     a reference exists); ``touch_probs`` (n_classes,) and ``touch_cls``; ``markers_pred``,
     ``markers_reference``, ``markers_true`` (n_markers, 3) mm; ``label``, ``trial`` and
     ``inflation`` (ml) as the frame carried them (None when the source does not know);
-    ``contact`` the contact head's ``ContactReading`` (:mod:`ectskin.learn.contact_predict`) and
+    ``contact`` the contact head's ``ContactReading`` (:mod:`ectskin.learn.predict.contact`) and
     ``ect`` the ECT head's :class:`EctFrame` (None without the head, before a reference exists,
     and for the ECT head on frames between its images); ``latency_ms`` from the frame's arrival
     to this output; ``stats`` a snapshot of :attr:`LiveEngine.stats`.

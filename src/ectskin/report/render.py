@@ -101,7 +101,10 @@ def _rel(path: Path, out_dir: Path) -> str:
         return path.resolve().as_posix()
 
 
-def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    """The lines of a Markdown table: ``header``, the rule, one line per row, a ``|`` inside a
+    cell escaped (``\\|``) so that it cannot split the cell."""
+
     def esc(s: str) -> str:
         return str(s).replace("|", "\\|")
 
@@ -242,7 +245,7 @@ def render_markdown(
             lines += ["**Contents**", ""]
             lines += [f"- [{title}](#{slug(title)})" for title in payload] + [""]
         elif kind == "table":
-            lines += _md_table(*payload) + [""]
+            lines += markdown_table(*payload) + [""]
         elif kind == "figure":
             caption, path = payload
             rel = _rel(path, out_dir)

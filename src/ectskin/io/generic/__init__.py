@@ -13,7 +13,7 @@ one passed in (``layout=``: the channels are then that layout's pairs in the fix
   parallel wires 10 mm apart on one virtual skin (their descriptors only tell the C2DT which
   channel is which);
 * when the channel count is not n(n−1)/2 the last pairs have no data: they hold NaN and are listed
-  in ``rec.meta["unmeasured_pairs"]``, which every data set of :mod:`ectskin.learn.datasets` leaves
+  in ``rec.meta["unmeasured_pairs"]``, which every data set of :mod:`ectskin.learn.data` leaves
   out (so 5 channels give a 4-electrode layout with 6 pairs, of which pair 5 is unmeasured);
 * one region per touch class (1..max label) and one marker per tracked point.
 

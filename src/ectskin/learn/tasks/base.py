@@ -12,14 +12,15 @@ task branches (DETR's criterion and postprocessors are the pattern):
 * evaluation: batched prediction of a test split, the test metrics (from
   :mod:`ectskin.learn.metrics`), its baselines and its figures (through :mod:`ectskin.viz`).
 
-A new task is a new subclass registered in :data:`ectskin.learn.tasks.TASKS`.
+A task is generic in its data set class (``Task[TouchData]``, see :mod:`ectskin.learn.data`). A
+new task is a new subclass registered in :data:`ectskin.learn.tasks.TASKS`.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 import torch
@@ -27,8 +28,12 @@ from torch import nn
 
 from ectskin._check import EctskinError
 from ectskin.io import Recording
+from ectskin.learn.data.base import SampleData
 from ectskin.learn.engine import Tensors
 from ectskin.learn.profiles import TrainSettings
+
+#: the data set class of a task
+DataT = TypeVar("DataT", bound=SampleData)
 
 
 class Criterion(ABC):
@@ -69,7 +74,7 @@ class Criterion(ABC):
 
 
 @dataclass
-class EvalCase:
+class EvalCase(Generic[DataT]):
     """A trained model's predictions on the test split, with what the metrics and figures need.
 
     ``data`` is the whole data set (for group names), ``test`` its test split, ``pred`` the
@@ -77,15 +82,16 @@ class EvalCase:
     the recording and ``config`` the model's config dataclass.
     """
 
-    data: Any
-    test: Any
+    data: DataT
+    test: DataT
     pred: np.ndarray
     recording: Recording
     config: Any
 
 
-class Task(ABC):
-    """One learning task (see the module docstring). Subclasses set the class attributes."""
+class Task(ABC, Generic[DataT]):
+    """One learning task (see the module docstring) on data sets of class ``DataT``. Subclasses
+    set the class attributes."""
 
     name: ClassVar[str]  # "touch", the name on the command line and in config.json
     model_kind: ClassVar[str]  # the checkpoint kind of its model ("touch_mlp")
@@ -110,19 +116,20 @@ class Task(ABC):
     @abstractmethod
     def dataset(
         self, rec: Recording, *, window: int = 10, prior: bool = True, reference: Any = "auto"
-    ) -> Any:
-        """The task's data set of ``rec`` (see :mod:`ectskin.learn.datasets`)."""
+    ) -> DataT:
+        """The task's data set of ``rec`` (see :mod:`ectskin.learn.data`)."""
 
     def dataset_options(self, config: Any) -> dict[str, Any]:
         """The :meth:`dataset` options a trained model (its config) was trained with."""
         return {}
 
-    def stratify(self, data: Any) -> np.ndarray | None:
+    def stratify(self, data: DataT) -> np.ndarray | None:
         """Per-trial labels to stratify the trial split by, or None."""
         return None
 
     def check_data(self, data: Any, what: str) -> None:
-        """Validate a split at the door, naming the split, trial and sample."""
+        """Validate a split at the door (anything: a wrong class is an error naming the class
+        expected), naming the split, trial and sample."""
         for name in self.arrays:
             if not isinstance(getattr(data, name, None), np.ndarray):
                 raise EctskinError(
@@ -145,49 +152,49 @@ class Task(ABC):
                     )
 
     @abstractmethod
-    def _check_shapes(self, data: Any, what: str) -> None:
+    def _check_shapes(self, data: DataT, what: str) -> None:
         """Task-specific shape and value checks of a non-empty split."""
 
     @abstractmethod
-    def tensors(self, data: Any, device: torch.device) -> Tensors:
+    def tensors(self, data: DataT, device: torch.device) -> Tensors:
         """The split's :attr:`batch_fields` as tensors on ``device``."""
 
     # ------------------------------------------------------------------ model
     @abstractmethod
-    def build_model(self, data: Any, model_options: dict[str, Any] | None) -> nn.Module:
+    def build_model(self, data: DataT, model_options: dict[str, Any] | None) -> nn.Module:
         """The task's model with its shape fields taken from the (training) data."""
 
     @abstractmethod
-    def fit_normalization(self, model: nn.Module, data: Any) -> dict[str, Any]:
+    def fit_normalization(self, model: nn.Module, data: DataT) -> dict[str, Any]:
         """Fit the model's scaling buffers on the training split; return the statistics (stored
         in the checkpoint's ``normalizer`` for reference)."""
 
-    def checkpoint_extra(self, data: Any) -> dict[str, Any]:
+    def checkpoint_extra(self, data: DataT) -> dict[str, Any]:
         """Task metadata stored in the checkpoints' ``extra`` (default: none)."""
         return {}
 
     # ------------------------------------------------------------------ training
     @abstractmethod
     def criterion(
-        self, model: nn.Module, settings: TrainSettings, train_data: Any, device: torch.device
+        self, model: nn.Module, settings: TrainSettings, train_data: DataT, device: torch.device
     ) -> Criterion:
         """The training criterion of ``model`` under ``settings`` (with its recipe)."""
 
     # ------------------------------------------------------------------ evaluation
     @abstractmethod
-    def predict(self, model: nn.Module, data: Any) -> np.ndarray:
+    def predict(self, model: nn.Module, data: DataT) -> np.ndarray:
         """Predictions for every sample of ``data`` (batched inference)."""
 
     @abstractmethod
-    def test_metrics(self, case: EvalCase) -> dict[str, Any]:
+    def test_metrics(self, case: EvalCase[DataT]) -> dict[str, Any]:
         """The test-set metrics of ``case`` (as metrics.json stores them under the task)."""
 
     @abstractmethod
-    def baseline_metrics(self, train: Any, test: Any, *, seed: int) -> dict[str, Any]:
+    def baseline_metrics(self, train: DataT, test: DataT, *, seed: int) -> dict[str, Any]:
         """The task's baselines fit on ``train`` and scored on ``test``: {name: metrics}."""
 
     @abstractmethod
-    def figures(self, case: EvalCase, metrics: dict[str, Any]) -> dict[str, Any]:
+    def figures(self, case: EvalCase[DataT], metrics: dict[str, Any]) -> dict[str, Any]:
         """The figures of :attr:`figure_captions`: {file stem: matplotlib Figure}. May add what
         a figure shows to ``metrics`` (e.g. the trajectory of Fig. 10)."""
 

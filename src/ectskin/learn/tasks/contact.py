@@ -1,6 +1,6 @@
 """Contact: where, how hard and how many fingers touch, and whether one hovers (:class:`ContactTask`).
 
-Data: :func:`ectskin.learn.contact_data.contact_dataset` (per-frame ground truth of the twin or
+Data: :func:`ectskin.learn.data.contact.contact_dataset` (per-frame ground truth of the twin or
 of an import with contact labels); model: :class:`~ectskin.learn.models.contact.ContactNet`.
 
 Training loss (:class:`ContactCriterion`), per frame:
@@ -21,7 +21,7 @@ Test localisation errors are distances over the skin (:func:`ectskin.twin.ect.on
 around the body's side edge between front and back). Test metrics: localisation (mean / median / p90, per face,
 per inflation state, a map per face), force, hover detection against height, finger count and
 per-finger error after Hungarian matching, each beside the baselines of
-:mod:`ectskin.learn.contact_baselines` on the same test frames.
+:mod:`ectskin.learn.baselines.contact` on the same test frames.
 """
 
 from __future__ import annotations
@@ -37,25 +37,25 @@ from torch import nn
 from ectskin._check import EctskinError
 from ectskin.io import Recording
 from ectskin.learn.augment import no_contact_means
-from ectskin.learn.contact_baselines import contact_baselines
-from ectskin.learn.contact_data import (
+from ectskin.learn.baselines.contact import contact_baselines
+from ectskin.learn.data.contact import (
     CONTACT_SPLIT,
     HOVER_MAX_MM,
     MAX_FINGERS,
     ContactData,
     contact_dataset,
 )
-from ectskin.learn.contact_metrics import (
+from ectskin.learn.engine import Tensors
+from ectskin.learn.metrics.contact import (
     force_metrics,
     hover_metrics,
     localisation_metrics,
     multi_metrics,
     rest_points,
 )
-from ectskin.learn.engine import Tensors
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS, ContactNet, ContactNetConfig
 from ectskin.learn.normalizer import Normalizer
-from ectskin.learn.predict import forward_batches
+from ectskin.learn.predict.base import forward_batches
 from ectskin.learn.profiles import TrainSettings
 from ectskin.learn.tasks.base import Criterion, EvalCase, Task, as_tensor, build_config
 from ectskin.twin.ect import on_skin_distance
@@ -72,7 +72,7 @@ SMOOTH_BETA = 0.02
 
 def body_size() -> tuple[float, float]:
     """(width, thickness) of the body in mm: the twin's default manipulator (the faces' rest
-    geometry of :func:`~ectskin.learn.contact_metrics.rest_points`)."""
+    geometry of :func:`~ectskin.learn.metrics.contact.rest_points`)."""
     c = ManipulatorConfig()
     return float(c.width_mm), float(c.thickness_mm)
 
@@ -180,7 +180,7 @@ class ContactCriterion(Criterion):
         return loss / n, dist / max(n_fingers, 1.0)
 
 
-class ContactTask(Task):
+class ContactTask(Task[ContactData]):
     """Contact (see the module docstring): :class:`ContactData` → :class:`ContactNet`."""
 
     name = "contact"
@@ -217,7 +217,7 @@ class ContactTask(Task):
     def stratify(self, data: ContactData) -> np.ndarray | None:
         return data.group_region if len(data.group_region) else None
 
-    def _check_shapes(self, data: Any, what: str) -> None:
+    def _check_shapes(self, data: ContactData, what: str) -> None:
         n = data.x.shape[0]
         s = MAX_FINGERS
         want = {"count": (n,), "face": (n, s), "uv": (n, s, 2), "force": (n, s), "hover": (n,)}
@@ -233,7 +233,7 @@ class ContactTask(Task):
         if bad.any():
             raise EctskinError(f"{what}: finger count must be 0..{s}, got {data.count[bad][0]}")
 
-    def tensors(self, data: Any, device: torch.device) -> Tensors:
+    def tensors(self, data: ContactData, device: torch.device) -> Tensors:
         return Tensors(
             (
                 as_tensor(data.x, np.float32, device),
@@ -246,7 +246,7 @@ class ContactTask(Task):
         )
 
     # ------------------------------------------------------------------ model
-    def build_model(self, data: Any, model_options: dict[str, Any] | None) -> ContactNet:
+    def build_model(self, data: ContactData, model_options: dict[str, Any] | None) -> ContactNet:
         shape = {
             "n_pairs": int(data.x.shape[2]),
             "window": int(data.x.shape[1]),
@@ -255,7 +255,7 @@ class ContactTask(Task):
         }
         return ContactNet(build_config(ContactNetConfig, shape, model_options))
 
-    def fit_normalization(self, model: nn.Module, data: Any) -> dict[str, Any]:
+    def fit_normalization(self, model: nn.Module, data: ContactData) -> dict[str, Any]:
         """Per-pair mean / std of the training windows; each face's centre and half extent
         (from the layout's skins); the force scale (the mean force of training frames in
         contact, 1 N without any)."""
@@ -281,7 +281,7 @@ class ContactTask(Task):
             "force_scale": scale,
         }
 
-    def checkpoint_extra(self, data: Any) -> dict[str, Any]:
+    def checkpoint_extra(self, data: ContactData) -> dict[str, Any]:
         return {
             "faces": list(data.faces),
             "face_extent": {f: [list(a), list(b)] for f, (a, b) in data.face_extent.items()},
@@ -290,7 +290,7 @@ class ContactTask(Task):
 
     # ------------------------------------------------------------------ training
     def criterion(
-        self, model, settings: TrainSettings, train_data: Any, device
+        self, model, settings: TrainSettings, train_data: ContactData, device
     ) -> ContactCriterion:
         """With ``settings.inflation_shift``, the no-contact means (last frame of each window) of
         the training split's no-contact trials (at least two, else skipped with a note)."""
@@ -322,13 +322,15 @@ class ContactTask(Task):
         m = getattr(model, "module", model)
         return forward_batches(model, [data.x], batch_size=PREDICT_BATCH, output=m.decode)
 
-    def test_metrics(self, case: EvalCase) -> dict[str, Any]:
+    def test_metrics(self, case: EvalCase[ContactData]) -> dict[str, Any]:
         m = contact_report(case.test, case.pred)
         m["window"] = int(case.config.window)
         m["arch"] = case.config.arch
         return m
 
-    def baseline_metrics(self, train: Any, test: Any, *, seed: int) -> dict[str, Any]:
+    def baseline_metrics(
+        self, train: ContactData, test: ContactData, *, seed: int
+    ) -> dict[str, Any]:
         out = {}
         for name, (pred, seconds) in contact_baselines(
             train, test, train.region_centre, seed=seed
@@ -338,7 +340,7 @@ class ContactTask(Task):
             out[name] = m
         return out
 
-    def figures(self, case: EvalCase, metrics: dict[str, Any]) -> dict[str, Any]:
+    def figures(self, case: EvalCase[ContactData], metrics: dict[str, Any]) -> dict[str, Any]:
         test, pred = case.test, case.pred
         single = test.count == 1
         p0 = slot_columns(pred, 0)

@@ -3,8 +3,8 @@
 Training: cross-entropy on the class logits, metric = accuracy (:class:`TouchCriterion`); the
 ``robust`` recipe adds the inflation shift, mixup and label smoothing
 (:mod:`ectskin.learn.augment`). Evaluation: accuracy, misclassified count, confusion map
-(Fig. 7) and adjacency of the confusions (:func:`ectskin.learn.metrics.touch_metrics`); baselines
-of :func:`ectskin.learn.baselines.touch_baselines`.
+(Fig. 7) and adjacency of the confusions (:func:`ectskin.learn.metrics.touch.touch_metrics`);
+baselines of :func:`ectskin.learn.baselines.touch.touch_baselines`.
 """
 
 from __future__ import annotations
@@ -19,13 +19,15 @@ from torch import nn
 from ectskin._check import EctskinError
 from ectskin.io import Recording
 from ectskin.learn.augment import augment_touch_batch, mixup_cross_entropy, no_contact_means
-from ectskin.learn.baselines import touch_baselines
-from ectskin.learn.datasets import TOUCH_SPLIT, Normalizer, TouchData, touch_dataset
+from ectskin.learn.baselines.touch import touch_baselines
+from ectskin.learn.data.touch import TouchData, touch_dataset
 from ectskin.learn.engine import Tensors
-from ectskin.learn.metrics import region_adjacency, touch_metrics
+from ectskin.learn.metrics.touch import region_adjacency, touch_metrics
 from ectskin.learn.models import TouchMLP, TouchMLPConfig
-from ectskin.learn.predict import forward_batches
+from ectskin.learn.normalizer import Normalizer
+from ectskin.learn.predict.base import forward_batches
 from ectskin.learn.profiles import TrainSettings
+from ectskin.learn.splits import TOUCH_SPLIT
 from ectskin.learn.tasks.base import (
     Criterion,
     EvalCase,
@@ -87,8 +89,8 @@ class TouchCriterion(Criterion):
         return ce / n, correct / n
 
 
-class TouchTask(Task):
-    """Touch classification: :class:`~ectskin.learn.datasets.TouchData` → TouchMLP."""
+class TouchTask(Task[TouchData]):
+    """Touch classification: :class:`~ectskin.learn.data.touch.TouchData` → TouchMLP."""
 
     name = "touch"
     model_kind = TouchMLP.kind
@@ -118,7 +120,7 @@ class TouchTask(Task):
     def stratify(self, data: TouchData) -> np.ndarray | None:
         return data.group_region if len(data.group_region) else None
 
-    def _check_shapes(self, data: Any, what: str) -> None:
+    def _check_shapes(self, data: TouchData, what: str) -> None:
         x, y = data.x, data.y
         n = x.shape[0]
         if x.ndim != 2 or y.shape != (n,):
@@ -134,27 +136,27 @@ class TouchTask(Task):
                 f"{what}: {sample_name(data, i)} has label {y[i]}, expected 0..{n_classes - 1}"
             )
 
-    def tensors(self, data: Any, device: torch.device) -> Tensors:
+    def tensors(self, data: TouchData, device: torch.device) -> Tensors:
         return Tensors((as_tensor(data.x, np.float32, device), as_tensor(data.y, np.int64, device)))
 
     # ------------------------------------------------------------------ model
-    def build_model(self, data: Any, model_options: dict[str, Any] | None) -> TouchMLP:
+    def build_model(self, data: TouchData, model_options: dict[str, Any] | None) -> TouchMLP:
         shape = {"n_pairs": int(data.x.shape[1]), "n_classes": int(data.n_classes)}
         return TouchMLP(build_config(TouchMLPConfig, shape, model_options))
 
-    def fit_normalization(self, model: nn.Module, data: Any) -> dict[str, Any]:
+    def fit_normalization(self, model: nn.Module, data: TouchData) -> dict[str, Any]:
         """Per-pair mean / std of the training frames (a :class:`Normalizer`), held in the
         model's buffers; returned as ``{"x": Normalizer.to_dict()}``."""
         norm = Normalizer.fit(data.x)
         model.set_normalization(x_mean=norm.mean, x_std=norm.std)
         return {"x": norm.to_dict()}
 
-    def checkpoint_extra(self, data: Any) -> dict[str, Any]:
+    def checkpoint_extra(self, data: TouchData) -> dict[str, Any]:
         return {"n_classes": int(data.n_classes)}
 
     # ------------------------------------------------------------------ training
     def criterion(
-        self, model: nn.Module, settings: TrainSettings, train_data: Any, device: torch.device
+        self, model: nn.Module, settings: TrainSettings, train_data: TouchData, device: torch.device
     ) -> TouchCriterion:
         """With ``settings.inflation_shift``, the no-contact means of the training split's
         inflation states (at least two, else the shift is skipped with a warning)."""
@@ -179,7 +181,7 @@ class TouchTask(Task):
             model, [data.x], batch_size=PREDICT_BATCH, output=lambda z: z.argmax(dim=1)
         )
 
-    def test_metrics(self, case: EvalCase) -> dict[str, Any]:
+    def test_metrics(self, case: EvalCase[TouchData]) -> dict[str, Any]:
         ds, test, layout = case.data, case.test, case.recording.layout
         adjacency = region_adjacency(layout) if layout.n_classes == ds.n_classes else None
         return touch_metrics(
@@ -191,8 +193,8 @@ class TouchTask(Task):
             group_names=ds.group_names,
         )
 
-    def baseline_metrics(self, train: Any, test: Any, *, seed: int) -> dict[str, Any]:
+    def baseline_metrics(self, train: TouchData, test: TouchData, *, seed: int) -> dict[str, Any]:
         return {k: r.to_metrics() for k, r in touch_baselines(train, test, seed=seed).items()}
 
-    def figures(self, case: EvalCase, metrics: dict[str, Any]) -> dict[str, Any]:
+    def figures(self, case: EvalCase[TouchData], metrics: dict[str, Any]) -> dict[str, Any]:
         return {"fig7_confusion": plot_confusion(np.asarray(metrics["confusion"]))}

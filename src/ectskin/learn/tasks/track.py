@@ -2,9 +2,9 @@
 
 Training: squared error in units of the model's ``out_scale`` for the gradient, reported in mm²;
 metric = average distance AD, paper Eq. 3 (:class:`TrackCriterion`). Evaluation: AD overall, per
-marker and per trajectory (:func:`ectskin.learn.metrics.track_metrics`), six examples (Fig. 9)
+marker and per trajectory (:func:`ectskin.learn.metrics.track.track_metrics`), six examples (Fig. 9)
 and one marker over a test trajectory (Fig. 10); baselines of
-:func:`ectskin.learn.baselines.track_baselines`.
+:func:`ectskin.learn.baselines.track.track_baselines`.
 """
 
 from __future__ import annotations
@@ -17,14 +17,16 @@ from torch import nn
 
 from ectskin._check import EctskinError
 from ectskin.io import Recording
-from ectskin.learn.baselines import track_baselines
-from ectskin.learn.datasets import TRACK_SPLIT, Normalizer, TrackData, track_dataset
+from ectskin.learn.baselines.track import track_baselines
+from ectskin.learn.data.track import TrackData, track_dataset
 from ectskin.learn.engine import Tensors
-from ectskin.learn.metrics import track_metrics
+from ectskin.learn.metrics.track import track_metrics
 from ectskin.learn.models import C2DT, C2DTConfig
 from ectskin.learn.models.c2dt import coordinate_stats
-from ectskin.learn.predict import forward_batches
+from ectskin.learn.normalizer import Normalizer
+from ectskin.learn.predict.base import forward_batches
 from ectskin.learn.profiles import TrainSettings
+from ectskin.learn.splits import TRACK_SPLIT
 from ectskin.learn.tasks.base import Criterion, EvalCase, Task, as_tensor, build_config
 from ectskin.viz.learning import plot_marker_trajectory, plot_tracking_examples
 
@@ -67,8 +69,8 @@ class TrackCriterion(Criterion):
         return se / n, ad / n
 
 
-class TrackTask(Task):
-    """Deformation tracking: :class:`~ectskin.learn.datasets.TrackData` → C2DT."""
+class TrackTask(Task[TrackData]):
+    """Deformation tracking: :class:`~ectskin.learn.data.track.TrackData` → C2DT."""
 
     name = "track"
     model_kind = C2DT.kind
@@ -96,7 +98,7 @@ class TrackTask(Task):
     def dataset_options(self, config: C2DTConfig) -> dict[str, Any]:
         return {"window": int(config.window), "prior": bool(config.prior)}
 
-    def _check_shapes(self, data: Any, what: str) -> None:
+    def _check_shapes(self, data: TrackData, what: str) -> None:
         x, y = data.x, data.y
         n = x.shape[0]
         if x.ndim != 3 or y.ndim != 3 or y.shape[0] != n or y.shape[2] != 3:
@@ -109,7 +111,7 @@ class TrackTask(Task):
                 f"{what}: init must have the shape of y {y.shape}, got {data.init.shape}"
             )
 
-    def tensors(self, data: Any, device: torch.device) -> Tensors:
+    def tensors(self, data: TrackData, device: torch.device) -> Tensors:
         return Tensors(
             (
                 as_tensor(data.x, np.float32, device),
@@ -119,7 +121,7 @@ class TrackTask(Task):
         )
 
     # ------------------------------------------------------------------ model
-    def build_model(self, data: Any, model_options: dict[str, Any] | None) -> C2DT:
+    def build_model(self, data: TrackData, model_options: dict[str, Any] | None) -> C2DT:
         desc = getattr(data, "electrode_desc", None)
         pairs = getattr(data, "pairs", None)
         has_desc = desc is not None and pairs is not None and np.size(desc) > 0
@@ -136,7 +138,7 @@ class TrackTask(Task):
             desc = pairs = None
         return C2DT(config, desc, pairs)
 
-    def fit_normalization(self, model: nn.Module, data: Any) -> dict[str, Any]:
+    def fit_normalization(self, model: nn.Module, data: TrackData) -> dict[str, Any]:
         """Per-pair mean / std of the training windows (a :class:`Normalizer` over samples and
         frames) and the coordinate scales of :func:`~ectskin.learn.models.c2dt.coordinate_stats`,
         held in the model's buffers; returned as ``{"x": Normalizer.to_dict(), "pos_mean": ...}``.
@@ -148,7 +150,7 @@ class TrackTask(Task):
 
     # ------------------------------------------------------------------ training
     def criterion(
-        self, model: nn.Module, settings: TrainSettings, train_data: Any, device: torch.device
+        self, model: nn.Module, settings: TrainSettings, train_data: TrackData, device: torch.device
     ) -> TrackCriterion:
         return TrackCriterion(model)
 
@@ -157,7 +159,7 @@ class TrackTask(Task):
         """(n, M, 3) float32 marker coordinates, mm."""
         return forward_batches(model, [data.x, data.init], batch_size=PREDICT_BATCH)
 
-    def test_metrics(self, case: EvalCase) -> dict[str, Any]:
+    def test_metrics(self, case: EvalCase[TrackData]) -> dict[str, Any]:
         """:func:`track_metrics` plus ``window``, ``prior`` and ``examples``: the samples of
         Fig. 9 (:func:`pick_examples`) with their AD (Eq. 3 per example) and the worst of them."""
         ds, test, pred = case.data, case.test, case.pred
@@ -189,10 +191,10 @@ class TrackTask(Task):
         }
         return m
 
-    def baseline_metrics(self, train: Any, test: Any, *, seed: int) -> dict[str, Any]:
+    def baseline_metrics(self, train: TrackData, test: TrackData, *, seed: int) -> dict[str, Any]:
         return {k: r.to_metrics() for k, r in track_baselines(train, test, seed=seed).items()}
 
-    def figures(self, case: EvalCase, metrics: dict[str, Any]) -> dict[str, Any]:
+    def figures(self, case: EvalCase[TrackData], metrics: dict[str, Any]) -> dict[str, Any]:
         """Fig. 9 (the examples of ``metrics``) and Fig. 10, whose trial, marker and AD are
         added to ``metrics["examples"]["trajectory"]``."""
         ds, test, pred = case.data, case.test, case.pred

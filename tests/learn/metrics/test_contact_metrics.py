@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ectskin.learn.contact_metrics import (
+from ectskin.learn.metrics.contact import (
     error_map,
     force_metrics,
     hover_metrics,

@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -39,7 +39,7 @@ from ectskin._check import EctskinError
 from ectskin.io import Recording, require_ground_truth
 from ectskin.io.calibration import calibrate, touch_reference
 from ectskin.learn.channels import channel_names, measured_channels
-from ectskin.learn.datasets import _group_mask
+from ectskin.learn.data.base import SampleData
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +53,7 @@ CONTACT_SPLIT = (0.66, 0.17, 0.17)
 
 
 @dataclass
-class ContactData:
+class ContactData(SampleData):
     """Contact samples, one per frame (see the module docstring for the targets).
 
     ``x`` (n, k, n_pairs) float32: the calibrated window, oldest frame first; ``group`` (n,)
@@ -63,6 +63,20 @@ class ContactData:
     position targets); ``group_region`` (n_groups,) each trial's region (stratification);
     ``region_centre`` (n_regions + 1, 3) each region's (face index, u, v) (row 0: no region).
     """
+
+    SAMPLE_FIELDS: ClassVar[tuple[str, ...]] = (
+        "x",
+        "count",
+        "face",
+        "uv",
+        "force",
+        "hover",
+        "height",
+        "group",
+        "frame",
+        "state",
+    )
+    MATCH_FIELDS: ClassVar[tuple[str, ...]] = ("pair_names", "states")
 
     x: np.ndarray
     count: np.ndarray
@@ -83,37 +97,12 @@ class ContactData:
     region_centre: np.ndarray = field(default_factory=lambda: np.zeros((1, 3)))
 
     @property
-    def n_samples(self) -> int:
-        return int(self.x.shape[0])
-
-    @property
     def window(self) -> int:
         return int(self.x.shape[1])
 
     @property
     def n_pairs(self) -> int:
         return int(self.x.shape[2])
-
-    @property
-    def n_groups(self) -> int:
-        return len(self.group_names)
-
-    def select(self, groups: Sequence[int] | np.ndarray) -> ContactData:
-        """The samples of the given group ids (e.g. ``split["train"]``); group ids are kept."""
-        m = _group_mask(self.group, groups, self.n_groups)
-        per_sample = (
-            "x",
-            "count",
-            "face",
-            "uv",
-            "force",
-            "hover",
-            "height",
-            "group",
-            "frame",
-            "state",
-        )
-        return replace(self, **{k: getattr(self, k)[m] for k in per_sample})
 
 
 def _fingers(t: Any, faces: list[str]) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, int]]:

@@ -1,28 +1,21 @@
-"""Learning data from recordings: calibrated touch frames and tracking windows.
+"""Deformation-tracking samples from a recording: :func:`track_dataset` → :class:`TrackData`.
 
-* :func:`touch_dataset` → :class:`TouchData`: one sample per frame, the frame's calibrated
-  readouts (paper Eq. 2 against the rest state, see :mod:`ectskin.io.calibration`) and its
-  touch class (0 = no touch, 1..n_regions).
-* :func:`track_dataset` → :class:`TrackData`: one sample per frame of every tracking trial, the
-  window of the last ``k`` calibrated frames (oldest first) ending at that frame, the marker
-  coordinates of the trajectory's first frame (``init``) and of the window's last frame (``y``).
-  With ``prior=True`` (the paper, §4.2) each trajectory is calibrated against its own first frame;
-  ``prior=False`` is the ablation: absolute calibration against the touch reference, ``init`` = 0.
+One sample per frame of every tracking trial: the window of the last ``k`` calibrated frames
+(oldest first) ending at that frame, the marker coordinates of the trajectory's first frame
+(``init``) and of the window's last frame (``y``). With ``prior=True`` (the paper, §4.2) each
+trajectory is calibrated against its own first frame; ``prior=False`` is the ablation: absolute
+calibration against the touch reference, ``init`` = 0.
 
-Splits: :mod:`ectskin.learn.splits`; normalisation: :mod:`ectskin.learn.normalizer` (re-exported).
-
-Channels a recording does not measure (``rec.meta["unmeasured_pairs"]``, set by the generic
-importer, see ``docs/import-format.md``) are left out of every data set: ``pair_names`` and
-``pairs`` list the measured channels only (the file's own channel names when the import stored
-them in ``rec.meta["channel_names"]``).
+Channels a recording does not measure are left out, as for touch (:mod:`ectskin.learn.data.touch`):
+``pair_names`` and ``pairs`` list the measured channels only.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -31,91 +24,15 @@ from ectskin._check import EctskinError
 from ectskin.io.calibration import calibrate, is_no_contact, touch_reference
 from ectskin.io.recording import Recording, Trial
 from ectskin.learn.channels import channel_names, check_regions, measured_channels
-from ectskin.learn.normalizer import Normalizer
-from ectskin.learn.splits import (
-    SPLITS,
-    TOUCH_SPLIT,
-    TRACK_SPLIT,
-    split_from_names,
-    split_groups,
-    split_names,
-)
+from ectskin.learn.data.base import NONFINITE_OPTIONS, SampleData, finite_rows, select_trials
 
 log = logging.getLogger(__name__)
 
-NONFINITE_OPTIONS = ("raise", "drop")
-
-__all__ = [
-    "NONFINITE_OPTIONS",
-    "SPLITS",
-    "TOUCH_SPLIT",
-    "TRACK_SPLIT",
-    "Normalizer",
-    "TouchData",
-    "TrackData",
-    "channel_names",
-    "check_regions",
-    "measured_channels",
-    "split_from_names",
-    "split_groups",
-    "split_names",
-    "touch_dataset",
-    "track_dataset",
-    "tracking_trials",
-]
-
-
-# --------------------------------------------------------------------------- data objects
-@dataclass
-class TouchData:
-    """Touch-recognition samples, one per frame.
-
-    Attributes
-    ----------
-    x : (n, n_pairs) float32
-        Calibrated readouts (Eq. 2), dimensionless.
-    y : (n,) int64
-        Touch class, 0 = no touch, 1..n_regions.
-    group : (n,) int64
-        Index into ``group_names`` of the sample's trial (for trial-exclusive splits).
-    group_names : list of str
-        Trial names.
-    n_classes : int
-        1 + number of regions of the layout.
-    pair_names : list of str
-        Channel names (measured pairs), length n_pairs.
-    group_region : (n_groups,) int64
-        Each trial's touched region (0 = none): the ``stratify`` labels of :func:`split_groups`.
-    """
-
-    x: np.ndarray
-    y: np.ndarray
-    group: np.ndarray
-    group_names: list[str]
-    n_classes: int
-    pair_names: list[str]
-    group_region: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-
-    @property
-    def n_samples(self) -> int:
-        return int(self.x.shape[0])
-
-    @property
-    def n_pairs(self) -> int:
-        return int(self.x.shape[1])
-
-    @property
-    def n_groups(self) -> int:
-        return len(self.group_names)
-
-    def select(self, groups: Sequence[int] | np.ndarray) -> TouchData:
-        """The samples of the given group ids (e.g. ``split["train"]``); group ids are kept."""
-        m = _group_mask(self.group, groups, self.n_groups)
-        return replace(self, x=self.x[m], y=self.y[m], group=self.group[m])
+__all__ = ["TrackData", "track_dataset", "tracking_trials"]
 
 
 @dataclass
-class TrackData:
+class TrackData(SampleData):
     """Deformation-tracking samples, one per frame (the window ends at that frame).
 
     Attributes
@@ -144,6 +61,9 @@ class TrackData:
         Each trial's touched region.
     """
 
+    SAMPLE_FIELDS: ClassVar[tuple[str, ...]] = ("x", "init", "y", "group", "frame")
+    MATCH_FIELDS: ClassVar[tuple[str, ...]] = ("pair_names", "prior")
+
     x: np.ndarray
     init: np.ndarray
     y: np.ndarray
@@ -157,10 +77,6 @@ class TrackData:
     group_region: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @property
-    def n_samples(self) -> int:
-        return int(self.x.shape[0])
-
-    @property
     def window(self) -> int:
         return int(self.x.shape[1])
 
@@ -172,129 +88,14 @@ class TrackData:
     def n_markers(self) -> int:
         return int(self.y.shape[1])
 
-    @property
-    def n_groups(self) -> int:
-        return len(self.group_names)
 
-    def select(self, groups: Sequence[int] | np.ndarray) -> TrackData:
-        """The samples of the given group ids (e.g. ``split["test"]``); group ids are kept."""
-        m = _group_mask(self.group, groups, self.n_groups)
-        return replace(
-            self,
-            x=self.x[m],
-            init=self.init[m],
-            y=self.y[m],
-            group=self.group[m],
-            frame=self.frame[m],
-        )
-
-
-def _group_mask(group: np.ndarray, groups: Any, n_groups: int) -> np.ndarray:
-    ids = np.asarray(groups)
-    if ids.size and (ids.dtype.kind not in "iu" or ids.min() < 0 or ids.max() >= n_groups):
-        raise EctskinError(
-            f"group ids must be integers in 0..{n_groups - 1}, got {ids.tolist()[:10]}"
-        )
-    return np.isin(group, ids)
-
-
-# --------------------------------------------------------------------------- helpers
-def _select_trials(rec: Recording, trials: Any) -> list[Trial]:
-    if trials is None:
-        return list(rec.trials)
-    if isinstance(trials, str):
-        trials = [trials]
-    out = []
-    for t in trials:
-        if isinstance(t, (int, np.integer)) and not isinstance(t, bool):
-            if not 0 <= int(t) < rec.n_trials:
-                raise EctskinError(f"trial index {t} out of range 0..{rec.n_trials - 1}")
-            out.append(rec.trials[int(t)])
-        else:
-            out.append(rec.trial(str(t)))
-    return out
-
-
-def _finite_rows(c: np.ndarray) -> np.ndarray:
-    return np.all(np.isfinite(c), axis=1)
-
-
-# --------------------------------------------------------------------------- touch
-def touch_dataset(
-    rec: Recording,
-    *,
-    reference: str | np.ndarray = "auto",
-    trials: Sequence[str | int] | None = None,
-    nonfinite: str = "raise",
-) -> TouchData:
-    """Calibrated touch frames of a recording, one sample per frame.
-
-    Parameters
-    ----------
-    rec : Recording
-    reference : "auto" | "rest" | "meta" | (n_pairs,) array
-        The reference state c_0 of Eq. 2 (see :func:`ectskin.io.calibration.touch_reference`);
-        "auto" = the mean readout of the uninflated, untouched trial (or per-trial references of
-        a generic import).
-    trials : sequence of names or indices, optional
-        Restrict to these trials (default: all, in recording order).
-    nonfinite : "raise" | "drop"
-        A frame with a non-finite readout (masked channel) is an error naming the trial, frame and
-        channel ("raise"), or is left out with a logged count ("drop").
-
-    Returns
-    -------
-    TouchData with ``group`` indexing the selected trials in order.
-    """
-    if nonfinite not in NONFINITE_OPTIONS:
-        raise EctskinError(
-            f"Invalid value for 'nonfinite': allowed values are 'raise', 'drop'; got {nonfinite!r}"
-        )
-    keep = measured_channels(rec)
-    pair_names = channel_names(rec, keep)
-    refs = touch_reference(rec, reference=reference, channels=keep)
-    chosen = _select_trials(rec, trials)
-    if not chosen:
-        raise EctskinError("touch_dataset: no trials selected")
-    check_regions(rec, chosen)
-    xs, ys, gs = [], [], []
-    dropped = 0
-    for g, t in enumerate(chosen):
-        c = calibrate(
-            t.capacitance[:, keep],
-            refs[t.name],
-            source=f"trial {t.name!r}",
-            pair_names=pair_names,
-            allow_nonfinite=nonfinite == "drop",
-        )
-        ok = _finite_rows(c)
-        if not ok.all():
-            dropped += int((~ok).sum())
-            c = c[ok]
-        xs.append(c)
-        ys.append(t.labels[ok].astype(np.int64))
-        gs.append(np.full(c.shape[0], g, dtype=np.int64))
-    if dropped:
-        log.warning("touch_dataset: dropped %d frames with non-finite readouts", dropped)
-    return TouchData(
-        x=np.concatenate(xs, axis=0),
-        y=np.concatenate(ys),
-        group=np.concatenate(gs),
-        group_names=[t.name for t in chosen],
-        n_classes=rec.layout.n_classes,
-        pair_names=pair_names,
-        group_region=np.array([t.region for t in chosen], dtype=np.int64),
-    )
-
-
-# --------------------------------------------------------------------------- tracking
 def tracking_trials(rec: Recording, trials: Any = None) -> list[Trial]:
     """The trials usable for deformation tracking (paper §3: touch trials without occlusion).
 
     Skips, with a logged count per reason: empty trials, trials without markers, no-contact
     trials, and trials whose markers have any NaN (occlusion).
     """
-    chosen = _select_trials(rec, trials)
+    chosen = select_trials(rec, trials)
     check_regions(rec, chosen)
     out, empty, no_markers, no_contact, occluded = [], [], [], [], []
     for t in chosen:
@@ -417,7 +218,7 @@ def track_dataset(
         if not pad and c.shape[0] < k:
             short += 1
             continue
-        ok = _finite_rows(c)
+        ok = finite_rows(c)
         if ok.all():
             valid = None
         else:

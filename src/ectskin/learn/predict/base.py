@@ -1,16 +1,16 @@
-"""Trained models for live use: load a run, feed calibrated frames, get answers.
+"""What every predictor shares: :class:`Predictor`, :func:`as_input` and :func:`forward_batches`.
 
-:class:`TouchPredictor` and :class:`TrackPredictor` rebuild their model from a run directory's
-``model.pt`` alone (see :mod:`ectskin.learn.checkpoint`). The training-set normalisation lives in
-the model's buffers, so both take *calibrated* readouts (paper Eq. 2) exactly as the data sets
-hold them. A touch run that selected a classical model (``candidates.json``, see
-:mod:`ectskin.learn.candidates`) answers with its ``model.skops`` instead (its standardisation is
-part of the model), through ``predict_proba``, with the same output.
+A predictor (:class:`~ectskin.learn.predict.touch.TouchPredictor`,
+:class:`~ectskin.learn.predict.track.TrackPredictor`,
+:class:`~ectskin.learn.predict.contact.ContactPredictor`) rebuilds its model from a run
+directory's ``model.pt`` alone (see :mod:`ectskin.learn.checkpoint`). The training-set
+normalisation lives in the model's buffers, so every predictor takes *calibrated* readouts
+(paper Eq. 2) exactly as the data sets hold them; :func:`as_input` checks them at the door.
 
-Calls run in eval mode under ``torch.inference_mode`` on the CPU by default (latency
-figures: ``benchmarks/bench_train.py`` and ``BENCHMARKS.md``). ``use_runtime("onnx")`` answers
-single frames with an ONNX Runtime export of the model instead (:mod:`ectskin.learn.runtime`,
-several times faster per frame; the live engine's default); batches stay on PyTorch.
+Calls run in eval mode under ``torch.inference_mode`` on the CPU by default (latency figures:
+``benchmarks/bench_train.py`` and ``BENCHMARKS.md``). ``use_runtime("onnx")`` answers single
+frames with an ONNX Runtime export of the model instead (:mod:`ectskin.learn.runtime`, the live
+engine's default); batches stay on PyTorch.
 
 :func:`forward_batches` is the one batched inference path: the predictors and the evaluation of
 a run (:mod:`ectskin.learn.tasks`) both run their model through it.
@@ -26,14 +26,10 @@ import numpy as np
 import torch
 
 from ectskin._check import EctskinError
-from ectskin.learn.candidates import (
-    CLASSICAL_FILE,
-    ClassicalModel,
-    load_classical,
-    read_candidates,
-)
 from ectskin.learn.checkpoint import load_checkpoint
 from ectskin.learn.runtime import RUNTIMES, OnnxModel
+
+__all__ = ["Predictor", "as_input", "forward_batches"]
 
 
 def forward_batches(
@@ -69,10 +65,6 @@ def forward_batches(
     return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
-def _softmax(logits: torch.Tensor) -> torch.Tensor:
-    return torch.softmax(logits, dim=-1)
-
-
 def _as_tensor(value: np.ndarray | torch.Tensor, device: torch.device) -> torch.Tensor:
     if isinstance(value, torch.Tensor):
         return value.to(device)
@@ -84,7 +76,7 @@ def _model_file(run_dir: str | Path) -> Path:
     return path / "model.pt" if path.is_dir() else path
 
 
-def _as_input(
+def as_input(
     name: str, value: Any, shape: tuple[int, ...], owner: str, channel_names: list[str]
 ) -> tuple[torch.Tensor, bool]:
     """A float32 tensor (B, *shape) from one sample of ``shape`` or a batch; returns
@@ -107,7 +99,11 @@ def _as_input(
     return torch.from_numpy(arr if batched else arr[None]), batched
 
 
-class _Predictor:
+class Predictor:
+    """A trained model for live use (module docstring): rebuilt from a run's checkpoint, with
+    its config, payload and channel names; subclasses set :attr:`kind` (the checkpoint kind)
+    and give ``predict``."""
+
     kind = ""
     _onnx: OnnxModel | None = None  # single frames through ONNX Runtime (use_runtime)
 
@@ -184,134 +180,3 @@ class _Predictor:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.source!r}, n_pairs={self.n_pairs})"
-
-
-class TouchPredictor(_Predictor):
-    """Touch class probabilities from calibrated frames: the run's TouchMLP, or the classical
-    model its ``candidates.json`` selects (``classical``; ``model`` is then None)."""
-
-    kind = "touch_mlp"
-    _output = staticmethod(_softmax)
-
-    def __init__(
-        self,
-        model: torch.nn.Module | None,
-        config: Any,
-        payload: dict,
-        source: str,
-        classical: ClassicalModel | None = None,
-    ) -> None:
-        self.classical = classical
-        if classical is None:
-            super().__init__(model, config, payload, source)
-            return
-        self.model = None
-        self.config = classical.config
-        self.payload = {"kind": f"touch_{classical.name}", "extra": {}}
-        self.source = source
-        self.device = torch.device("cpu")
-        self.pair_names = list(classical.pair_names)
-
-    @classmethod
-    def from_run(
-        cls, run_dir: str | Path, *, device: str | torch.device = "cpu", layout: Any = None
-    ):
-        """Load the model a run answers with: ``run_dir/model.skops`` when the run's
-        ``candidates.json`` selects a classical model, else ``run_dir/model.pt`` (on
-        ``device``); or the model file itself (``.skops`` or a checkpoint). With ``layout`` a
-        model trained for another skin is refused before it is used."""
-        path = Path(run_dir)
-        if path.is_dir():
-            doc = read_candidates(path)
-            if doc is not None and doc["selected"] != "mlp":
-                path = path / CLASSICAL_FILE
-        if path.suffix == ".skops":
-            return cls(None, None, {}, str(path), classical=load_classical(path, layout=layout))
-        return super().from_run(run_dir, device=device, layout=layout)
-
-    @property
-    def model_name(self) -> str:
-        """ "mlp" or the classical candidate answering."""
-        return "mlp" if self.classical is None else self.classical.name
-
-    @property
-    def n_classes(self) -> int:
-        return int(self.config.n_classes)
-
-    @property
-    def runtime(self) -> str:
-        return "skops" if self.classical is not None else super().runtime
-
-    def _single_shapes(self) -> list[tuple[int, ...]]:
-        return [(1, self.n_pairs)]
-
-    def predict(self, c_calibrated: Any) -> np.ndarray:
-        """(n_pairs,) → (n_classes,) probabilities; (B, n_pairs) → (B, n_classes). Class 0 = no
-        touch, k = region k."""
-        x, batched = _as_input(
-            "readouts",
-            c_calibrated,
-            (self.n_pairs,),
-            f"TouchPredictor({self.source})",
-            self.pair_names,
-        )
-        if self.classical is not None:
-            probs = self.classical.predict_proba(x.numpy())
-        else:
-            probs = self._forward([x], batched)
-        return probs if batched else probs[0]
-
-    def classify(self, c_calibrated: Any) -> np.ndarray | int:
-        """The most probable class: an int for one frame, (B,) int64 for a batch."""
-        probs = self.predict(c_calibrated)
-        return int(probs.argmax()) if probs.ndim == 1 else probs.argmax(axis=1)
-
-
-class TrackPredictor(_Predictor):
-    """Marker coordinates (mm) from a window of calibrated frames (C2DT)."""
-
-    kind = "c2dt"
-
-    @property
-    def window(self) -> int:
-        return int(self.config.window)
-
-    @property
-    def n_markers(self) -> int:
-        return int(self.config.n_markers)
-
-    @property
-    def prior(self) -> bool:
-        return bool(self.config.prior)
-
-    def _single_shapes(self) -> list[tuple[int, ...]]:
-        shapes = [(1, self.window, self.n_pairs)]
-        return shapes + [(1, self.n_markers, 3)] if self.prior else shapes
-
-    def predict(self, window_calibrated: Any, init: Any = None) -> np.ndarray:
-        """(k, n_pairs) window (oldest first) and (n_markers, 3) initial coordinates (mm) →
-        (n_markers, 3) coordinates, mm. Batched: (B, k, n_pairs), (B, n_markers, 3) →
-        (B, n_markers, 3). ``init`` is required with prior knowledge, ignored without.
-
-        With prior knowledge the window must be calibrated against the trajectory's first
-        frame (its readouts are c_0 of Eq. 2) and ``init`` holds that frame's markers.
-        """
-        owner = f"TrackPredictor({self.source})"
-        x, batched = _as_input(
-            "window", window_calibrated, (self.window, self.n_pairs), owner, self.pair_names
-        )
-        i = None
-        if self.prior:
-            if init is None:
-                raise EctskinError(
-                    f"{owner}: this model uses prior knowledge; pass init, the markers' "
-                    f"coordinates in the trajectory's first frame ({self.n_markers}, 3) mm"
-                )
-            i, batched_i = _as_input("init", init, (self.n_markers, 3), owner, [])
-            if batched_i != batched or i.shape[0] != x.shape[0]:
-                raise EctskinError(
-                    f"{owner}: window and init disagree in batch size "
-                    f"({tuple(x.shape)} vs {tuple(i.shape)})"
-                )
-        out = self._forward([x, i], batched)
-        return out if batched else out[0]

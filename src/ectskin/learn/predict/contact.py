@@ -15,12 +15,14 @@ import numpy as np
 
 from ectskin._check import EctskinError
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
-from ectskin.learn.predict import _as_input, _Predictor
+from ectskin.learn.predict.base import Predictor, as_input
+
+__all__ = ["ContactPredictor", "ContactReading", "FingerEstimate"]
 
 
 @dataclass(frozen=True)
-class Finger:
-    """One finger of a :class:`ContactReading`."""
+class FingerEstimate:
+    """One finger of a :class:`ContactReading`: what the model says about it."""
 
     face: str
     u_mm: float
@@ -36,7 +38,7 @@ class ContactReading:
     count: int
     p_contact: float
     p_hover: float
-    fingers: tuple[Finger, ...]
+    fingers: tuple[FingerEstimate, ...]
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -47,7 +49,7 @@ class ContactReading:
         }
 
 
-class ContactPredictor(_Predictor):
+class ContactPredictor(Predictor):
     """Contact count, points, forces and hover from a window of calibrated frames."""
 
     kind = "contact_net"
@@ -73,7 +75,7 @@ class ContactPredictor(_Predictor):
     def predict(self, window_calibrated: Any) -> np.ndarray:
         """(k, n_pairs) window, oldest frame first → (3 + S · 5,) columns (``PRED_COLUMNS``,
         then ``SLOT_COLUMNS`` per slot); batched (B, k, n_pairs) → (B, columns)."""
-        x, batched = _as_input(
+        x, batched = as_input(
             "window",
             window_calibrated,
             (self.window, self.n_pairs),
@@ -97,7 +99,9 @@ class ContactPredictor(_Predictor):
         for s in range(count):
             a = len(PRED_COLUMNS) + s * len(SLOT_COLUMNS)
             face, u, v, sigma, force = row[a : a + len(SLOT_COLUMNS)]
-            fingers.append(Finger(faces[int(face)], float(u), float(v), float(sigma), float(force)))
+            fingers.append(
+                FingerEstimate(faces[int(face)], float(u), float(v), float(sigma), float(force))
+            )
         return ContactReading(
             count=count,
             p_contact=float(row[PRED_COLUMNS.index("p_contact")]),

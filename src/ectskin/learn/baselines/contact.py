@@ -26,21 +26,25 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
-from ectskin.learn.contact_data import MAX_FINGERS, ContactData
+from ectskin.learn.baselines.base import subsample
+from ectskin.learn.data.contact import MAX_FINGERS, ContactData
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
 
 CONTACT_BASELINES = ("region_centre", "knn", "ridge")
 MAX_TRAIN = 10000
 
+__all__ = [
+    "CONTACT_BASELINES",
+    "MAX_TRAIN",
+    "contact_baselines",
+    "contact_knn_baseline",
+    "contact_ridge_baseline",
+    "region_centre_baseline",
+]
+
 
 def _frames(data: ContactData) -> np.ndarray:
     return np.asarray(data.x[:, -1, :], dtype=np.float64)
-
-
-def _subsample(n: int, max_train: int, seed: int) -> np.ndarray:
-    if n <= max_train:
-        return np.arange(n)
-    return np.sort(np.random.default_rng(seed).choice(n, max_train, replace=False))
 
 
 def _pack(count, p_contact, p_hover, face, uv, force) -> np.ndarray:
@@ -85,7 +89,7 @@ def region_centre_baseline(
 ) -> np.ndarray:
     """Region classifier → the region's centre. ``region_centres`` (n_regions + 1, 3): (face
     index, u, v) of each region id (row 0 unused)."""
-    idx = _subsample(train.n_samples, MAX_TRAIN, seed)
+    idx = subsample(train.n_samples, MAX_TRAIN, np.random.default_rng(seed))
     x = _frames(train)[idx]
     region = train.group_region[train.group[idx]] * (train.count[idx] > 0)
     clf = _logreg(seed)
@@ -110,13 +114,15 @@ def region_centre_baseline(
     )
 
 
-def knn_baseline(train: ContactData, test: ContactData, *, seed: int = 0, k: int = 5) -> np.ndarray:
+def contact_knn_baseline(
+    train: ContactData, test: ContactData, *, seed: int = 0, k: int = 5
+) -> np.ndarray:
     """k nearest standardised training frames (see the module docstring)."""
     from sklearn.neighbors import KNeighborsClassifier, KNeighborsRegressor
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import StandardScaler
 
-    idx = _subsample(train.n_samples, MAX_TRAIN, seed)
+    idx = subsample(train.n_samples, MAX_TRAIN, np.random.default_rng(seed))
     x = _frames(train)[idx]
     xt = _frames(test)
     count = np.minimum(train.count[idx], 1)
@@ -141,13 +147,13 @@ def knn_baseline(train: ContactData, test: ContactData, *, seed: int = 0, k: int
     return _pack(count_pred(xt), p_contact(xt), p_hover(xt), face, uv, force)
 
 
-def ridge_baseline(train: ContactData, test: ContactData, *, seed: int = 0) -> np.ndarray:
+def contact_ridge_baseline(train: ContactData, test: ContactData, *, seed: int = 0) -> np.ndarray:
     """Ridge for (u, v) and force, logistic regression for count, face and hover."""
     from sklearn.linear_model import RidgeCV
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import StandardScaler
 
-    idx = _subsample(train.n_samples, MAX_TRAIN, seed)
+    idx = subsample(train.n_samples, MAX_TRAIN, np.random.default_rng(seed))
     x = _frames(train)[idx]
     xt = _frames(test)
     count = np.minimum(train.count[idx], 1)
@@ -176,8 +182,8 @@ def contact_baselines(
     out: dict[str, Any] = {}
     for name, fn in (
         ("region_centre", lambda: region_centre_baseline(train, test, region_centres, seed=seed)),
-        ("knn", lambda: knn_baseline(train, test, seed=seed)),
-        ("ridge", lambda: ridge_baseline(train, test, seed=seed)),
+        ("knn", lambda: contact_knn_baseline(train, test, seed=seed)),
+        ("ridge", lambda: contact_ridge_baseline(train, test, seed=seed)),
     ):
         t0 = time.perf_counter()
         pred = fn()
