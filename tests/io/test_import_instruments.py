@@ -177,10 +177,6 @@ def test_capmeter_ms_time_without_unit_needs_time_unit(tmp_path):
         ("133.3,1526.1,0.375,983.4,", "133.3,1526.1,0.375,98x3.4,",
          (r"capmeter_bom_fF\.csv: line 9: column 4 \(channel 'C13', 'C13 \[fF\]'\): expected a "
          r"number or a missing-value marker .* found '98x3.4'")),
-        # time going backwards
-        ("200.0,1528.8", "150.0,1528.8",
-         (r"line 11: time column 'Time \[ms\]': time '150.0' does not increase \(previous frame, "
-         r"line 10: '166.7'\)")),
         # an unparseable time
         ("233.3,1530.2", "2x3.3,1530.2", r"line 12: time column 'Time \[ms\]': expected a number"),
         # a channel column with no unit
@@ -198,6 +194,16 @@ def test_capmeter_malformed_inputs_name_file_line_and_channel(tmp_path, old, new
     p = _copy_with(tmp_path, CAP_BOM, old, new)
     with pytest.raises(EctskinError, match=pattern):
         read_capmeter_csv(p)
+
+
+def test_capmeter_time_going_backwards_is_refused_with_time_order_strict(tmp_path):
+    """time_order="strict" keeps the error that was the only behaviour before (the default,
+    "file", now imports such a file: tests/io/test_capmeter_time_order.py)."""
+    p = _copy_with(tmp_path, CAP_BOM, "200.0,1528.8", "150.0,1528.8")
+    with pytest.raises(EctskinError, match=(
+        r"line 11: time column 'Time \[ms\]': time '150.0' does not increase \(previous frame, "
+        r"line 10: '166.7'\)")):
+        read_capmeter_csv(p, time_order="strict")
 
 
 def test_capmeter_non_strict_skips_and_reports(tmp_path):

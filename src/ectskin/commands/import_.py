@@ -39,6 +39,7 @@ KIND_EXAMPLES = {
   ectskin import capacitance readout.csv                      # report channels and masks
   ectskin import capacitance readout.csv -o rec.h5 --region 7 --inflation 0,10,20
   ectskin import capacitance export.csv --delimiter semicolon --time-unit ms --no-strict
+  ectskin import capacitance export.csv --time-order sort --resample-hz 30
 """,
     "mocap": """\
   ectskin import mocap take.csv                               # markers, rate, occlusions
@@ -73,6 +74,13 @@ def _add_capacitance_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-strict", dest="strict", action="store_false",
                    help="skip malformed rows and mask unparseable cells (reported) instead of "
                         "stopping at the first")
+    g.add_argument("--time-order", choices=("file", "sort", "strict"), default="file",
+                   help="time stamps that repeat or step back: file (default): keep the rows in "
+                        "the file's order and re-derive their times; sort: sort the rows by time "
+                        "stamp; strict: refuse the row (docs/instrument-import.md)")
+    g.add_argument("--resample-hz", type=float, default=None, metavar="F",
+                   help="resample the readouts onto a uniform grid of F frames/s (linear "
+                        "interpolation of each channel; default: keep the file's frames)")
 
 
 def _add_mocap_options(p: argparse.ArgumentParser) -> None:
@@ -174,6 +182,7 @@ def _read_capacitance(args, path, n_pairs=None):
     return read_capmeter_csv(
         path, n_pairs=n_pairs, strict=args.strict, time_unit=args.time_unit,
         value_unit=args.value_unit, delimiter=delim, pair_order=args.pair_order,
+        time_order=args.time_order, resample_hz=args.resample_hz,
     )
 
 
@@ -242,7 +251,9 @@ def _build_from_manifest(args: argparse.Namespace):
 
     per_trial = {"--mocap": args.mocap, "--trial-name": args.trial_name,
                  "--region": args.region or None, "--inflation": args.inflation.strip(),
-                 "--markers": args.markers}
+                 "--markers": args.markers,
+                 "--time-order": args.time_order if args.time_order != "file" else None,
+                 "--resample-hz": args.resample_hz}
     given = [k for k, v in per_trial.items() if v]
     if given:
         raise EctskinError(

@@ -12,7 +12,8 @@ Modules, by job:
 * :mod:`~ectskin.io.generic`: recordings from other sources in a documented NPZ/CSV layout;
 * :mod:`~ectskin.io.capmeter`, :mod:`~ectskin.io.motive`: instrument exports (capacitance meter,
   OptiTrack Motive), one package per vendor format, on the shared text helpers of
-  :mod:`~ectskin.io.text`;
+  :mod:`~ectskin.io.text` and the frame-rate checks of :mod:`~ectskin.io.frame_rate` (which the
+  generic readers share);
 * :mod:`~ectskin.io.align`: the delay between the two instruments, and a recording built from them;
 * :mod:`~ectskin.io.calibration`: paper Eq. 2 and the choice of the reference state.
 """

@@ -10,9 +10,13 @@
   caller can name the column and what it expected.
 * :class:`RowErrors`: the ``strict`` policy for a malformed data row: raise an error naming file
   and line, or skip the row, log it and remember it for the report.
-* :func:`cut_short` and :func:`truncation_note`: the last row of a file that ends without a
-  newline may have been cut in the middle (a copy that stopped: ``1.00239`` read as ``1.0``);
-  the importers leave such a row out and say so, keeping the rows before it.
+* :func:`data_cells` and :func:`float_cells`: a block of machine-written data lines read in bulk
+  (cells as an array, numbers column by column); the importers read the block line by line only
+  when the bulk read finds something to explain (a bad row, a quote), so that every message still
+  names the line and the column.
+* :func:`cut_last_row` and :func:`truncation_note`: the one rule for the last row of a file that
+  ends without a newline: it may have been cut in the middle (a copy that stopped: ``1.00239``
+  read as ``1.0``); every importer leaves such a row out and says so, keeping the rows before it.
 * :data:`MAX_ABS_VALUE`: the largest magnitude a number of an imported file may have.
 """
 
@@ -21,9 +25,11 @@ from __future__ import annotations
 import csv
 import logging
 import re
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Collection, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import numpy as np
 
 from ectskin._check import EctskinError
 
@@ -145,6 +151,77 @@ class RowErrors:
         self.skipped.append((line, reason))
 
 
+# --------------------------------------------------------------------------- bulk reads
+def data_cells(
+    lines: Sequence[str], first_line: int, delimiter: str, width: int
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The cells of machine-written data lines, read in bulk.
+
+    ``lines`` are consecutive lines of the file, the first being line ``first_line`` (1-based).
+    Returns ``(cells, line_numbers)``: an object array (n, ``width``) of the cell texts, exactly as
+    :func:`csv_rows` would give them, and the line number of each row (int64); blank lines (no
+    cell with more than white space) are left out. None when a line needs the CSV reader or has a
+    fault: a quote or NUL character, a line longer than the CSV reader's field limit, or a
+    non-blank line without ``width`` cells. The caller then reads the lines one by one, so that the fault is
+    reported with its line.
+    """
+    if not lines:
+        return np.empty((0, width), dtype=object), np.empty(0, dtype=np.int64)
+    if max(map(len, lines)) > csv.field_size_limit():
+        return None
+    # a line of other (Unicode) white space is kept here: its cells then send the block to the
+    # line reader, which leaves it out
+    blank = " \t" + delimiter
+    keep = [k for k, ln in enumerate(lines) if ln.strip(blank)]
+    kept = lines if len(keep) == len(lines) else [lines[k] for k in keep]
+    n_delims = width - 1
+    if any(ln.count(delimiter) != n_delims for ln in kept):
+        return None
+    block = delimiter.join(kept)
+    if '"' in block or "\x00" in block:
+        return None
+    cells = np.array(block.split(delimiter), dtype=object).reshape(len(kept), width)
+    return cells, np.asarray(keep, dtype=np.int64) + first_line
+
+
+def float_cells(
+    cells: np.ndarray,
+    parse: Callable[[str], float | None],
+    no_value: Collection[str] = ("",),
+    decimal_comma: bool = False,
+) -> np.ndarray:
+    """float64 of every cell of ``cells`` (a 1-D object array of texts), as ``parse`` reads it
+    (:func:`parse_float` or :func:`parse_number`); NaN where a cell is no number.
+
+    Column by column in C wherever Python's ``float`` takes every cell, which gives the same
+    numbers as ``parse`` (both end in ``float``; ``parse_number`` only adds spaces in thousands
+    and, with ``decimal_comma``, the one comma of a cell, which ``float`` refuses). Texts in
+    ``no_value`` (``""``, ``"OL"``...) are taken as NaN first; a column with any other text that
+    ``float`` refuses is parsed cell by cell. A NaN is either a cell ``nan`` or no number: the
+    caller tells them apart by the texts of its (few) NaN cells.
+    """
+    try:
+        return cells.astype(np.float64)
+    except ValueError:
+        pass
+    if "" in no_value:  # empty cells, the commonest: compared in C, without hashing every cell
+        try:
+            return np.where(cells == "", "nan", cells).astype(np.float64)
+        except ValueError:
+            pass
+    texts = cells.tolist()
+    if decimal_comma:  # "1,5" → "1.5"; a cell with a dot and a comma, or two commas, is refused
+        texts = [c.replace(",", ".") for c in texts]
+    nan_for = {t: "nan" for t in no_value}
+    texts = list(map(nan_for.get, texts, texts))
+    try:
+        return np.array(texts, dtype=object).astype(np.float64)
+    except ValueError:
+        pass
+    values = map(parse, cells.tolist())
+    return np.fromiter((np.nan if v is None else v for v in values), np.float64, len(cells))
+
+
 # --------------------------------------------------------------------------- truncated files
 def decimals(cell: str, decimal_comma: bool = False) -> int:
     """Digits after the decimal separator of a number cell: ``"1.00239"`` → 5, ``"2"`` → 0,
@@ -220,6 +297,39 @@ def cut_short(
             f"{tail.n} rows before it have {fixed}"
         )
     return None
+
+
+#: How many rows before a file's last row :func:`cut_last_row` compares it with.
+TAIL_ROWS = 50
+
+
+def ends_with_newline(text: str) -> bool:
+    """Whether ``text`` (a whole file) ends with a line break (an empty text counts as one)."""
+    return not text or text.endswith(("\n", "\r"))
+
+
+def cut_last_row(
+    rows: Sequence[tuple[int, Sequence[str]]],
+    width: int,
+    is_value: Callable[[str], bool] | None,
+    decimal_comma: bool = False,
+) -> str | None:
+    """Why the last of ``rows`` looks cut short, or None: the one rule of every importer for the
+    last data row of a file that ends without a newline.
+
+    ``rows`` are data rows ``(line, cells)`` ending with the file's last one; the last
+    :data:`TAIL_ROWS` rows before it that have ``width`` cells tell how its last cell should look
+    (:func:`cut_short`: the cell count, an empty last cell, ``is_value``, the decimals). A blank
+    last row is no cut. The caller leaves a cut row out, logs :func:`truncation_note` as a warning
+    and lists the row among those it skipped.
+    """
+    if not rows or not any(c.strip() for c in rows[-1][1]):
+        return None
+    tail = TailDecimals()
+    for _, before in rows[-TAIL_ROWS - 1 : -1]:
+        if len(before) == width:
+            tail.add(before[-1], decimal_comma)
+    return cut_short(rows[-1][1], width, tail, is_value, decimal_comma)
 
 
 def truncation_note(src: str, line: int, reason: str, kept: int) -> str:

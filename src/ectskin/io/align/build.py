@@ -105,7 +105,8 @@ def build_recording(
     max_gap_frames : see :func:`resample_markers`.
 
     The trial's timestamps count from its first frame (s). ``Trial.meta`` records the sources, the
-    delay (and how it was found), the masked cells and the occlusions.
+    delay (and how it was found), the masked cells, the occlusions and, under ``timing``, what
+    the reader did to the readout's time stamps (re-derived, resampled).
     """
     check_option("clock", clock, ("start", "file"))
     delay = _check_delay(delay)
@@ -128,6 +129,8 @@ def build_recording(
         "masked": capmeter.mask_report.to_dict(),
         "clock": clock,
     }
+    if capmeter.timing:  # time stamps re-derived or resampled (ectskin.io.capmeter.timing)
+        trial_meta["timing"] = dict(capmeter.timing)
     markers = None
     if mocap is not None:
         markers = _aligned_markers(
@@ -288,6 +291,8 @@ _TRIAL_KEYS = {
     "time_unit",
     "value_unit",
     "length_units",
+    "time_order",
+    "resample_hz",
 }
 _TOP_KEYS = {"layout", "max_delay_s", "delay_method", "clock", "strict", "trials"}
 
@@ -388,6 +393,8 @@ def _manifest_trial(
             strict=strict,
             time_unit=e.get("time_unit"),
             value_unit=e.get("value_unit"),
+            time_order=e.get("time_order", "file"),
+            resample_hz=e.get("resample_hz"),
         )
         mocap = None
         if e.get("mocap"):

@@ -17,15 +17,18 @@ reader accepts the layout described in ``docs/instrument-import.md``:
 * time in s, ms, or clock time ``hh:mm:ss.fff`` (optionally after a date).
 
 Values are converted to pF (``aF``, ``fF``, ``pF``, ``nF`` accepted). A row with the wrong number of
-cells, an unparseable cell or a time that does not increase is an :class:`EctskinError` naming the
-file, the line and the column; with ``strict=False`` the row (or cell) is skipped (masked) and
-reported instead.
+cells or an unparseable cell is an :class:`EctskinError` naming the file, the line and the
+column; with ``strict=False`` the row (or cell) is skipped (masked) and reported instead. Time
+stamps that repeat or step back are kept in the file's order with re-derived times, sorted, or
+refused (``time_order``); the frames can be resampled onto a uniform grid (``resample_hz``).
 
-Modules, in the reader's order: :mod:`ectskin.io.text` (text, delimiter, numbers),
+Modules, in the reader's order: :mod:`ectskin.io.text` (text, delimiter, numbers, bulk reads),
 :mod:`~ectskin.io.capmeter.header` (metadata, header, units row, columns),
-:mod:`~ectskin.io.capmeter.rows` (data rows), :mod:`~ectskin.io.capmeter.read` (cross-check of
-the relative change, pair order, the result); :mod:`~ectskin.io.capmeter.units` holds the unit
-tables and the cell and channel-name parsers, :mod:`~ectskin.io.capmeter.data` the result types.
+:mod:`~ectskin.io.capmeter.rows` (data rows, in bulk or one at a time),
+:mod:`~ectskin.io.capmeter.timing` (time order, resampling), :mod:`~ectskin.io.capmeter.read`
+(cross-check of the relative change, pair order, the result); :mod:`~ectskin.io.capmeter.units`
+holds the unit tables and the cell and channel-name parsers, :mod:`~ectskin.io.capmeter.data` the
+result types.
 """
 
 from __future__ import annotations

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -110,6 +111,12 @@ class CapmeterData:
     ``pairs``         (n_channels, 2) int or None    electrode numbers (1-based) when every
                                                      channel name reads as a pair, e.g. ``C12``
     ================  =============================  ==========================================
+
+    ``timing`` records what was done to the time stamps (empty when nothing was): stamps that
+    repeated or stepped back (``time_order``, ``steps_back``, ``repeats``, ``first_lines``,
+    ``retimed``; :mod:`~ectskin.io.capmeter.timing`) and ``resampled_hz`` when the frames were
+    resampled onto a uniform grid (then ``lines`` holds the line of the row at or before each
+    frame).
     """
 
     path: str
@@ -122,6 +129,8 @@ class CapmeterData:
     time_unit: str
     pairs: np.ndarray | None = None
     meta: dict[str, str] = field(default_factory=dict)
+    timing: dict[str, Any] = field(default_factory=dict)
+    resampled_hz: float | None = None
 
     @property
     def n_frames(self) -> int:
@@ -133,7 +142,9 @@ class CapmeterData:
 
     @property
     def frame_rate_hz(self) -> float:
-        """1 / median frame interval (NaN with fewer than 2 frames)."""
+        """The resampling rate, else 1 / median frame interval (NaN with fewer than 2 frames)."""
+        if self.resampled_hz is not None:
+            return float(self.resampled_hz)
         if self.n_frames < 2:
             return float("nan")
         return float(1.0 / np.median(np.diff(self.timestamps)))

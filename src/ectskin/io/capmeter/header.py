@@ -294,6 +294,12 @@ def find_header(rows: Rows, decimal_comma: bool) -> int:
     A metadata row such as ``Time zone,UTC+1`` fails the last test. Without any data row the first
     candidate is returned (the caller then reports the missing data).
     """
+    return locate_header(rows, decimal_comma)[0]
+
+
+def locate_header(rows: Rows, decimal_comma: bool) -> tuple[int, bool]:
+    """:func:`find_header`, and whether a data row after the header confirmed it: then the
+    answer is the same for any rows that begin with ``rows`` (the head of a file is enough)."""
     first = -1
     for r, (_, cells) in enumerate(rows):
         named = [c.strip() for c in cells if c.strip()]
@@ -308,5 +314,5 @@ def find_header(rows: Rows, decimal_comma: bool) -> int:
         while nxt < len(rows) and not any(c.strip() for c in rows[nxt][1]):
             nxt += 1
         if nxt < len(rows) and any(_is_number_or_clock(c, decimal_comma) for c in rows[nxt][1]):
-            return r
-    return first
+            return r, True
+    return first, False

@@ -9,7 +9,6 @@ Kept, it would pass the import and fail training (Eq. 2 divides by a reference o
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Callable
 from typing import Any
 
@@ -17,6 +16,7 @@ import numpy as np
 
 from ectskin._check import EctskinError
 from ectskin.io.calibration import REFERENCE_RTOL
+from ectskin.io.frame_rate import frame_rate, stated_rate
 from ectskin.io.generic.fields import Fields
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import SensorLayout
@@ -275,34 +275,33 @@ def _check_timestamps(f: Fields, groups: _Groups) -> None:
 
 
 def _frame_rate(f: Fields, frame_rate_hz: float | None, groups: _Groups) -> float:
-    """The caller's rate, else the file's, else 1 / the median timestamp step within groups."""
+    """The caller's rate, else the file's, else 1 / the median timestamp step within groups
+    (:func:`~ectskin.io.frame_rate.frame_rate`)."""
     src = f.source
-    if frame_rate_hz is None:
-        frame_rate_hz = f.frame_rate_hz
-    if frame_rate_hz is None:
-        if f.timestamps is None:
-            raise EctskinError(
-                f"{src}: no timestamps and no frame rate: give timestamps ('timestamps' / column "
-                f"'time_s'), a frame_rate_hz field, or the rate (frame_rate_hz=...; --frame-rate on "
-                f"the command line)"
-            )
-        steps = np.concatenate([np.diff(f.timestamps[idx]) for idx in groups.members])
-        steps = steps[np.isfinite(steps) & (steps > 0)]
-        if steps.size == 0:
-            raise EctskinError(
-                f"{src}: cannot infer the frame rate from the timestamps (no group has two "
-                f"increasing timestamps); give the rate (frame_rate_hz=...; --frame-rate on the "
-                "command line)"
-            )
-        frame_rate_hz = 1.0 / float(np.median(steps))
-        log.info("%s: frame rate %.4g Hz from the median timestamp step", src, frame_rate_hz)
-    try:
-        rate = float(frame_rate_hz)
-    except (TypeError, ValueError):
-        rate = math.nan
-    if not (math.isfinite(rate) and rate > 0):
-        raise EctskinError(f"{src}: frame_rate_hz must be a number > 0, got {frame_rate_hz!r}")
-    return rate
+    stated = frame_rate_hz if frame_rate_hz is not None else f.frame_rate_hz
+    if stated is not None:
+        stated = stated_rate(stated, f"{src}: frame_rate_hz")
+    elif f.timestamps is None:
+        raise EctskinError(
+            f"{src}: no timestamps and no frame rate: give timestamps ('timestamps' / column "
+            f"'time_s'), a frame_rate_hz field, or the rate (frame_rate_hz=...; --frame-rate on "
+            f"the command line)"
+        )
+    steps = (
+        np.concatenate([np.diff(f.timestamps[idx]) for idx in groups.members])
+        if f.timestamps is not None
+        else np.empty(0)
+    )
+    return frame_rate(
+        stated,
+        steps,
+        src,
+        no_rate=(
+            "cannot infer the frame rate from the timestamps (no group has two increasing "
+            "timestamps); give the rate (frame_rate_hz=...; --frame-rate on the command line)"
+        ),
+        what="timestamp steps within groups",
+    )
 
 
 def _trial(

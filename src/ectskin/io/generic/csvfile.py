@@ -4,7 +4,7 @@
 The file is streamed once: group ids are kept as text and every other column goes into one flat
 float64 buffer, so a big file costs 8 bytes per numeric cell rather than a Python string per cell.
 A last row cut short by an incomplete copy (the file ends without a newline inside it) is left
-out with a warning (:func:`ectskin.io.text.cut_short`).
+out with a warning (:func:`ectskin.io.text.cut_last_row`).
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import math
 from array import array
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,14 +20,16 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
+from ectskin.io.frame_rate import stated_rate
 from ectskin.io.generic.fields import (
     CSV_COLUMNS,
     Fields,
     check_magnitude,
     class_labels,
     ground_truth,
+    group_ids,
 )
-from ectskin.io.text import TailDecimals, csv_rows, cut_short, parse_float, truncation_note
+from ectskin.io.text import TAIL_ROWS, csv_rows, cut_last_row, parse_float, truncation_note
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +48,8 @@ class _Scan:
     groups: list[str] = field(default_factory=list)
     surfaces: list[str] = field(default_factory=list)  # the 'surface' column, when present
     lines: array = field(default_factory=lambda: array("q"))
-    tail: TailDecimals = field(default_factory=TailDecimals)  # the last column's format
+    # the last data rows read, (line, cells): how the file's last row should look
+    tail: deque = field(default_factory=lambda: deque(maxlen=TAIL_ROWS + 1))
     notes: list[str] = field(default_factory=list)
 
     def add_last(self, line: int, cells: list[str]) -> None:
@@ -55,7 +59,8 @@ class _Scan:
         if all(not c.strip() for c in cells):
             return None
         last_is_text = len(self.header) - 1 in (self.cols["group"], self.cols.get("surface"))
-        why = cut_short(cells, len(self.header), self.tail, None if last_is_text else _is_number)
+        rows = [*self.tail, (line, cells)]
+        why = cut_last_row(rows, len(self.header), None if last_is_text else _is_number)
         if why is None:
             try:
                 return self.add(line, cells)
@@ -106,7 +111,7 @@ class _Scan:
         if "surface" in self.cols:
             self.surfaces.append(cells[self.cols["surface"]].strip())
         self.lines.append(line)
-        self.tail.add(cells[-1])
+        self.tail.append((line, cells))
 
     def _comment(self, text: str) -> None:
         """``# frame_rate_hz: 30`` (or ``=``) above the header → meta["frame_rate_hz"]."""
@@ -208,7 +213,7 @@ def read_csv(path: Path) -> Fields:
     return Fields(
         src,
         readouts,
-        _group_ids(scan.groups),
+        group_ids(np.asarray(scan.groups, dtype=str), n, src, row, text_ints=True),
         labels,
         markers,
         reference,
@@ -259,23 +264,11 @@ def _scan(path: Path) -> _Scan:
     return scan
 
 
-def _group_ids(groups: list[str]) -> np.ndarray:
-    """Integer ids when every group reads as an integer, else the texts."""
-    try:
-        return np.asarray([int(v) for v in groups], dtype=np.int64)
-    except (ValueError, OverflowError):
-        return np.asarray(groups, dtype=str)
-
-
 def _frame_rate(meta: dict[str, str], src: str) -> float | None:
+    """``# frame_rate_hz: 30`` above the header (:func:`~ectskin.io.frame_rate.stated_rate`)."""
     if "frame_rate_hz" not in meta:
         return None
-    try:
-        return float(meta["frame_rate_hz"])
-    except ValueError:
-        raise EctskinError(
-            f"{src}: '# frame_rate_hz' must be a number, got {meta['frame_rate_hz']!r}"
-        ) from None
+    return stated_rate(meta["frame_rate_hz"], f"{src}: '# frame_rate_hz'")
 
 
 def _csv_kind(name: str) -> tuple[str, bool]:

@@ -211,6 +211,51 @@ def check_group_text(group: np.ndarray, src: str, row: Callable[[int], str]) -> 
         )
 
 
+def group_ids(
+    g: np.ndarray, n: int, src: str, row: Callable[[int], str], *, text_ints: bool = False
+) -> np.ndarray:
+    """The group id of each of the ``n`` frames, checked: int64, or text (``str``).
+
+    Integers, and floats that hold integers (up to 2**53), become int64; ASCII bytes and text
+    stay text, none of them empty or with a NUL byte (:func:`check_group_text`), unless
+    ``text_ints`` (CSV, where every cell is text) and every id reads as an integer. Errors name
+    the file and the field ``'group'``.
+    """
+    if g.shape != (n,):
+        raise EctskinError(
+            f"{src}: field 'group' must have shape ({n},) (one group id per frame), got {g.shape}"
+        )
+    if g.dtype.kind in "iu":
+        if g.dtype.kind == "u" and g.size and g.max() > np.iinfo(np.int64).max:
+            i = int(np.argmax(g > np.iinfo(np.int64).max))
+            raise EctskinError(f"{src}: field 'group' row {i} is {g[i]}, beyond the int64 ids")
+        return g.astype(np.int64)
+    if g.dtype.kind == "f":
+        # beyond 2**53 a float no longer holds every integer: two ids could become one
+        bad = ~np.isfinite(g) | (g != np.round(g)) | (np.abs(g) > 2.0**53)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise EctskinError(f"{src}: field 'group' row {i} is {g[i]}, expected an integer id")
+        return g.astype(np.int64)
+    if g.dtype.kind == "S":  # bytes: ASCII text
+        try:
+            g = np.char.decode(g, "ascii")
+        except UnicodeDecodeError:
+            raise EctskinError(
+                f"{src}: field 'group' holds bytes that are not ASCII text; store the group ids "
+                "as integers or as a unicode string array (np.asarray(ids, dtype=str))"
+            ) from None
+    if g.dtype.kind == "U":
+        check_group_text(g, src, row)
+        if text_ints:
+            try:
+                return np.asarray([int(v) for v in g.tolist()], dtype=np.int64)
+            except (ValueError, OverflowError):
+                pass
+        return g.astype(str)
+    raise EctskinError(f"{src}: field 'group' must hold integers or strings, found dtype {g.dtype}")
+
+
 def class_labels(
     lab: np.ndarray, n: int, src: str, name: str, row: Callable[[int], str]
 ) -> np.ndarray:

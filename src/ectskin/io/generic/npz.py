@@ -9,14 +9,15 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
+from ectskin.io.frame_rate import stated_rate
 from ectskin.io.generic.fields import (
     NPZ_FIELDS,
     Fields,
     GroundTruth,
-    check_group_text,
     check_magnitude,
     class_labels,
     ground_truth,
+    group_ids,
 )
 
 
@@ -33,7 +34,7 @@ def read_npz(path: Path) -> Fields:
     group = raw["group"]
     if group is None:
         raise EctskinError(f"{src}: missing field 'group' (a group id per frame: the trials)")
-    group = _group_ids(group, n, src)
+    group = group_ids(group, n, src, _row)
     labels, markers = _labels_and_markers(raw["labels"], raw["markers"], n, src)
     reference = raw["reference"]
     if reference is not None:
@@ -190,11 +191,12 @@ def _labels_and_markers(
 
 
 def _frame_rate(fr: np.ndarray | None, src: str) -> float | None:
+    """Field ``frame_rate_hz``: one number (:func:`~ectskin.io.frame_rate.stated_rate`)."""
     if fr is None:
         return None
     if fr.size != 1:
         raise EctskinError(f"{src}: field 'frame_rate_hz' must be one number, got shape {fr.shape}")
-    return float(_numeric(fr, src, "frame_rate_hz").reshape(()))
+    return stated_rate(_numeric(fr, src, "frame_rate_hz"), f"{src}: frame_rate_hz")
 
 
 def _numeric(a: np.ndarray, src: str, name: str) -> np.ndarray:
@@ -218,34 +220,3 @@ def _names(a: np.ndarray | None, count: int, src: str, name: str) -> list[str] |
     if len(set(names)) != len(names):
         raise EctskinError(f"{src}: field {name!r} has duplicate names")
     return names
-
-
-def _group_ids(g: np.ndarray, n: int, src: str) -> np.ndarray:
-    if g.shape != (n,):
-        raise EctskinError(
-            f"{src}: field 'group' must have shape ({n},) (one group id per frame), got {g.shape}"
-        )
-    if g.dtype.kind in "iu":
-        if g.dtype.kind == "u" and g.size and g.max() > np.iinfo(np.int64).max:
-            i = int(np.argmax(g > np.iinfo(np.int64).max))
-            raise EctskinError(f"{src}: field 'group' row {i} is {g[i]}, beyond the int64 ids")
-        return g.astype(np.int64)
-    if g.dtype.kind == "f":
-        # beyond 2**53 a float no longer holds every integer: two ids could become one
-        bad = ~np.isfinite(g) | (g != np.round(g)) | (np.abs(g) > 2.0**53)
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise EctskinError(f"{src}: field 'group' row {i} is {g[i]}, expected an integer id")
-        return g.astype(np.int64)
-    if g.dtype.kind == "S":  # bytes: ASCII text
-        try:
-            g = np.char.decode(g, "ascii")
-        except UnicodeDecodeError:
-            raise EctskinError(
-                f"{src}: field 'group' holds bytes that are not ASCII text; store the group ids "
-                "as integers or as a unicode string array (np.asarray(ids, dtype=str))"
-            ) from None
-    if g.dtype.kind == "U":
-        check_group_text(g, src, _row)
-        return g.astype(str)
-    raise EctskinError(f"{src}: field 'group' must hold integers or strings, found dtype {g.dtype}")

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ectskin._check import EctskinError
+from ectskin.io import frame_rate
 from ectskin.io.text import Rows
 
 log = logging.getLogger(__name__)
@@ -76,15 +77,7 @@ def stated_rate(meta: dict[str, str], src: str) -> float | None:
     """``Export Frame Rate`` (else ``Capture Frame Rate``) of the metadata, frames/s, or None."""
     for key in ("Export Frame Rate", "Capture Frame Rate"):
         if key in meta:
-            try:
-                rate = float(meta[key])
-            except ValueError:
-                raise EctskinError(
-                    f"{src}: line 1: {key} must be a number, found {meta[key]!r}"
-                ) from None
-            if not (np.isfinite(rate) and rate > 0):
-                raise EctskinError(f"{src}: line 1: {key} must be > 0, found {meta[key]!r}")
-            return rate
+            return frame_rate.stated_rate(meta[key], f"{src}: line 1: {key}")
     return None
 
 

@@ -1,4 +1,9 @@
-"""``read_motive_csv``: read text → metadata row → header rows and markers → data rows → result."""
+"""``read_motive_csv``: read text → metadata row → header rows and markers → data rows (in
+bulk; one by one to report a fault) → result.
+
+A last row cut short by an incomplete copy (the file ends without a newline inside it) is left
+out and listed among the skipped rows, with a warning (:func:`ectskin.io.text.cut_last_row`).
+"""
 
 from __future__ import annotations
 
@@ -10,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from ectskin._check import EctskinError
-from ectskin.io.motive.data import MarkerOcclusion, MocapData
+from ectskin.io.frame_rate import frame_rate
+from ectskin.io.motive.data import N_FIRST_LINES, MarkerOcclusion, MocapData
 from ectskin.io.motive.header import (
     AXES,
     Columns,
@@ -21,9 +27,27 @@ from ectskin.io.motive.header import (
     position_columns,
     stated_rate,
 )
-from ectskin.io.text import MAX_ABS_VALUE, RowErrors, Rows, csv_rows, parse_float, read_text
+from ectskin.io.text import (
+    MAX_ABS_VALUE,
+    TAIL_ROWS,
+    RowErrors,
+    Rows,
+    csv_rows,
+    cut_last_row,
+    data_cells,
+    ends_with_newline,
+    float_cells,
+    parse_float,
+    read_text,
+    truncation_note,
+)
 
 log = logging.getLogger(__name__)
+
+#: Lines at the top of a file in which the header is looked for before the whole file is.
+HEAD_LINES = 200
+#: Data lines read in bulk at a time (bounds the memory of the cell texts).
+CHUNK_LINES = 20_000
 
 
 def read_motive_csv(
@@ -58,7 +82,10 @@ def read_motive_csv(
             f"marker_names must be a list of names, e.g. ['M1', 'M2'], got the string "
             f"{marker_names!r}"
         )
-    rows = list(csv_rows(read_text(path, "Motive").splitlines(), src))
+    text = read_text(path, "Motive")
+    lines = text.splitlines()
+    head = _head_rows(lines, src)
+    rows = head if head is not None else list(csv_rows(lines, src))
     meta = metadata(rows, src)
     unit, scale = length_unit(meta, length_units, src)
     stated = stated_rate(meta, src)
@@ -66,8 +93,30 @@ def read_motive_csv(
     chosen = choose_markers(cols, marker_names, include_unlabeled, src)
     col_idx = position_columns(cols, chosen, src)
     errors = RowErrors(src, strict, log)
-    take = _parse_rows(rows[cols.axis + 1 :], cols, chosen, col_idx, scale, errors)
-    rate = _frame_rate(take.t, stated, src)
+    bulk = None if head is None else _bulk_read(text, lines, cols, chosen, col_idx, scale, src)
+    if bulk is not None:  # one row per line down to the data: read in bulk
+        take, cut = bulk
+    else:  # one row at a time: the reference, which reports every fault
+        if head is not None:
+            rows = list(csv_rows(lines, src))
+        data = rows[cols.axis + 1 :]
+        cut = None if ends_with_newline(text) else _cut_last_row(data, cols)
+        if cut is not None:
+            data = data[:-1]
+        take = _parse_rows(data, cols, chosen, col_idx, scale, errors)
+    if cut is not None:
+        line, why = cut
+        log.warning("%s", truncation_note(src, line, why, len(take.t) + len(errors.skipped)))
+        errors.skipped.append(
+            (line, f"cut short ({why}); the file ends there without a newline (truncated?)")
+        )
+    rate = frame_rate(
+        stated,
+        np.diff(take.t),
+        src,
+        no_rate="one frame and no frame rate in the metadata",
+        what="steps of the Time column",
+    )
     for name, o in take.occlusions.items():
         if o.n_occluded:
             log.info(
@@ -91,6 +140,59 @@ def read_motive_csv(
         occlusions=take.occlusions,
         skipped_rows=errors.skipped,
     )
+
+
+def _head_rows(lines: list[str], src: str) -> Rows | None:
+    """The CSV rows of the head of the file when they hold the column header row (``Frame,Time
+    (Seconds),...``) and one row per line (no quoted cell over several lines); else None."""
+    head = lines[:HEAD_LINES]
+    try:
+        rows = list(csv_rows(head, src))
+    except EctskinError:
+        return None
+    if len(head) < len(lines):
+        rows = rows[:-1]  # the last row of a cut head may be incomplete
+    if any(line != k + 1 for k, (line, _) in enumerate(rows)):
+        return None
+    if not any(c and c[0].strip().lower() == "frame" for _, c in rows):
+        return None
+    return rows
+
+
+def _bulk_read(
+    text: str,
+    lines: list[str],
+    cols: Columns,
+    chosen: list[str],
+    col_idx: np.ndarray,
+    scale: float,
+    src: str,
+) -> tuple[_Take, tuple[int, str] | None] | None:
+    """The frames of the data lines read by :func:`_bulk_take` and the cut last line left out
+    (or None), or None when the rows must be read one at a time (a fault, or a quote near the
+    end)."""
+    data_lines = lines[cols.axis_line :]
+    cut = None
+    if not ends_with_newline(text):
+        first = max(cols.axis_line, len(lines) - TAIL_ROWS - 1)
+        tail = lines[first:]
+        if any('"' in ln for ln in tail):
+            return None
+        try:
+            rows = [(first + line, c) for line, c in csv_rows(tail, src)]
+        except EctskinError:  # the whole file's reader names the right line
+            return None
+        cut = _cut_last_row(rows, cols)
+        if cut is not None:
+            data_lines = data_lines[:-1]
+    take = _bulk_take(data_lines, cols.axis_line + 1, cols, chosen, col_idx, scale)
+    return None if take is None else (take, cut)
+
+
+def _cut_last_row(data: Rows, columns: Columns) -> tuple[int, str] | None:
+    """(line, why) when the last data row (the file ends without a newline) looks cut short."""
+    why = cut_last_row(data, columns.width, lambda c: parse_float(c) is not None)
+    return None if why is None else (data[-1][0], why)
 
 
 # --------------------------------------------------------------------------- data rows
@@ -202,17 +304,63 @@ def _marker_cells(
     return occluded, None
 
 
-def _frame_rate(t: np.ndarray, stated: float | None, src: str) -> float:
-    """The stated frame rate, else 1 / the median step of the times; a mismatch is logged."""
-    measured = float(1.0 / np.median(np.diff(t))) if len(t) > 1 else float("nan")
-    rate = stated if stated is not None else measured
-    if not np.isfinite(rate):
-        raise EctskinError(f"{src}: one frame and no frame rate in the metadata")
-    if stated is not None and np.isfinite(measured) and abs(measured / stated - 1) > 0.01:
-        log.warning(
-            "%s: the Time column gives %.3f frames/s, the metadata says %.3f",
-            src,
-            measured,
-            stated,
-        )
-    return float(rate)
+# --------------------------------------------------------------------------- bulk read
+def _bulk_take(
+    lines: list[str],
+    first_line: int,
+    columns: Columns,
+    chosen: list[str],
+    col_idx: np.ndarray,
+    scale: float,
+) -> _Take | None:
+    """:func:`_parse_rows` of the data ``lines`` (the first being line ``first_line``), read in
+    bulk: the same frames, or None when a row is malformed (then :func:`_parse_rows` reports it)."""
+    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+    for start in range(0, len(lines), CHUNK_LINES):
+        chunk = lines[start : start + CHUNK_LINES]
+        block = data_cells(chunk, first_line + start, ",", columns.width)
+        if block is None:
+            return None
+        cells, line_no = block
+        if not len(line_no):
+            continue
+        try:
+            frames = cells[:, 0].astype(np.int64)  # int() of each cell, as _frame_and_time
+        except (ValueError, OverflowError):
+            return None
+        t = float_cells(cells[:, 1], parse_float)
+        if not (np.isfinite(t).all() and (np.abs(t) <= MAX_ABS_VALUE).all()):
+            return None
+        pos = np.empty((len(line_no), len(chosen), 3))
+        empty = np.zeros(pos.shape, dtype=bool)
+        for m in range(len(chosen)):
+            for a in range(3):
+                col = cells[:, col_idx[m, a]]
+                v = float_cells(col, parse_float)
+                nan = np.isnan(v)
+                if nan.any():
+                    if any(c.strip() for c in col[nan].tolist()):
+                        return None  # "nan" or no number: not an empty (occluded) cell
+                    empty[nan, m, a] = True
+                v = v * scale
+                if not (np.abs(v[~nan]) <= MAX_ABS_VALUE).all():
+                    return None
+                pos[:, m, a] = v
+        parts.append((t, frames, line_no, pos, empty))
+    if not parts:
+        return None  # _parse_rows reports that there are no data rows
+    t = np.concatenate([p[0] for p in parts])
+    if np.any(np.diff(t) <= 0):
+        return None  # _parse_rows names the row whose time does not increase
+    line_no = np.concatenate([p[2] for p in parts])
+    pos = np.concatenate([p[3] for p in parts])
+    n_empty = np.concatenate([p[4] for p in parts]).sum(axis=2)  # (n, n_markers)
+    occl = {name: MarkerOcclusion(name) for name in chosen}
+    for m, name in enumerate(chosen):
+        hit = n_empty[:, m] > 0
+        pos[hit, m] = np.nan  # a partly empty marker counts as occluded
+        o = occl[name]
+        o.n_occluded = int(hit.sum())
+        o.n_partial = int((hit & (n_empty[:, m] < 3)).sum())
+        o.first_lines = [int(v) for v in line_no[hit][:N_FIRST_LINES]]
+    return _Take(t, np.concatenate([p[1] for p in parts]), line_no, pos, occl)
