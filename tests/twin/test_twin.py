@@ -16,7 +16,7 @@ from ectskin.twin.live import LiveTwin
 from ectskin.twin.mechanics import Handling
 from ectskin.twin.protocol import region_bounds
 from ectskin.twin.readout import ReadoutConfig, noise_pf, readout
-from ectskin.twin.simulate import TouchResponse
+from ectskin.twin.response import TouchResponse
 
 
 @pytest.fixture(scope="module")
@@ -253,6 +253,9 @@ def test_a_subset_of_trials_and_the_hand_off_are_the_same_trials():
     touch = [t.name for t in full.trials if t.meta["kind"] == "touch"][:3]
     sub = simulate_experiment(proto, workers=1, progress=False, trials=touch[::-1])
     assert [t.name for t in sub.trials] == touch and sub.meta["only_trials"] == touch
+    # a whole experiment is not a subset: its metadata names no trials (the ``trials`` argument
+    # was once rebound to the result list, so every run wrote ``only_trials``)
+    assert "only_trials" not in full.meta
     for t in sub.trials:
         np.testing.assert_array_equal(t.capacitance, by_name[t.name].capacitance)
         np.testing.assert_array_equal(t.markers, by_name[t.name].markers)

@@ -22,7 +22,7 @@ from ectskin.twin.mechanics import Handling, Manipulator, touch_loads
 from ectskin.twin.protocol import finger_separation_mm, region_bounds
 from ectskin.twin.rod import PointLoad
 from ectskin.twin.rod import solve as solve_rod
-from ectskin.twin.simulate import SecondFingerResponse, TouchResponse
+from ectskin.twin.response import SecondFingerResponse, TouchResponse
 
 BASELINE = Path(__file__).resolve().parents[1] / "data" / "twin_single_finger_baseline.npz"
 

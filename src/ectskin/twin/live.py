@@ -15,7 +15,7 @@ from ectskin.twin.mechanics import Touch
 from ectskin.twin.protocol import Protocol
 from ectskin.twin.readout import mocap, readout
 from ectskin.twin.sensor import SensorModel
-from ectskin.twin.simulate import chebyshev_nodes
+from ectskin.twin.response import chebyshev_nodes
 
 _FORCE_MAX_N = 3.0
 
