@@ -12,15 +12,10 @@ import pytest
 from ectskin.electrostatics import Reconstructor, collapse_layers
 from ectskin.io import Recording, Trial
 from ectskin.layout import default_layout
+from ectskin.layout.geometry import on_skin_distance
 from ectskin.twin import SensorModel, Touch
-from ectskin.twin.ect import (
-    EctImager,
-    ect_grid,
-    ect_image_metrics,
-    locate,
-    on_skin_distance,
-    sensitivity,
-)
+from ectskin.twin.ect import EctImager, ect_grid, locate, sensitivity
+from ectskin.twin.ect_metrics import ect_image_metrics
 from ectskin.viz import plot_ect_images
 
 REST = [0.0, 0.0, 0.0]

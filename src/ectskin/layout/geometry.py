@@ -55,3 +55,22 @@ def pad_touches(e: Any, other: Any) -> bool:
     pts = sample_polyline(other.polyline_mm, n=50)
     inside = np.all(np.abs(pts - c) < h + other.width_mm / 2, axis=1)
     return bool(inside.any())
+
+
+def on_skin_distance(face_a: str, uv_a, face_b: str, uv_b, width_mm: float, thickness_mm: float):
+    """Distance (mm) between two surface points over the body's skin.
+
+    Same face: the straight distance in (u, v). Front to back: the shortest path around a side
+    edge (u = ±width/2), the faces and the side wall unfolded into one plane:
+    ``√((|u_a − e| + thickness + |u_b − e|)² + (v_a − v_b)²)``, the smaller over e = ±width/2.
+    Both faces use u = x, so the edges line up.
+    """
+    a = np.asarray(uv_a, dtype=np.float64)
+    b = np.asarray(uv_b, dtype=np.float64)
+    dv = a[..., 1] - b[..., 1]
+    if face_a == face_b:
+        return np.hypot(a[..., 0] - b[..., 0], dv)
+    e = width_mm / 2
+    right = np.abs(e - a[..., 0]) + thickness_mm + np.abs(e - b[..., 0])
+    left = np.abs(e + a[..., 0]) + thickness_mm + np.abs(e + b[..., 0])
+    return np.hypot(np.minimum(left, right), dv)

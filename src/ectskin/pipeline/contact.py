@@ -27,13 +27,14 @@ from typing import Any
 
 from ectskin._check import EctskinError
 from ectskin._files import read_json, save_figure_atomic, write_json_atomic
+from ectskin.electrostatics.reconstruct import METHODS
 from ectskin.io import Recording, read_recording, write_recording
 from ectskin.learn.evaluate import evaluate_run
 from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
 from ectskin.pipeline.runner import StepRunner, digest
 from ectskin.pipeline.steps import DATA_FILE, recording_digest, run_settings, train_job
 from ectskin.twin import simulate_experiment
-from ectskin.twin.ect import METHODS, ect_image_metrics
+from ectskin.twin.ect_metrics import ect_image_metrics
 from ectskin.viz import figure_file
 from ectskin.viz.ect import plot_ect_images
 
@@ -206,7 +207,7 @@ def ect_images(
     runner: StepRunner, config: ReproduceConfig, data_path: Path, data_settings: dict[str, Any]
 ) -> dict[str, Any]:
     """Step "ect_images": training-free ECT images of the contact run's test trials
-    (:func:`ectskin.twin.ect.ect_image_metrics`, every 10th frame in contact) into
+    (:func:`ectskin.twin.ect_metrics.ect_image_metrics`, every 10th frame in contact) into
     ``OUT_DIR/ect/metrics.json`` and a figure of a few touches beside the truth. Returns the
     metrics (without the image arrays)."""
     out_dir = runner.out / "ect"

@@ -4,7 +4,8 @@ mechanics (bulge, bending, dimple) ─► sensor (panels, method of moments) ─
 ─► protocol + simulate (the paper's experiment) ─► characterize (paper Fig. 3, 4), live (a source).
 """
 
-from ectskin.twin.ect import EctGrid, EctImager, ect_grid, ect_image_metrics, sensitivity
+from ectskin.twin.ect import EctGrid, EctImager, ect_grid, sensitivity
+from ectskin.twin.ect_metrics import ect_image_metrics
 from ectskin.twin.mechanics import Manipulator, ManipulatorConfig, Touch
 from ectskin.twin.protocol import Protocol, TrialPlan, plan_trials
 from ectskin.twin.readout import MocapConfig, ReadoutConfig

@@ -43,7 +43,9 @@ Units: mm, ml (= 1000 mm³), N, kPa (= 1e-3 N/mm²).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 from scipy.optimize import brentq
@@ -95,6 +97,32 @@ class ManipulatorConfig:
     def n_chambers(self) -> int:
         return len(self.chamber_centres_z_mm)
 
+
+
+def recording_manipulator(meta: Mapping[str, Any]) -> tuple[ManipulatorConfig, str]:
+    """The manipulator a recording was made on, and where it came from.
+
+    ``meta["manipulator"]`` (the twin writes its :class:`ManipulatorConfig` there) → ``(config,
+    "recording")``; a recording without one (an import from other hardware) → the default
+    (paper's) body, ``(ManipulatorConfig(), "default")``, so that a caller can say which it used.
+    A field that :class:`ManipulatorConfig` does not have is an error naming it.
+    """
+    given = meta.get("manipulator")
+    if given is None:
+        return ManipulatorConfig(), "default"
+    if not isinstance(given, Mapping):
+        raise EctskinError(
+            f"recording meta 'manipulator': expected a mapping of ManipulatorConfig fields, "
+            f"got {type(given).__name__}"
+        )
+    known = {f.name for f in fields(ManipulatorConfig)}
+    unknown = sorted(set(given) - known)
+    if unknown:
+        raise EctskinError(
+            f"recording meta 'manipulator': unknown field(s) {unknown}; expected some of "
+            f"{sorted(known)}"
+        )
+    return ManipulatorConfig(**given), "recording"
 
 @dataclass(frozen=True)
 class Touch:

@@ -17,7 +17,7 @@ Training loss (:class:`ContactCriterion`), per frame:
 
 Validation metric: the mean distance (mm) between each finger's true and predicted points,
 slot 0 for one finger, matched for two; a wrong face is charged the body's thickness across.
-Test localisation errors are distances over the skin (:func:`ectskin.twin.ect.on_skin_distance`:
+Test localisation errors are distances over the skin (:func:`ectskin.layout.geometry.on_skin_distance`:
 around the body's side edge between front and back). Test metrics: localisation (mean / median / p90, per face,
 per inflation state, a map per face), force, hover detection against height, finger count and
 per-finger error after Hungarian matching, each beside the baselines of
@@ -36,6 +36,7 @@ from torch import nn
 
 from ectskin._check import EctskinError
 from ectskin.io import Recording
+from ectskin.layout.geometry import on_skin_distance
 from ectskin.learn.augment import no_contact_means
 from ectskin.learn.baselines.contact import contact_baselines
 from ectskin.learn.data.contact import (
@@ -58,7 +59,6 @@ from ectskin.learn.normalizer import Normalizer
 from ectskin.learn.predict.base import forward_batches
 from ectskin.learn.profiles import TrainSettings
 from ectskin.learn.tasks.base import Criterion, EvalCase, Task, as_tensor, build_config
-from ectskin.twin.ect import on_skin_distance
 from ectskin.twin.mechanics import ManipulatorConfig
 from ectskin.viz.contact import plot_error_maps, plot_force_scatter, plot_hover_curve
 
