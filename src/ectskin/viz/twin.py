@@ -6,6 +6,7 @@ figure and never decide where files go: the caller saves.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -21,7 +22,8 @@ def line_styles(n: int) -> list[dict[str, Any]]:
     """Colour and dash of ``n`` curves that a reader can match to their legend entries: the 10
     colours of ``tab10``, then again dashed, then dotted (a continuous colour map gives 28
     shades that no one tells apart). More than 30 curves repeat the cycle."""
-    colors = colormaps["tab10"].colors
+    tab10 = colormaps["tab10"]
+    colors = [tab10(k) for k in range(10)]
     return [
         {"color": colors[k % 10], "linestyle": LINESTYLES[(k // 10) % len(LINESTYLES)]}
         for k in range(n)
@@ -35,7 +37,7 @@ def plot_response(
     selected: list[int],
     *,
     title: str,
-    stages: list[tuple[float, str]] = (),
+    stages: Sequence[tuple[float, str]] = (),
     show: bool = False,
 ):
     """Two panels as in the paper: (a) all pairs' calibrated change vs time, (b) 4 selected pairs.
@@ -78,6 +80,8 @@ def plot_response(
         import matplotlib.pyplot as plt
 
         manager = plt.figure().canvas.manager
+        if manager is None:  # a non-interactive backend: nothing to show on
+            return fig
         manager.canvas.figure = fig
         fig.set_canvas(manager.canvas)
         plt.show()
