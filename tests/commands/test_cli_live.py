@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 from ectskin.cli import main
-from ectskin.commands import live as live_command
 from ectskin.io.hdf5 import RecordingWriter, read_recording, write_recording
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import default_layout
+from ectskin.live import output as live_output
 
 LAYOUT = default_layout()
 P, M = LAYOUT.n_pairs, LAYOUT.n_markers
@@ -40,7 +40,7 @@ def _fast(src: str, *extra: str) -> list[str]:
 
 # ---------------------------------------------------------------------------- outputs
 def test_jsonl_refuses_an_existing_file_without_overwrite(tmp_path, capsys):
-    """Issue 12, defect 4: --jsonl overwrote without a flag."""
+    """--jsonl once overwrote an existing file without a flag."""
     src = _replay(tmp_path / "c.h5")
     out = tmp_path / "out.jsonl"
     out.write_text("earlier results\n")
@@ -54,7 +54,7 @@ def test_jsonl_refuses_an_existing_file_without_overwrite(tmp_path, capsys):
 
 @pytest.mark.parametrize("option", ["--jsonl", "--record"])
 def test_no_output_onto_the_file_being_replayed(tmp_path, capsys, option):
-    """Issue 12, defect 4: `live --source replay:c.h5 --jsonl c.h5` turned the recording into
+    """`live --source replay:c.h5 --jsonl c.h5` once turned the recording into
     JSON, and `--record X --force` destroyed X. Refused, even with --overwrite/--force."""
     src = _replay(tmp_path / "c.h5")
     before = open(src, "rb").read()
@@ -89,7 +89,7 @@ class _FullDisk(io.StringIO):
 
 
 def test_jsonl_on_a_full_disk_is_one_clear_message(tmp_path, capsys, caplog, monkeypatch):
-    """Issue 12, defect 5 (live): an OSError traceback. Now one line, exit code 2, no partial
+    """A full disk once gave an OSError traceback. Now one line, exit code 2, no partial
     file, and the engine stopped (not 90 failing callbacks)."""
     src = _replay(tmp_path / "c.h5")
     out = tmp_path / "out.jsonl"
@@ -101,7 +101,7 @@ def test_jsonl_on_a_full_disk_is_one_clear_message(tmp_path, capsys, caplog, mon
             return _FullDisk(room=5)
         return real_open(path, *args, **kwargs)
 
-    monkeypatch.setattr(live_command, "open", open_on_full_disk, raising=False)
+    monkeypatch.setattr(live_output, "open", open_on_full_disk, raising=False)
     with caplog.at_level("WARNING"):
         rc = main(_fast(src, "--jsonl", str(out)))
     err = capsys.readouterr().err
@@ -116,7 +116,7 @@ def test_jsonl_on_a_full_disk_is_one_clear_message(tmp_path, capsys, caplog, mon
 
 # ---------------------------------------------------------------------------- checks first
 def test_reference_markers_are_checked_before_any_connection(tmp_path, capsys):
-    """Issue 12: a bad --reference-markers file was found only after a 10-s connection attempt."""
+    """A bad --reference-markers file was once found only after a 10-s connection attempt."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]  # nothing listens there
@@ -174,7 +174,7 @@ def _cli(argv: list[str]) -> subprocess.Popen:
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
 def test_live_record_is_closed_complete_on_sigterm_and_sighup(tmp_path, sig, spawn_cli):
-    """Issue 12, defect 10: the recording of `live --record` was left incomplete."""
+    """Once, the recording of `live --record` was left incomplete by a signal."""
     src = _replay(tmp_path / "c.h5")
     out = tmp_path / "live.h5"
     argv = ["live", "--source", f"replay:{src}", "--loop", "--record", str(out)]
@@ -195,7 +195,7 @@ def test_live_record_is_closed_complete_on_sigterm_and_sighup(tmp_path, sig, spa
 
 
 def test_dashboard_stops_after_duration(tmp_path):
-    """Issue 12: with --dashboard, live kept serving after --duration ended."""
+    """With --dashboard, live once kept serving after --duration ended."""
     src = _replay(tmp_path / "c.h5")
     argv = [
         "live",

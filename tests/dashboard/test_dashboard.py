@@ -341,7 +341,7 @@ def test_host_names_and_addresses_are_parsed_and_judged():
 
 
 def test_dns_rebinding_requests_are_refused(client, engine):
-    """Issue 12, defect 1: a page from evil.example re-pointed at 127.0.0.1 sends Host and Origin
+    """DNS rebinding: a page from evil.example re-pointed at 127.0.0.1 sends Host and Origin
     evil.example; Origin equals Host, so only the Host check can refuse it."""
     evil = {"Host": "evil.example:8765", "Origin": "http://evil.example:8765"}
     r = client.post("/api/reference", headers=evil)
@@ -365,7 +365,7 @@ def test_dns_rebinding_requests_are_refused(client, engine):
 
 
 def test_dns_rebinding_reproduction_against_a_real_server():
-    """The issue's reproduction against a running server: the curl POST and a raw websocket
+    """The attack reproduced against a running server: the curl POST and a raw websocket
     handshake with Host and Origin evil.example are refused; the same from 127.0.0.1 works."""
     import httpx
 
@@ -549,7 +549,7 @@ def test_server_runs_the_engine_and_reports_its_errors():
 
 
 def test_pages_are_told_when_the_engine_ends():
-    """Issue 12: the "live" badge stayed after the source ended. The stream says so: a status
+    """The "live" badge once stayed after the source ended. The stream says so: a status
     message "running", then "ended" after the last frame."""
     from websockets.sync.client import connect
 
@@ -572,7 +572,7 @@ def test_pages_are_told_when_the_engine_ends():
 
 
 def test_serve_returns_when_the_engine_ends_unless_told_to_keep_serving(monkeypatch):
-    """Issue 12: `live --dashboard --duration` kept serving after the duration. serve() returns
+    """`live --dashboard --duration` once kept serving after the duration. serve() returns
     once the engine has ended (and the pages were told); keep_serving waits for Ctrl-C."""
     from ectskin.dashboard import serve
     from ectskin.dashboard import server as server_module
@@ -696,7 +696,7 @@ BROWSER_TEST = REPO / "tests" / "dashboard" / "test_dashboard_browser.py"
 
 
 def test_browser_test_fails_in_ci_instead_of_skipping(tmp_path):
-    """Issue 12: without Chromium the browser test skipped silently, also in CI. With CI set it
+    """Without Chromium the browser test once skipped silently, also in CI. With CI set it
     must fail; on a developer's machine it may still skip."""
     import subprocess
     import sys
@@ -713,7 +713,7 @@ def test_browser_test_fails_in_ci_instead_of_skipping(tmp_path):
 
 
 def test_make_browser_fails_loudly_when_chromium_cannot_be_installed(tmp_path):
-    """Issue 12: `make browser` printed a line and succeeded when apt-get failed, so `make test`
+    """`make browser` once printed a line and succeeded when apt-get failed, so `make test`
     went on and the browser test skipped. Now the target fails."""
     import shutil
     import subprocess

@@ -140,7 +140,7 @@ def test_page_follows_a_replayed_recording(tmp_path, chromium):
         page.wait_for_selector('#connection-status[data-state="open"]', timeout=10_000)
         assert page.locator("#faces .region").count() == 18
         assert page.locator("#probs .prob-row").count() == 19
-        # the page tells the newcomer how the reference must be taken (issue 12)
+        # the page tells the newcomer how the reference must be taken
         assert "untouched and uninflated" in page.text_content("#reference-hint")
 
         # The reference: captured from the rest trial's first 30 frames, shown with its frames.
@@ -187,8 +187,8 @@ def test_page_follows_a_replayed_recording(tmp_path, chromium):
         assert page.get_attribute("#markers-moved", "data-source") == "pred"
         assert page.locator('#markers-yz circle[data-kind="pred"][visibility="visible"]').count() == 5
 
-        # Marker errors are drawn on their own scale, with a legend (issue 12: sub-mm errors
-        # were invisible on the 140-mm views, and nothing said what red, blue and "moved" were).
+        # Marker errors are drawn on their own scale, with a legend (sub-mm errors were
+        # invisible on the 140-mm views, and nothing said what red, blue and "moved" were).
         assert page.locator("#marker-errors .mk-row").count() == 5
         page.wait_for_function(
             "() => [...document.querySelectorAll('#marker-errors .mk-row')]"
@@ -262,7 +262,7 @@ def test_page_follows_a_replayed_recording(tmp_path, chromium):
         assert stats["dashboard"]["reference_requests"] == 1
         page.wait_for_selector('#reference-status[data-state="ready"]', timeout=20_000)
 
-        # The badge: "live" only while frames keep coming (issue 12).
+        # The badge: "live" only while frames keep coming.
         states = page.evaluate("""() => {
             const b = window.ectskinDashboard.badge;
             return [b(true, 'running', 100), b(true, 'running', 5000), b(true, 'ended', 100),
@@ -270,7 +270,7 @@ def test_page_follows_a_replayed_recording(tmp_path, chromium):
                    .map(x => x[0]); }""")
         assert states == ["open", "stale", "ended", "error", "closed", "waiting"]
 
-        # The source ends: the badge no longer says "live" (issue 12).
+        # The source ends: the badge no longer says "live".
         engine.stop()
         page.wait_for_selector('#connection-status[data-state="ended"]', timeout=10_000)
         assert "ended" in page.text_content("#connection-status")

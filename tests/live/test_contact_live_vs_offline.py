@@ -99,7 +99,8 @@ def test_live_contact_readings_equal_the_offline_predictor_on_the_same_windows(t
         policy="block",
     )
     fed = []
-    head = engine.contact
+    (head,) = engine.heads
+    assert head.key == "contact"
     inputs = head.inputs
     head.inputs = lambda w, c0: fed.append(inputs(w, c0)) or fed[-1]  # what the model got
     outs = []

@@ -187,7 +187,7 @@ def test_capture_reference_on_command_touch_only():
         eng.capture_reference("everything")
 
 
-# ------------------------------------------------------------------ reference at rest (issue 12)
+# ------------------------------------------------------------------ reference at rest
 def test_touch_reference_refuses_a_window_with_contact_and_captures_again(caplog):
     """The newcomer's trap: a replay that starts with a touch. The touch reference must not be
     taken from the touched frames; it is taken from the first window at rest."""
@@ -280,7 +280,7 @@ def test_sim_starts_at_rest_so_the_reference_is_taken_there():
 
     steps = list(islice(demo_scenario(LAYOUT, seed=0), 3))
     assert steps[0].region is None and steps[0].inflation_ml == (0.0, 0.0, 0.0)
-    assert steps[0].duration_s * 30 >= 30 and steps[1].region == 10  # the issue's touch follows
+    assert steps[0].duration_s * 30 >= 30 and steps[1].region == 10  # a touch follows
 
     class Twin:  # the LiveTwin protocol; labels = the touched region
         layout, frame_rate_hz = LAYOUT, 30.0

@@ -250,3 +250,73 @@ def test_heads_are_checked_against_the_layout():
     imager.n_pairs = 30
     with pytest.raises(EctskinError, match="ECT imager reads 30 pairs, layout"):
         _engine(cap, imager=imager)
+
+
+class FakeTouch:
+    """TouchPredictor protocol; remembers its inputs; class 3."""
+
+    n_pairs, n_classes = P, LAYOUT.n_classes
+
+    def __init__(self):
+        self.inputs = []
+
+    def predict(self, x):
+        self.inputs.append(np.array(x))
+        p = np.full(self.n_classes, 0.01)
+        p[3] = 1.0
+        return p / p.sum()
+
+
+def test_every_head_runs_the_same_way_on_its_own_reference():
+    """touch, contact and the image on the touch reference, tracking on its own: after the touch
+    reference is captured again, only the tracking head's inputs keep the first reference."""
+    n = 30
+    rng = np.random.default_rng(5)
+    cap = 10 * (1 + 0.01 * np.arange(n))[:, None] * (1 + 0.1 * rng.random(P))
+    markers = np.zeros((n, M, 3))
+    touch, track, contact, imager = FakeTouch(), FakeTrack(window=3), FakeContact(2), FakeImager()
+    eng = _engine(
+        cap, markers, touch=touch, track=track, contact=contact, imager=imager, reference_frames=3
+    )
+    assert [(h.key, h.reference, h.window) for h in eng.heads] == [
+        ("touch", "touch", 1),
+        ("track", "tracking", 3),
+        ("contact", "touch", 2),
+        ("ect", "touch", 1),
+    ]
+
+    def on_output(o):
+        if o.seq == 10:
+            eng.capture_reference("touch")
+
+    eng.run(on_output=on_output)
+    c0 = cap[:3].mean(0)
+    a, b = eng.reference_state()["touch"]["in_use"]["frames"]
+    c0_new = cap[a : b + 1].mean(0)
+    assert a > 10
+    # every head answered on the 28 frames from the third on, none before
+    assert len(touch.inputs) == len(track.calls) == len(contact.inputs) == len(imager.deltas)
+    assert len(touch.inputs) == n - 2
+    np.testing.assert_allclose(touch.inputs[0], (cap[2] - c0) / c0, rtol=1e-6)
+    np.testing.assert_allclose(touch.inputs[-1], (cap[-1] - c0_new) / c0_new, rtol=1e-6)
+    np.testing.assert_allclose(imager.deltas[-1], cap[-1] - c0_new, rtol=1e-12)
+    np.testing.assert_allclose(
+        contact.inputs[-1], _calibrated_window(cap, n - 1, 2, c0_new), rtol=1e-6
+    )
+    np.testing.assert_allclose(track.calls[-1], _calibrated_window(cap, n - 1, 3, c0), rtol=1e-6)
+    meta = json.loads(json.dumps(eng.meta(), allow_nan=False))
+    assert meta["touch"] == {"n_classes": LAYOUT.n_classes}
+    assert meta["track"] == {"window": 3, "n_markers": M}
+    assert (meta["touch_model"], meta["track_model"], meta["contact_model"]) == (True,) * 3
+
+
+def test_the_tracking_head_is_checked_against_the_layout():
+    cap = np.full((3, P), 10.0)
+
+    class SixMarkers(FakeTrack):
+        n_markers = M + 1
+
+    with pytest.raises(EctskinError, match=f"tracking model predicts {M + 1} markers, layout"):
+        _engine(cap, track=SixMarkers())
+    with pytest.raises(EctskinError, match="tracking model: window must be an integer >= 1, got 0"):
+        _engine(cap, track=FakeTrack(window=0))

@@ -128,16 +128,3 @@ def test_cli_live_with_contact_model_and_ect(tmp_path, capsys, monkeypatch, runt
 def test_cli_ect_every_must_be_positive(capsys):
     assert main(["live", "--source", "sim", "--ect", "--ect-every", "0"]) == 2
     assert "--ect-every must be >= 1 (frames), got 0" in capsys.readouterr().err
-
-
-def test_status_line_names_each_finger():
-    from ectskin.learn.predict import ContactReading, FingerEstimate
-
-    two = ContactReading(
-        2, 0.99, 0.01, (FingerEstimate("front", 3.2, 40.6, 2.0, 0.8), FingerEstimate("back", -1, 99.5, 3, 1.25))
-    )
-    assert live_cmd._contact_text(two) == (
-        "contact 2: front (3, 41) mm 0.80 N, back (-1, 100) mm 1.25 N hover 0.01"
-    )
-    assert live_cmd._contact_text(ContactReading(0, 0.1, 0.7, ())) == "contact 0 hover 0.70"
-    assert live_cmd._contact_text(None) == ""

@@ -1,6 +1,6 @@
 """The live path and the offline path give the same answers: a recording replayed through the
 live engine with a trained touch model, frame by frame, against the offline data set and
-predictor (issue 12: "Live and offline paths are never compared; Eq. 2 exists twice").
+predictor, so that Eq. 2 and the model inputs cannot drift apart between the two paths.
 
 Both calibrate with paper Eq. 2 against the same reference: the mean readout of the rest-state
 trial (uninflated, untouched). Offline that is ``touch_reference(rec)``; live it is the touch

@@ -18,7 +18,7 @@ from ectskin._check import EctskinError
 from ectskin.io.hdf5 import read_recording, write_recording
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import default_layout
-from ectskin.live.recorder import Recorder, record_main
+from ectskin.live.recorder import Recorder, record_stream
 from ectskin.live.sources import Frame, ReplaySource
 
 LAYOUT = default_layout()
@@ -131,30 +131,30 @@ def test_writer_errors_reach_the_producer(tmp_path):
         r.close()
 
 
-def test_record_main_duration_and_overwrite(tmp_path):
+def test_record_stream_duration_and_overwrite(tmp_path):
     src = write_recording(_recording(), tmp_path / "in.h5")
     out = tmp_path / "rec.h5"
-    summary = record_main(f"replay:{src}", out, duration_s=0.5, speed=2.0, loop=True)
+    summary = record_stream(f"replay:{src}", out, duration_s=0.5, speed=2.0, loop=True)
     rec = read_recording(out)
     assert summary["frames"] == rec.n_frames > 0
     assert not summary["interrupted"]
     # 0.5 s at 2x real speed of a 30 fps recording: about 30 frames
     assert 15 <= rec.n_frames <= 40
     with pytest.raises(EctskinError, match="exists"):
-        record_main(f"replay:{src}", out, duration_s=0.1)
+        record_stream(f"replay:{src}", out, duration_s=0.1)
     with pytest.raises(EctskinError, match="duration must be > 0"):
-        record_main(f"replay:{src}", tmp_path / "x.h5", duration_s=0)
+        record_stream(f"replay:{src}", tmp_path / "x.h5", duration_s=0)
 
 
 _CHILD = r"""
 import sys
-from ectskin.live.recorder import record_main
+from ectskin.live.recorder import record_stream
 
 def on_frame(f):
     sys.stdout.write(f"{f.seq}\n")
     sys.stdout.flush()
 
-record_main("replay:" + sys.argv[1], sys.argv[2], speed=float(sys.argv[3]), loop=True,
+record_stream("replay:" + sys.argv[1], sys.argv[2], speed=float(sys.argv[3]), loop=True,
             on_frame=on_frame)
 """
 
@@ -250,7 +250,7 @@ def test_cli_record_never_writes_onto_the_file_it_replays(tmp_path, capsys):
         assert "is the file the source" in err and "refusing to write onto" in err
     assert src.read_bytes() == before
     with pytest.raises(EctskinError, match="own input"):
-        record_main(f"replay:{src}", src, overwrite=True)
+        record_stream(f"replay:{src}", src, overwrite=True)
 
 
 def test_source_given_as_a_file_suggests_replay(tmp_path, capsys):
@@ -269,13 +269,13 @@ def _slow_recording(fps: float) -> Recording:
 
 
 def test_record_reports_rate_from_timestamps_and_warns_below_nominal(tmp_path, caplog, capsys):
-    """Issue 12: `record` printed the wall-clock seconds and no warning while the source delivered
+    """`record` once printed the wall-clock seconds and no warning while the source delivered
     17 fps of a nominal 30. The summary must say what the timestamps say."""
     from ectskin.cli import main
 
     slow = write_recording(_slow_recording(15.0), tmp_path / "slow.h5")
     with caplog.at_level("WARNING"):
-        summary = record_main(f"replay:{slow}", tmp_path / "a.h5", speed=math.inf)
+        summary = record_stream(f"replay:{slow}", tmp_path / "a.h5", speed=math.inf)
     assert summary["rate_hz"] == pytest.approx(15.0)
     assert summary["timestamps_s"] == pytest.approx(59 / 15)
     assert summary["nominal_hz"] == 30.0
@@ -291,7 +291,7 @@ def test_record_reports_rate_from_timestamps_and_warns_below_nominal(tmp_path, c
     # at the nominal rate: no warning; trials whose clocks restart are summed, not overlapped
     caplog.clear()
     with caplog.at_level("WARNING"):
-        summary = record_main(
+        summary = record_stream(
             f"replay:{_nominal_recording(tmp_path)}", tmp_path / "c.h5", speed=math.inf
         )
     assert not [r for r in caplog.records if r.levelname == "WARNING"]
@@ -339,7 +339,7 @@ def test_sim_timestamps_show_a_pause_of_the_twin():
 
 
 def test_sim_trials_metadata_match_their_frames(tmp_path):
-    """Issue 12: a recorded sim trial said region 0 while its frames said 10. Each step of the
+    """A recorded sim trial once said region 0 while its frames said 10. Each step of the
     scenario is now a trial whose region and inflation are those of its frames."""
     from itertools import islice
 
@@ -364,7 +364,7 @@ def test_sim_trials_metadata_match_their_frames(tmp_path):
         assert t.inflation == tuple(float(v) for v in step.inflation_ml)
     assert rec.trials[0].meta["kind"] == "no_contact" and rec.trials[1].meta["kind"] == "touch"
     assert [t.name for t in rest_trials(rec)] == ["sim_0000"]  # offline Eq. 2 finds the rest
-    # the real twin: the default scenario's first touch (region 10, the issue's) likewise
+    # the real twin: the default scenario's first touch (region 10) likewise
     steps = list(islice(demo_scenario(LAYOUT, seed=0, rest_s=0.1, step_s=0.1), 2))
     src = TwinSource(paced=False, scenario=steps)
     frames = list(src)
@@ -392,7 +392,7 @@ def _stop_with(spawn_cli, sig: int, argv: list[str], wait_for: str) -> tuple[int
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
 def test_record_closes_the_file_complete_on_sigterm_and_sighup(tmp_path, sig, spawn_cli):
-    """Issue 12, defect 10: `kill PID` or a closed terminal left the recording incomplete, and
+    """`kill PID` or a closed terminal once left the recording incomplete, and
     every reader then refused it."""
     src = write_recording(_recording(), tmp_path / "in.h5")
     out = tmp_path / "rec.h5"

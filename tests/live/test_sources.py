@@ -87,7 +87,7 @@ def test_parse_line_fields_and_values():
         (",".join(["1"] * 27 + ["inf"]), "malformed", "channel 28 of 28: 'inf' is not finite"),
         ("t=abc;" + ",".join(["1"] * 28), "malformed", "field 't' must be a number"),
         ("seq=-1;" + ",".join(["1"] * 28), "malformed", "field 'seq' must be >= 0"),
-        # a garbled counter is one bad line, not 1e23 frames lost (issue 12, defect 8)
+        # a garbled counter is one bad line, not 1e23 frames lost
         ("seq=" + "9" * 23 + ";" + ",".join(["1"] * 28), "malformed", "'seq' must be at most"),
         ("seq=" + "9" * 5000 + ";" + ",".join(["1"] * 28), "malformed", "(5000 characters)"),
         ("foo=1;" + ",".join(["1"] * 28), "malformed", "unknown field 'foo'"),
@@ -409,7 +409,7 @@ def _ten_mb_session():
 
 
 def _check_one_problem(src, frames):
-    """Issue 12, defect 7: the 10 MB line is ONE malformed line, reported as line 2, and it takes
+    """The 10 MB line is ONE malformed line, reported as line 2, and it takes
     one frame number (the next frame is seq 2, not seq 81)."""
     assert src.counters["malformed"] == 1, list(src.problems)
     (problem,) = src.problems

@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import logging
-import os
 import sys
 import time
 from pathlib import Path
@@ -25,7 +23,9 @@ from ectskin.commands._options import add_overwrite
 from ectskin.dashboard import serve
 from ectskin.layout import SensorLayout, default_layout, load_layout
 from ectskin.live.engine import POLICIES, LiveEngine
+from ectskin.live.output import JsonLinesWriter, status_line
 from ectskin.live.recorder import Recorder
+from ectskin.live.reference import reference_line
 from ectskin.live.signals import stop_on_signals
 from ectskin.live.sources import SOURCE_SPECS, check_not_input, open_source
 
@@ -255,56 +255,6 @@ def _ect_imager(layout: SensorLayout):
 
 
 # ---------------------------------------------------------------------------- the run
-class _JsonLines:
-    """``--jsonl``: every output as one JSON line. A write error (a full disk) stops the engine
-    once and is kept in ``error``; the command then reports it in one line and removes the
-    incomplete file."""
-
-    def __init__(self, path: str, stop) -> None:
-        self.path = path
-        self.stop = stop
-        self.lines = 0
-        self.error: OSError | None = None
-        if path == "-":
-            self.file = sys.stdout
-        else:
-            try:
-                self.file = open(path, "w", encoding="utf-8")  # noqa: SIM115 - closed in close()
-            except OSError as exc:
-                raise EctskinError(f"--jsonl {path}: cannot open ({exc.strerror})") from None
-
-    def __call__(self, out) -> None:
-        if self.error is not None:
-            return
-        # to_json_dict() already applies the JSON policy (non-finite -> None): dump it as is
-        try:
-            self.file.write(json.dumps(out.to_json_dict(), allow_nan=False) + "\n")
-        except OSError as exc:
-            self.error = exc
-            self.stop()
-            return
-        self.lines += 1
-
-    def close(self) -> None:
-        """Close the file; on a write error remove it and raise one clear error."""
-        if self.file is not sys.stdout:
-            try:
-                self.file.close()
-            except OSError as exc:  # the last buffered lines did not fit either
-                self.error = self.error or exc
-        if self.error is None:
-            return
-        removed = ""
-        if self.file is not sys.stdout:
-            with contextlib.suppress(OSError):
-                os.remove(self.path)
-                removed = "; removed the incomplete file"
-        why = self.error.strerror or str(self.error)
-        raise EctskinError(
-            f"--jsonl {self.path}: cannot write ({why}); stopped after {self.lines} lines{removed}"
-        )
-
-
 def _run(args: argparse.Namespace, models: dict, ref_markers) -> int:
     """The command with its models loaded (``models``: touch, track, contact; each may be
     None)."""
@@ -351,7 +301,12 @@ def _run(args: argparse.Namespace, models: dict, ref_markers) -> int:
         )
         run_kwargs = {"max_frames": args.max_frames, "duration_s": args.duration}
         if args.jsonl:
-            jsonl = _JsonLines(args.jsonl, engine.stop)
+            jsonl = JsonLinesWriter(
+                sys.stdout if args.jsonl == "-" else args.jsonl,
+                overwrite=args.overwrite,
+                on_error=engine.stop,
+                name=f"--jsonl {args.jsonl}",
+            )
         t0 = time.monotonic()
         if args.dashboard:
             stats, interrupted = _serve(engine, args, run_kwargs, jsonl)
@@ -387,26 +342,12 @@ def _summary(engine: LiveEngine, stats: dict, recorder, args, ended: str) -> Non
     )
     print(f"final ({ended}): " + ", ".join(f"{k} {stats.get(k)}" for k in keys), file=sys.stderr)
     refs = engine.reference_state()
-    for name, used in (("touch", engine.touch is not None), ("tracking", engine.track is not None)):
-        if used or name == "touch":
-            print(f"{name} reference: {_reference_line(refs[name])}", file=sys.stderr)
+    used = {"touch"} | {h.reference for h in engine.heads}
+    for name in ("touch", "tracking"):
+        if name in used:
+            print(f"{name} reference: {reference_line(refs[name])}", file=sys.stderr)
     if recorder is not None:
         print(f"recorded {recorder.frames_written} frames to {args.record}", file=sys.stderr)
-
-
-def _reference_line(ref: dict) -> str:
-    """One line on a reference for the final summary."""
-    use = ref["in_use"]
-    if use is None:
-        why = f"; last refusal: {ref['last_refusal']}" if ref["last_refusal"] else ""
-        return f"never captured ({ref['refusals']} window(s) refused{why})"
-    a, b = use["frames"]
-    text = f"frames {a}..{b}, captured {use['captured_utc']}"
-    if ref["refusals"]:
-        text += f", after {ref['refusals']} refused window(s)"
-    if use["warnings"]:
-        text += "; WARNING: " + "; ".join(use["warnings"])
-    return text
 
 
 def _console(engine, run_kwargs, jsonl, status: bool) -> tuple[dict, bool]:
@@ -419,22 +360,7 @@ def _console(engine, run_kwargs, jsonl, status: bool) -> tuple[dict, bool]:
         now = time.monotonic()
         if status and now - last[0] >= 1.0:
             last[0] = now
-            s = out.stats
-            touch = "-" if out.touch_cls is None else f"class {out.touch_cls:2d}"
-            moved = "-"
-            if out.markers_pred is not None and out.markers_reference is not None:
-                d = np.linalg.norm(out.markers_pred - out.markers_reference, axis=1)
-                moved = f"{np.nanmax(d):5.2f} mm"
-            ref = s.get("reference", {}).get("touch", {}).get("state", "-")
-            heads = "".join(f" | {h}" for h in (_contact_text(out.contact),) if h)
-            print(
-                f"t {out.t:9.3f} s | touch {touch} | markers moved {moved}{heads} | "
-                f"reference {ref} | "
-                f"{s['fps_out']:5.1f} fps | latency p50 {s['latency_ms_p50']} ms "
-                f"p99 {s['latency_ms_p99']} ms | dropped {s['dropped']} malformed "
-                f"{s['malformed']} reconnects {s['reconnects']}",
-                file=sys.stderr,
-            )
+            print(status_line(out), file=sys.stderr)
 
     try:
         return engine.run(on_output=on_output, **run_kwargs), False
@@ -442,20 +368,6 @@ def _console(engine, run_kwargs, jsonl, status: bool) -> tuple[dict, bool]:
         log.info("interrupted")
         engine.stop()
         return engine.stats, True
-
-
-def _contact_text(reading) -> str:
-    """The contact head's reading for the status line ('' without one)."""
-    if reading is None:
-        return ""
-    fingers = ", ".join(
-        f"{f.face} ({f.u_mm:.0f}, {f.v_mm:.0f}) mm {f.force_n:.2f} N" for f in reading.fingers
-    )
-    return (
-        f"contact {reading.count}"
-        + (f": {fingers}" if fingers else "")
-        + (f" hover {reading.p_hover:.2f}")
-    )
 
 
 def _serve(engine, args, run_kwargs, jsonl) -> tuple[dict, bool]:

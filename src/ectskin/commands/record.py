@@ -16,7 +16,7 @@ from pathlib import Path
 from ectskin._check import EctskinError
 from ectskin.commands._options import add_out, add_overwrite, resolve_out
 from ectskin.layout import load_layout
-from ectskin.live.recorder import record_main
+from ectskin.live.recorder import record_stream
 from ectskin.live.signals import stop_on_signals
 from ectskin.live.sources import SOURCE_SPECS, check_not_input
 
@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
             last[0] = now
 
     with stop_on_signals("closing the recording"):
-        summary = record_main(
+        summary = record_stream(
             args.source,
             out,
             args.duration,

@@ -45,9 +45,6 @@ Steps (each cached under ``OUT``, so a stopped run resumes where it stopped):
 
 The perturbation of each skin is also measured: ``rest_deviation_pct``, the RMS over pairs of
 the relative change of its rest readout from the nominal one.
-
-Size: the study's steps, its evaluation matrix and its report read one results document; apart
-they would each re-learn its shape.
 """
 
 from __future__ import annotations

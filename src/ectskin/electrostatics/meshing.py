@@ -20,10 +20,6 @@ Discretisation advice (checked in ``tests/electrostatics/test_electrostatics.py`
 * With both, two coplanar 1 × 60 mm strips 10 mm apart change their mutual capacitance by
   < 0.1 % when every panel dimension is halved, and agree with an uncorrected 8-across mesh to
   < 1 %. Pads: 3 × 3 cosine panels with ``edge_correction=True`` are within about 2 %.
-
-Size: one family of builders (grids, plates, strips, spheres, cylinders) sharing the node grids,
-the edge correction and the argument checks at the end of the file; split, each part would
-import the others' private checks.
 """
 
 from __future__ import annotations

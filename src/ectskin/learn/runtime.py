@@ -1,10 +1,10 @@
 """Single-frame inference with ONNX Runtime: the live engine's fast path.
 
 A live engine answers one frame at a time. Run eagerly, PyTorch spends most of a small model's
-time dispatching its ~100 operators, not computing. :class:`OnnxModel` exports a trained model
-(with its output map, e.g. softmax or ContactNet's decode) once, for a batch of one, with
+time dispatching its operators one by one, not computing. :class:`OnnxModel` exports a trained
+model (with its output map, e.g. softmax or ContactNet's decode) once, for a batch of one, with
 ``torch.onnx.export`` and runs it in an ONNX Runtime session on one thread, which answers a
-frame several times faster (``benchmarks/bench_live.py``; the figures are in BENCHMARKS.md).
+frame faster (``benchmarks/bench_live.py`` measures both; the figures are in BENCHMARKS.md).
 
 The export is checked before it is used: on fixed random inputs it must give what the PyTorch
 model gives, to ``rtol = atol = 1e-4`` (float32 kernels differ in the last bits), else

@@ -4,21 +4,22 @@
   behind one iterator interface, one module each; :func:`open_source` parses ``replay:FILE``,
   ``sim``, ``lsl:NAME``, ``serial:PORT[@BAUD]``, ``tcp:HOST:PORT``.
 * :mod:`ectskin.live.recorder` — :class:`Recorder` (every frame to HDF5, flushed ≤ 0.25 s) and
-  :func:`record_main` (``ectskin record``).
+  :func:`record_stream` (``ectskin record``).
 * :mod:`ectskin.live.engine` — :class:`LiveEngine`: reference capture
-  (:mod:`~ectskin.live.reference`), calibration (paper Eq. 2), touch and tracking predictors
-  (:mod:`~ectskin.live.predictors`), latency and drop accounting (:mod:`~ectskin.live.meter`);
-  emits :class:`Output` (:mod:`~ectskin.live.output`); the optional contact and ECT image heads
-  (:mod:`~ectskin.live.heads`: :class:`ContactHead`, :class:`EctHead`, giving an
-  :class:`EctFrame`).
+  (:mod:`~ectskin.live.reference`), calibration (paper Eq. 2), the heads
+  (:mod:`~ectskin.live.heads`: :class:`TouchHead`, :class:`TrackHead`, :class:`ContactHead`,
+  :class:`EctHead`, giving an :class:`EctFrame`), latency and drop accounting
+  (:mod:`~ectskin.live.meter`); emits :class:`Output`.
+* :mod:`ectskin.live.output` — :class:`Output` and its JSON message, :class:`JsonLinesWriter`
+  (every output as a JSON line, ``ectskin live --jsonl``).
 
 Optional dependencies (pyserial, pylsl) are imported only when such a source is opened.
 """
 
 from ectskin.live.engine import POLICIES, LiveEngine
-from ectskin.live.heads import ContactHead, EctHead
-from ectskin.live.output import EctFrame, Output
-from ectskin.live.recorder import Recorder, record_main
+from ectskin.live.heads import ContactHead, EctHead, Head, TouchHead, TrackHead
+from ectskin.live.output import EctFrame, JsonLinesWriter, Output
+from ectskin.live.recorder import Recorder, record_stream
 from ectskin.live.sources import (
     Frame,
     FrameSource,
@@ -39,6 +40,8 @@ __all__ = [
     "EctHead",
     "Frame",
     "FrameSource",
+    "Head",
+    "JsonLinesWriter",
     "LiveEngine",
     "LslSource",
     "Output",
@@ -46,9 +49,11 @@ __all__ = [
     "ReplaySource",
     "SerialSource",
     "TcpSource",
+    "TouchHead",
+    "TrackHead",
     "TwinSource",
     "TwinStep",
     "open_source",
     "parse_line",
-    "record_main",
+    "record_stream",
 ]

@@ -1,8 +1,9 @@
 """The live engine: source → reference capture → calibration (Eq. 2) → heads → outputs.
 
-Heads: touch (TouchMLP, one frame), tracking (C2DT, a window), and optionally contact (a window,
-:class:`~ectskin.live.heads.ContactHead`) and the ECT image (every N-th frame,
-:class:`~ectskin.live.heads.EctHead`).
+Heads (:mod:`ectskin.live.heads`), each optional: touch (TouchMLP, one frame), tracking (C2DT, a
+window), contact (ContactNet, a window) and the ECT image (every N-th frame). The engine keeps the
+raw frames and the references; every head is run the same way, on every processed frame whose
+reference exists, with the newest frames it reads.
 
 Threads and policy
 ------------------
@@ -26,11 +27,10 @@ Reference and calibration
 -------------------------
 The first ``reference_frames`` frames (and again the next ones after :meth:`capture_reference`)
 are averaged channel-wise (NaN-aware) into the reference c_0; frames are calibrated by paper Eq. 2,
-c = (c_t − c_0)/c_0. Touch uses the touch reference (the paper's rest state: capture it untouched
-and uninflated), tracking its own reference (the paper's "prior knowledge": the state at the start
-of the trajectory, with the marker coordinates of that moment as the decoder's initial coordinates).
-Contact and the ECT image use the touch reference too (their models, like touch, describe the
-skin against its rest state).
+c = (c_t − c_0)/c_0. Touch, contact and the ECT image use the touch reference (the paper's rest
+state: capture it untouched and uninflated; their models describe the skin against it), tracking
+its own reference (the paper's "prior knowledge": the state at the start of the trajectory, with
+the marker coordinates of that moment as the decoder's initial coordinates).
 ``capture_reference(which="both"|"touch"|"track")`` re-captures one or both.
 
 A capture window is judged before use (:mod:`ectskin.live.reference`): the touch reference refuses
@@ -45,10 +45,6 @@ Latency is ``perf_counter()`` from the frame's arrival (``Frame.arrival``) to it
 torch single-threaded (``ectskin live`` does, through :func:`ectskin.learn.threads.torch_threads`):
 the models are tiny, and extra intra-op threads compete with the reader and recorder threads and
 stall inference on a small machine.
-
-Size: over 500 lines because the reader thread, the inference loop, the reference captures and
-the counters share one lock and one state; the per-frame heads that need no such state live in
-:mod:`~ectskin.live.heads`.
 """
 
 from __future__ import annotations
@@ -66,10 +62,9 @@ import numpy as np
 from ectskin._check import EctskinError, check_array, check_option
 from ectskin.io.calibration import relative_change
 from ectskin.layout import SensorLayout
-from ectskin.live.heads import ContactHead, EctHead
+from ectskin.live.heads import HEAD_KEYS, Head, ReferenceInUse, build_heads
 from ectskin.live.meter import Meter
 from ectskin.live.output import Output, json_list
-from ectskin.live.predictors import bind_predictors
 from ectskin.live.reference import REFERENCE_KINDS, ReferenceCapture, References
 
 logger = logging.getLogger(__name__)
@@ -78,7 +73,7 @@ POLICIES = ("skip-to-newest", "block")
 
 
 class LiveEngine:
-    """Runs touch recognition and tracking on a live source.
+    """Runs the heads (touch recognition, tracking, contact, ECT image) on a live source.
 
     Parameters
     ----------
@@ -87,15 +82,13 @@ class LiveEngine:
         ``close()`` and optional ``counters``).
     layout
         The sensor layout (default: ``source.layout``); its pair count must match the source's.
-    touch, track
-        Predictors with the ``TouchPredictor`` / ``TrackPredictor`` protocol of
-        :mod:`ectskin.learn.predict`, or None.
-    contact
-        A predictor with the ``ContactPredictor`` protocol of
-        :mod:`ectskin.learn.predict.contact`, or None.
+    touch, track, contact
+        Predictors with the ``TouchPredictor`` / ``TrackPredictor`` / ``ContactPredictor``
+        protocol of :mod:`ectskin.learn.predict`, or None; each becomes a head
+        (:func:`~ectskin.live.heads.build_heads`).
     imager, ect_every
         An ECT imager (``faces``, ``grid_extent``, ``image(delta_c)``, ``locate(delta_c)``) run
-        on every ``ect_every``-th processed frame, or None.
+        on every ``ect_every``-th processed frame that has a reference, or None.
     reference_frames
         Frames averaged into a reference (30 = 1 s at 30 fps).
     policy
@@ -155,15 +148,15 @@ class LiveEngine:
                 f"{layout.name!r} has {n_pairs} pairs"
             )
         self.n_pairs, self.n_markers = n_pairs, n_markers
-        self.touch = touch
-        self.track = track
-        bound = bind_predictors(layout, touch, track)
-        self._touch_sel, self._track_sel = bound.touch_channels, bound.track_channels
-        self.n_classes, self.window = bound.n_classes, bound.window
-        self.contact = None if contact is None else ContactHead(contact, layout)
-        self.ect = None if imager is None else EctHead(imager, layout, ect_every)
-        # raw frames kept for the windowed heads (tracking, contact), a ring buffer
-        self._ring = max(self.window, self.contact.window if self.contact else 1)
+        #: the heads, in the order they run (:data:`~ectskin.live.heads.HEAD_KEYS`)
+        self.heads: tuple[Head, ...] = build_heads(
+            layout, touch=touch, track=track, contact=contact, imager=imager, ect_every=ect_every
+        )
+        by_key = {h.key: h for h in self.heads}
+        self.n_classes = getattr(by_key.get("touch"), "n_classes", layout.n_classes)
+        self._tracks = any(h.reference == "tracking" for h in self.heads)
+        # raw frames kept for the windowed heads, a ring buffer
+        self._ring = max((h.window for h in self.heads), default=1)
         if reference_markers is None:
             reference_markers = getattr(source, "reference_markers", None)
         if reference_markers is not None:
@@ -172,7 +165,7 @@ class LiveEngine:
             )
         self._fallback_markers = reference_markers
         if (
-            track is not None
+            self._tracks
             and reference_markers is None
             and getattr(source, "provides_markers", None) is False
         ):
@@ -199,7 +192,9 @@ class LiveEngine:
         self._win = np.zeros((self._ring, n_pairs))
         self._win_pos = 0
         self._win_n = 0
-        self._init_markers: np.ndarray | None = None
+        #: the references the heads are calibrated against, once accepted (the tracking one with
+        #: the decoder's initial marker coordinates)
+        self._in_use: dict[str, ReferenceInUse | None] = {"touch": None, "tracking": None}
         self._warned: set[str] = set()
 
     # ------------------------------------------------------------------ public API
@@ -233,21 +228,24 @@ class LiveEngine:
     @property
     def reference_markers(self) -> np.ndarray | None:
         """(n_markers, 3) mm initial marker coordinates in use (None until known)."""
-        return self._init_markers if self._init_markers is not None else self._fallback_markers
+        tracking = self._in_use["tracking"]
+        if tracking is not None and tracking.markers is not None:
+            return tracking.markers
+        return self._fallback_markers
 
     def meta(self) -> dict[str, Any]:
         """The engine's part of the dashboard's ``meta`` message (the dashboard adds the layout:
-        ``ectskin.dashboard.build_meta``)."""
+        ``ectskin.dashboard.build_meta``): per head key (:data:`~ectskin.live.heads.HEAD_KEYS`)
+        the head's ``meta()`` or None without that head, and ``touch_model``, ``track_model``,
+        ``contact_model`` saying which models run."""
+        by_key = {h.key: h for h in self.heads}
         return {
             "reference_markers": json_list(self.reference_markers),
             "n_classes": self.n_classes,
             "policy": self.policy,
             "reference_frames": self.reference_frames,
-            "touch_model": self.touch is not None,
-            "track_model": self.track is not None,
-            "contact_model": self.contact is not None,
-            "contact": None if self.contact is None else self.contact.meta(),
-            "ect": None if self.ect is None else self.ect.meta(),
+            **{f"{key}_model": key in by_key for key in ("touch", "track", "contact")},
+            **{key: by_key[key].meta() if key in by_key else None for key in HEAD_KEYS},
             "source": str(getattr(self.source, "name", type(self.source).__name__)),
         }
 
@@ -414,6 +412,10 @@ class LiveEngine:
                 self.recorder.add_event(text, t_s=f.t)
             except EctskinError as exc:
                 logger.error("cannot record the event: %s", exc)
+        c0 = ref.c0
+        assert c0 is not None  # an accepted reference has its c_0
+        if name == "touch":
+            self._in_use["touch"] = ReferenceInUse(c0)
         if name == "tracking":
             m = ref.initial_markers(self._fallback_markers)
             if m is not None and not np.isfinite(m).all():
@@ -423,13 +425,13 @@ class LiveEngine:
                     f"marker {j} was not visible during the reference capture; its prediction "
                     "is NaN",
                 )
-            if m is None and self.track is not None:
+            if m is None and self._tracks:
                 self._warn_once(
                     "nomarkers",
                     "tracking disabled: the source gave no markers during the reference and no "
                     "reference_markers was passed",
                 )
-            self._init_markers = m
+            self._in_use["tracking"] = ReferenceInUse(c0, m)
 
     def _process(self, f) -> Output:
         raw = f.capacitance
@@ -442,44 +444,20 @@ class LiveEngine:
             trial=f.trial,
             inflation=f.inflation,
         )
-        c0 = self._refs.touch.c0
-        if c0 is not None:
-            cal = relative_change(raw, c0)  # Eq. 2; NaN where the reference channel is unusable
-            out.calibrated = cal
-            if self.touch is not None:
-                x = np.nan_to_num(cal, nan=0.0, posinf=0.0, neginf=0.0)
-                if self._touch_sel is not None:
-                    x = x[self._touch_sel]
-                try:
-                    probs = np.asarray(self.touch.predict(x.astype(np.float32)), dtype=np.float64)
-                    out.touch_probs = probs
-                    out.touch_cls = int(np.argmax(probs))
-                except Exception:
-                    self._model_error("touch")
-            if self.contact is not None:
-                try:
-                    out.contact = self.contact(self._window(self.contact.window), c0)
-                except Exception:
-                    self._model_error("contact")
-            if self.ect is not None and self.ect.due():
-                try:
-                    out.ect = self.ect(raw, c0)
-                except Exception:
-                    self._model_error("ECT imager")
-        c0t = self._refs.tracking.c0
-        if self.track is not None and c0t is not None and self._init_markers is not None:
-            w = relative_change(self._window(self.window), c0t)  # Eq. 2, (k, n_pairs)
-            w = np.nan_to_num(w, nan=0.0, posinf=0.0, neginf=0.0)
-            if self._track_sel is not None:
-                w = w[:, self._track_sel]
+        touch_ref = self._in_use["touch"]
+        if touch_ref is not None:
+            # Eq. 2; NaN where the reference channel is unusable
+            out.calibrated = relative_change(raw, touch_ref.c0)
+        for head in self.heads:
+            ref = self._in_use[head.reference]
+            if ref is None:
+                continue
+            # the frame itself for a head of one frame (as the source gave it), else the ring's
+            frames = raw[None] if head.window == 1 else self._window(head.window)
             try:
-                out.markers_pred = np.asarray(
-                    self.track.predict(w.astype(np.float32), self._init_markers.astype(np.float32)),
-                    dtype=np.float64,
-                )
-                out.markers_reference = self._init_markers
+                head.step(frames, ref, out)
             except Exception:
-                self._model_error("tracking")
+                self._model_error(head.what)
         return out
 
     # ------------------------------------------------------------------ helpers
@@ -499,7 +477,7 @@ class LiveEngine:
             self._counts["errors"] += 1
         if what not in self._warned:
             self._warned.add(what)
-            logger.exception("%s model failed (further failures counted in stats['errors'])", what)
+            logger.exception("%s failed (further failures counted in stats['errors'])", what)
 
     def _warn_once(self, key: str, message: str) -> None:
         if key not in self._warned:

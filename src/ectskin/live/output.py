@@ -1,18 +1,27 @@
-"""What the live engine emits per processed frame, and its JSON message (the dashboard protocol).
+"""What the live engine emits per processed frame, its JSON message (the dashboard protocol) and
+the writers of outputs.
 
 The message carries every number of an :class:`Output` as it is (non-finite → ``null``), except
 the ECT image, which is quantised (:meth:`EctFrame.to_json_dict`): it is a picture for the page,
-and at full precision it would be most of every message.
+and at full precision it would be most of every message. :class:`JsonLinesWriter` writes each
+message as one line (``ectskin live --jsonl``); :func:`status_line` says one output in one line
+of text (the command's status line).
 """
 
 from __future__ import annotations
 
+import contextlib
+import json
 import math
+import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from pathlib import Path
+from typing import Any, TextIO
 
 import numpy as np
 
+from ectskin._check import EctskinError
 from ectskin._files import to_jsonable
 
 #: Quantisation levels of the ECT image in a JSON message: values are sent as integers in
@@ -136,3 +145,115 @@ class Output:
             "latency_ms": float(self.latency_ms),
             "stats": dict(self.stats),
         }
+
+
+class JsonLinesWriter:
+    """Every :class:`Output` as one JSON line, its frame message (``to_json_dict()``, strict
+    JSON): ``engine.run(on_output=writer)``.
+
+    ``target`` is a path (created; an existing file is replaced only with ``overwrite``) or an
+    open text stream such as ``sys.stdout`` (written to, never closed). A write error (a full
+    disk) is kept in :attr:`error`, stops the writing and calls ``on_error()`` once (e.g.
+    ``engine.stop``); :meth:`close` then removes the incomplete file and raises one
+    :class:`EctskinError` that says how many lines were written. ``name`` names the output in
+    messages (default: the path).
+    """
+
+    def __init__(
+        self,
+        target: str | Path | TextIO,
+        *,
+        overwrite: bool = False,
+        on_error: Callable[[], None] | None = None,
+        name: str | None = None,
+    ) -> None:
+        self.on_error = on_error
+        self.lines = 0
+        self.error: OSError | None = None
+        self.path: Path | None = None
+        if isinstance(target, str | Path):
+            self.path = Path(target)
+            self.name = name or str(target)
+            if self.path.exists() and not overwrite:
+                raise EctskinError(f"{self.name} exists; refusing to replace it without overwrite")
+            try:
+                self.file: TextIO = open(self.path, "w", encoding="utf-8")  # noqa: SIM115 - close()
+            except OSError as exc:
+                raise EctskinError(f"{self.name}: cannot open ({exc.strerror})") from None
+        else:
+            self.file = target
+            self.name = name or str(getattr(target, "name", "stream"))
+
+    def __call__(self, out: Output) -> None:
+        """Write one output (nothing after a write error)."""
+        if self.error is not None:
+            return
+        # to_json_dict() already applies the JSON policy (non-finite -> None): dump it as is
+        try:
+            self.file.write(json.dumps(out.to_json_dict(), allow_nan=False) + "\n")
+        except OSError as exc:
+            self.error = exc
+            if self.on_error is not None:
+                self.on_error()
+            return
+        self.lines += 1
+
+    def close(self) -> None:
+        """Close the file (a stream is flushed); on a write error remove the file and raise."""
+        try:
+            if self.path is not None:
+                self.file.close()
+            else:
+                self.file.flush()
+        except OSError as exc:  # the last buffered lines did not fit either
+            self.error = self.error or exc
+        if self.error is None:
+            return
+        removed = ""
+        if self.path is not None:
+            with contextlib.suppress(OSError):
+                os.remove(self.path)
+                removed = "; removed the incomplete file"
+        why = self.error.strerror or str(self.error)
+        raise EctskinError(
+            f"{self.name}: cannot write ({why}); stopped after {self.lines} lines{removed}"
+        )
+
+    def __enter__(self) -> JsonLinesWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def status_line(out: Output) -> str:
+    """One line of text on an output and its ``stats``: the touch class, how far the markers
+    moved from the reference (the largest, mm), the contact reading, the touch reference's state,
+    the rate, latency and counters."""
+    s = out.stats
+    touch = "-" if out.touch_cls is None else f"class {out.touch_cls:2d}"
+    moved = "-"
+    if out.markers_pred is not None and out.markers_reference is not None:
+        d = np.linalg.norm(out.markers_pred - out.markers_reference, axis=1)
+        moved = f"{np.nanmax(d):5.2f} mm"
+    ref = s.get("reference", {}).get("touch", {}).get("state", "-")
+    contact = "" if out.contact is None else f" | {_contact_text(out.contact)}"
+    return (
+        f"t {out.t:9.3f} s | touch {touch} | markers moved {moved}{contact} | "
+        f"reference {ref} | "
+        f"{s['fps_out']:5.1f} fps | latency p50 {s['latency_ms_p50']} ms "
+        f"p99 {s['latency_ms_p99']} ms | dropped {s['dropped']} malformed "
+        f"{s['malformed']} reconnects {s['reconnects']}"
+    )
+
+
+def _contact_text(reading: Any) -> str:
+    """A ``ContactReading`` in a few words."""
+    fingers = ", ".join(
+        f"{f.face} ({f.u_mm:.0f}, {f.v_mm:.0f}) mm {f.force_n:.2f} N" for f in reading.fingers
+    )
+    return (
+        f"contact {reading.count}"
+        + (f": {fingers}" if fingers else "")
+        + (f" hover {reading.p_hover:.2f}")
+    )

@@ -1,56 +1,18 @@
-"""How the live engine binds trained models to the sensor layout: channels, classes, markers.
+"""Which layout channels a trained model consumes: :func:`model_channels`.
 
-A predictor follows the ``TouchPredictor`` / ``TrackPredictor`` protocol of
-:mod:`ectskin.learn.predict` (``n_pairs``, optional ``pair_names``; ``n_classes`` for touch;
-``window`` and ``n_markers`` for tracking). :func:`bind_predictors` checks them against the layout
-once, when the engine is built, and says which layout channels each model consumes.
+A predictor (:mod:`ectskin.learn.predict`) says how many channels it reads (``n_pairs``) and may
+name them (``pair_names``). The live heads (:mod:`ectskin.live.heads`) ask once, when the engine is
+built, and then feed the model those channels in its order.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ectskin._check import EctskinError
 from ectskin.layout import SensorLayout
-
-
-@dataclass(frozen=True)
-class Binding:
-    """The result of :func:`bind_predictors`.
-
-    ``touch_channels`` / ``track_channels``: (n_model_pairs,) layout indices each model consumes,
-    in the model's order, or None for all pairs in layout order. ``n_classes``: the touch model's
-    (the layout's without one). ``window``: the tracking model's window (1 without one).
-    """
-
-    touch_channels: np.ndarray | None
-    track_channels: np.ndarray | None
-    n_classes: int
-    window: int
-
-
-def bind_predictors(layout: SensorLayout, touch: Any = None, track: Any = None) -> Binding:
-    """Check ``touch`` and ``track`` (either may be None) against ``layout``."""
-    touch_sel = model_channels(touch, layout, "touch model") if touch is not None else None
-    track_sel = model_channels(track, layout, "tracking model") if track is not None else None
-    n_classes = int(getattr(touch, "n_classes", layout.n_classes))
-    if touch is not None and n_classes != layout.n_classes:
-        raise EctskinError(
-            f"touch model has {n_classes} classes, layout {layout.name!r} has "
-            f"{layout.n_classes} (no touch + {layout.n_regions} regions)"
-        )
-    window = 1
-    if track is not None:
-        window = int(track.window)
-        if int(track.n_markers) != layout.n_markers:
-            raise EctskinError(
-                f"tracking model predicts {track.n_markers} markers, layout {layout.name!r} "
-                f"has {layout.n_markers}"
-            )
-    return Binding(touch_sel, track_sel, n_classes, window)
 
 
 def model_channels(predictor: Any, layout: SensorLayout, what: str) -> np.ndarray | None:

@@ -390,11 +390,11 @@ class ClockStats:
         return (self.frames - 1) / (self.last_arrival - self.first_arrival)
 
 
-#: ``record_main`` warns when the timestamps show fewer than this fraction of the nominal rate.
+#: ``record_stream`` warns when the timestamps show fewer than this fraction of the nominal rate.
 LOW_RATE_FRACTION = 0.9
 
 
-def record_main(
+def record_stream(
     source_spec: str,
     out_path: str | Path,
     duration_s: float | None = None,

@@ -371,3 +371,20 @@ class References:
                 "last_refusal": self.last_refusal[name],
             }
         return out
+
+
+def reference_line(state: dict[str, Any]) -> str:
+    """One line on one reference of :meth:`References.state` (``state["touch"]``), for a run's
+    summary: where and when the reference in use was captured and what was wrong with it, or
+    why none was."""
+    use = state["in_use"]
+    if use is None:
+        why = f"; last refusal: {state['last_refusal']}" if state["last_refusal"] else ""
+        return f"never captured ({state['refusals']} window(s) refused{why})"
+    a, b = use["frames"]
+    text = f"frames {a}..{b}, captured {use['captured_utc']}"
+    if state["refusals"]:
+        text += f", after {state['refusals']} refused window(s)"
+    if use["warnings"]:
+        text += "; WARNING: " + "; ".join(use["warnings"])
+    return text

@@ -27,8 +27,8 @@ from ectskin.twin.human import finger_path
 from ectskin.twin.mechanics import Handling, Touch
 from ectskin.twin.protocol import Protocol, region_bounds
 from ectskin.twin.readout import ReadoutConfig, noise_pf, readout, snr_db
-from ectskin.twin.sensor import SensorModel
 from ectskin.twin.response import TouchResponse
+from ectskin.twin.sensor import SensorModel
 from ectskin.viz import DEFAULT_DPI, check_figure_options, figure_file
 from ectskin.viz.twin import plot_response
 

@@ -14,8 +14,8 @@ from ectskin.layout import SensorLayout, default_layout
 from ectskin.twin.mechanics import Touch
 from ectskin.twin.protocol import Protocol
 from ectskin.twin.readout import mocap, readout
-from ectskin.twin.sensor import SensorModel
 from ectskin.twin.response import chebyshev_nodes
+from ectskin.twin.sensor import SensorModel
 
 _FORCE_MAX_N = 3.0
 

@@ -16,18 +16,14 @@ surroundings is far larger than the sensor's), so they share one potential (0 V,
 electrodes) and one conductor index (``n_electrodes``).
 
 The fingertip is placed at its point along the surface normal; the skin beside that point is
-not consulted, and the chambers' bulges under a wide pad can reach into the fingertip (in a
-small 10 ml simulation the least clearance under the pad had a median of 0.2 mm and a 10th
-percentile of −0.8 mm). Usually the method of moments still solves; where a wire panel comes
-within a fraction of a panel of the finger's it does not, even with a refined fingertip. There,
-and only there, the finger rests on the skin instead: it is lifted until the skin under its pad
-keeps half the sealing cover (:data:`MIN_COVER_FRACTION` of ``Finger.skin_cover_mm``: the cover
-compresses, it does not vanish) below it (:meth:`SensorModel.finger_panels`, ``rest_on_skin``).
-Placing every finger so would be the consistent model; it changes every touch frame and is left
-for a later change of the twin.
-
-Size: the electrodes' panels, the finger's (with its placement on the deformed skin), the
-cavities and the readout are one model of one geometry, read together.
+not consulted, and the chambers' bulges under a wide pad can reach into the fingertip (the
+clearances measured in one simulation are in BENCHMARKS.md). Usually the method of moments still
+solves; where a wire panel comes within a fraction of a panel of the finger's it does not, even
+with a refined fingertip. There, and only there, the finger rests on the skin instead: it is
+lifted until the skin under its pad keeps half the sealing cover (:data:`MIN_COVER_FRACTION` of
+``Finger.skin_cover_mm``: the cover compresses, it does not vanish) below it
+(:meth:`SensorModel.finger_panels`, ``rest_on_skin``). Placing every finger so would be the
+consistent model; it changes every touch frame and is left for a later change of the twin.
 """
 
 from __future__ import annotations
