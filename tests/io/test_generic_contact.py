@@ -84,14 +84,17 @@ def _npz(path, group, readouts, labels, contact, pos, force, height, surface, **
 
 
 def _check(rec, contact, pos, force, height):
+    """One finger per trial (finger 0 of the fingers axis)."""
     assert [t.name for t in rec.trials] == ["a", "b", "c"]
-    assert [t.finger_surface for t in rec.trials] == ["front", "back", None]
+    assert [t.finger_surface for t in rec.trials] == [("front",), ("back",), (None,)]
     for k, t in enumerate(rec.trials):
         rows = slice(k * N, (k + 1) * N)
-        assert t.contact.dtype == bool and np.array_equal(t.contact, contact[rows] == 1)
-        np.testing.assert_array_equal(t.finger_uv_mm, pos[rows])  # NaN where no finger
-        np.testing.assert_array_equal(t.finger_height_mm, height[rows])
-        np.testing.assert_array_equal(t.force, force[rows])
+        assert t.n_fingers == 1 and t.contact.shape == (N, 1)
+        f = t.finger(0)
+        assert f.contact.dtype == bool and np.array_equal(f.contact, contact[rows] == 1)
+        np.testing.assert_array_equal(f.uv_mm, pos[rows])  # NaN where no finger
+        np.testing.assert_array_equal(f.height_mm, height[rows])
+        np.testing.assert_array_equal(f.force, force[rows])
         assert t.has_ground_truth
 
 
@@ -214,7 +217,7 @@ def test_npz_contact_fields_shapes_and_a_hover_without_height(tmp_path):
     # a position outside contact (the hover frames) without heights: contact is inferred from
     # the position, so every frame with one is a contact frame, and the import goes through
     rec = load_generic(tmp_path / "h.npz")
-    assert np.array_equal(rec.trials[0].contact, np.isfinite(pos[:N, 0]))
+    assert np.array_equal(rec.trials[0].contact[:, 0], np.isfinite(pos[:N, 0]))
     np.savez(
         tmp_path / "c.npz",
         readouts=readouts,
@@ -230,3 +233,108 @@ def test_npz_contact_fields_shapes_and_a_hover_without_height(tmp_path):
         r"outside contact without a height_mm field",
     ):
         load_generic(tmp_path / "c.npz")
+
+
+# ------------------------------------------------------------------------ several fingers
+def _fingers2():
+    """Two groups of N frames: in "a" finger 0 presses the front throughout and finger 1 the
+    back in frames 4..7, hovering 2 mm above it in frame 8 and away otherwise; in "b" finger 0
+    presses, finger 1 stays away. Arrays on the fingers axis (n, 2[, 2])."""
+    n = 2 * N
+    rng = np.random.default_rng(7)
+    contact = np.zeros((n, 2))
+    contact[:, 0] = 1
+    contact[4:8, 1] = 1
+    pos = np.full((n, 2, 2), np.nan)
+    pos[:, 0] = rng.uniform(0, 40, (n, 2))
+    pos[4:9, 1] = rng.uniform(-20, 0, (5, 2))
+    height = np.where(contact == 1, 0.0, np.nan)
+    height[8, 1] = 2.0
+    force = np.where(contact == 1, rng.uniform(0.5, 2.0, (n, 2)), 0.0)
+    surface = np.full((n, 2), "", dtype="<U5")
+    surface[:, 0] = "front"
+    surface[:N, 1] = "back"
+    group = np.repeat(["a", "b"], N)
+    readouts = rng.uniform(1.0, 2.0, (n, 3))
+    labels = np.where(contact[:, 0] == 1, 1, 0)
+    return group, readouts, labels, contact, pos, force, height, surface
+
+
+def _csv2(path, group, readouts, labels, contact, pos, force, height, surface, *, header=None):
+    def num(v):
+        return "" if np.isnan(v) else repr(float(v))
+
+    cols = ["group", "label", "c:x1", "c:x2", "c:x3"]
+    for pre in ("", "f1:"):
+        cols += [f"{pre}{c}" for c in ("contact", "x_mm", "z_mm", "force_n", "height_mm", "surface")]
+    lines = ["# frame_rate_hz: 30", ",".join(header or cols)]
+    for i in range(len(group)):
+        cells = [group[i], str(int(labels[i])), *(num(v) for v in readouts[i])]
+        for k in range(2):
+            cells += [str(int(contact[i, k])), num(pos[i, k, 0]), num(pos[i, k, 1])]
+            cells += [num(force[i, k]), num(height[i, k]), str(surface[i, k])]
+        lines.append(",".join(cells))
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("fmt", ["npz", "csv"])
+def test_two_fingers_import_on_the_fingers_axis(tmp_path, fmt):
+    group, readouts, labels, contact, pos, force, height, surface = _fingers2()
+    if fmt == "csv":
+        src = _csv2(tmp_path / "two.csv", group, readouts, labels, contact, pos, force, height,
+                    surface)
+    else:
+        src = _npz(tmp_path / "two.npz", group, readouts, labels, contact, pos, force, height,
+                   surface)
+    for rec in (load_generic(src), None):
+        if rec is None:  # and the same after an HDF5 round trip
+            rec = read_recording(write_recording(load_generic(src), tmp_path / "two.h5"))
+        a, b = rec.trials
+        assert (a.n_fingers, b.n_fingers) == (2, 2)
+        assert a.finger_surface == ("front", "back") and b.finger_surface == ("front", None)
+        for t, rows in ((a, slice(0, N)), (b, slice(N, 2 * N))):
+            np.testing.assert_array_equal(t.contact, contact[rows] == 1)
+            np.testing.assert_array_equal(t.finger_uv_mm, pos[rows])
+            np.testing.assert_array_equal(t.finger_height_mm, height[rows])
+            np.testing.assert_array_equal(t.force, force[rows])
+        assert a.n_contacts.tolist() == [1] * 4 + [2] * 4 + [1] * 4
+        assert a.finger(1).height_mm[8] == 2.0 and np.isnan(b.finger(1).uv_mm).all()
+
+
+def test_two_finger_labels_are_refused_naming_finger_line_and_column(tmp_path):
+    data = _fingers2()
+    group, readouts, labels, contact, pos, force, height, surface = data
+    bad = force.copy()
+    bad[1, 1] = 0.5  # finger 1 is away in frame 1 (line 4)
+    with pytest.raises(EctskinError, match=r"two\.csv: line 4, column 'f1:force_n': expected 0 N "
+                       r"in a frame without contact, found 0\.5"):
+        load_generic(_csv2(tmp_path / "two.csv", group, readouts, labels, contact, pos, bad,
+                           height, surface))
+    faces = surface.copy()
+    faces[5, 1] = "left"
+    with pytest.raises(EctskinError, match=r"group 'a': surface of finger 1 must be one face per "
+                       r"group, expected 'back' \(as in its first rows\), found 'left' at line 8"):
+        load_generic(_csv2(tmp_path / "two.csv", group, readouts, labels, contact, pos, force,
+                           height, faces))
+    skip = "group,label,c:x1,c:x2,c:x3,contact,force_n,f2:contact,f2:force_n"
+    (tmp_path / "gap.csv").write_text(f"# frame_rate_hz: 30\n{skip}\na,1,1,1,1,1,1,0,0\n")
+    with pytest.raises(EctskinError, match=r"gap\.csv: line 2: contact-label columns of finger 2 "
+                       r"but none of finger 1"):
+        load_generic(tmp_path / "gap.csv")
+    fewer = "group,label,c:x1,c:x2,c:x3,contact,force_n,f1:contact"
+    (tmp_path / "fewer.csv").write_text(f"# frame_rate_hz: 30\n{fewer}\na,1,1,1,1,1,1,0\n")
+    with pytest.raises(EctskinError, match=r"line 2: finger 1 has the contact-label columns "
+                       r"f1:contact, finger 0 contact, force_n; every finger gives the same"):
+        load_generic(tmp_path / "fewer.csv")
+    _npz(tmp_path / "mixed.npz", group, readouts, labels, contact, pos, force[:, 0], height,
+         surface)
+    with pytest.raises(EctskinError, match=r"mixed\.npz: the contact fields disagree on the "
+                       r"number of fingers \('contact' 2, 'position_mm' 2, 'force_n' 1"):
+        load_generic(tmp_path / "mixed.npz")
+    far = pos.copy()
+    far[2, 1] = [1.0, 2.0]  # finger 1 away in frame 2, but a position without a height
+    _npz(tmp_path / "far.npz", group, readouts, labels, contact, far, force, height, surface)
+    with pytest.raises(EctskinError, match=r"far\.npz: row 2, field 'height_mm' \(finger 1\): "
+                       r"expected a height wherever a position is given"):
+        load_generic(tmp_path / "far.npz")

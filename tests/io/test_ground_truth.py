@@ -1,4 +1,6 @@
-"""The finger's per-frame ground truth: checks at the door, HDF5 format version 2, version-1 files.
+"""The finger's per-frame ground truth: checks at the door, HDF5 round trips, version-1 files.
+
+One finger throughout (finger 0 of the fingers axis; several fingers: test_hdf5_fingers.py).
 
 ``tests/data/recording_v1.h5`` was written by the format-version-1 code (the commit before the
 ground truth) with :func:`v1_fixture_recording` below, so that reading files of older ectskin is
@@ -72,20 +74,17 @@ def trial(name: str = "t", n: int = N, layout=None, **fields) -> Trial:
 def test_trial_holds_the_ground_truth():
     t = trial(**truth(), finger_surface="front", force=np.zeros(N))
     assert t.has_ground_truth and t.missing_ground_truth == ()
-    assert t.contact.dtype == np.bool_ and t.finger_uv_mm.shape == (N, 2)
-    assert t.finger_height_mm.dtype == np.float64 and t.finger_surface == "front"
+    assert t.contact.dtype == np.bool_ and t.finger_uv_mm.shape == (N, 1, 2)  # one finger
+    assert t.finger_height_mm.dtype == np.float64 and t.finger_surface == ("front",)
     bare = trial()
     assert not bare.has_ground_truth and bare.missing_ground_truth == GROUND_TRUTH_FIELDS
-    assert (bare.contact, bare.finger_uv_mm, bare.finger_height_mm, bare.finger_surface) == (
-        None,
-        None,
-        None,
-        None,
-    )
+    assert (bare.contact, bare.finger_uv_mm, bare.finger_height_mm) == (None, None, None)
+    assert bare.finger_surface == () and bare.n_fingers == 0
     partial = trial(contact=truth()["contact"])
     assert partial.missing_ground_truth == ("finger_uv_mm", "finger_height_mm")
     # contact as 0/1 numbers is accepted and stored as bool
     assert trial(contact=[0, 0, 0, 1, 1, 1]).contact.dtype == np.bool_
+    assert trial(contact=[0, 0, 0, 1, 1, 1]).contact[:, 0].tolist() == [0, 0, 0, 1, 1, 1]
 
 
 def _with(**change):
@@ -97,7 +96,7 @@ def _with(**change):
 BAD_TRIALS = {
     "contact too long": (
         _with(contact=np.zeros(N + 1, dtype=bool)),
-        r"trial 't': contact must have shape \(6\), got \(7,\)",
+        r"trial 't': contact must have shape \(6, n_fingers\) or, one finger, \(6,\); got \(7,\)",
     ),
     "contact not 0/1": (_with(contact=[0, 0, 2, 1, 1, 1]), r"trial 't': contact must be bool"),
     "contact float": (
@@ -107,43 +106,46 @@ BAD_TRIALS = {
     "contact text": (_with(contact=["yes"] * N), r"contact must be bool, found dtype <U3"),
     "uv 3 columns": (
         _with(finger_uv_mm=np.zeros((N, 3))),
-        r"trial 't': finger_uv_mm must have shape \(6, 2\), got \(6, 3\)",
+        r"trial 't': finger_uv_mm must have shape \(6, n_fingers, 2\) or, one finger, \(6, 2\); "
+        r"got \(6, 3\)",
     ),
     "uv flat": (
         _with(finger_uv_mm=np.zeros(N)),
-        r"trial 't': finger_uv_mm must have shape \(6, 2\), got \(6,\)",
+        r"trial 't': finger_uv_mm must have shape \(6, n_fingers, 2\) .*; got \(6,\)",
     ),
-    "height 2-D": (
-        _with(finger_height_mm=np.zeros((N, 1))),
-        r"trial 't': finger_height_mm must have shape \(6\), got \(6, 1\)",
+    "height 3-D": (
+        _with(finger_height_mm=np.zeros((N, 1, 1))),
+        r"trial 't': finger_height_mm must have shape \(6, n_fingers\) or, one finger, \(6,\); "
+        r"got \(6, 1, 1\)",
     ),
     "uv half NaN": (
         _with(finger_uv_mm=np.array([[np.nan, 1.0]] + [[1.0, 1.0]] * 5)),
-        r"trial 't': finger_uv_mm\[0\] is \[nan, 1.0\], expected two finite numbers \(mm\) or two NaN",
+        r"trial 't': finger_uv_mm\[0, 0\] is \[nan, 1.0\], expected two finite numbers \(mm\) or "
+        r"two NaN",
     ),
     "uv inf": (
         _with(finger_uv_mm=np.array([[np.nan, np.nan]] + [[np.inf, 1.0]] * 5)),
-        r"finger_uv_mm\[1\] is \[inf, 1.0\]",
+        r"finger_uv_mm\[1, 0\] is \[inf, 1.0\]",
     ),
     "negative height": (
         _with(finger_height_mm=np.array([np.nan, -1.0, 2.0, 0, 0, 0])),
-        r"trial 't': finger_height_mm\[1\] is -1.0, expected a height >= 0 mm",
+        r"trial 't': finger_height_mm\[1, 0\] is -1.0, expected a height >= 0 mm",
     ),
     "uv and height disagree": (
         _with(finger_height_mm=np.array([3.0, 8.5, 2.0, 0, 0, 0])),
-        r"trial 't': frame 0 has finger_uv_mm \[nan, nan\] but finger_height_mm 3.0",
+        r"trial 't': frame 0, finger 0 has finger_uv_mm \[nan, nan\] but finger_height_mm 3.0",
     ),
     "contact without a finger": (
         _with(contact=np.ones(N, dtype=bool), finger_height_mm=None),
-        r"trial 't': frame 0 is in contact but finger_uv_mm is NaN",
+        r"trial 't': finger_uv_mm\[0, 0\] is \[nan, nan\] in contact, expected two finite numbers",
     ),
     "contact above the skin": (
         _with(contact=np.array([0, 1, 0, 1, 1, 1]), finger_uv_mm=None),
-        r"trial 't': frame 1 is in contact but finger_height_mm is 8.5, expected 0",
+        r"trial 't': finger_height_mm\[1, 0\] is 8.5 in contact, expected 0",
     ),
     "unknown surface": (
         _with(finger_surface="top"),
-        r"trial 't': 'finger_surface'.*'front', 'back', 'right', 'left'; got 'top'",
+        r"trial 't': 'finger_surface\[0\]'.*'front', 'back', 'right', 'left'; got 'top'",
     ),
 }
 
@@ -192,23 +194,25 @@ def test_v1_file_reads_with_the_ground_truth_none(layout):
         for field in ("capacitance", "timestamps", "labels", "markers", "force"):
             a, b = getattr(got, field), getattr(want, field)
             assert (a is None) == (b is None) and (a is None or a.tobytes() == b.tobytes())
-        for field in (*GROUND_TRUTH_FIELDS, "finger_surface"):
+        for field in GROUND_TRUTH_FIELDS:
             assert getattr(got, field) is None, field
         assert not got.has_ground_truth
+        assert got.finger_surface == want.finger_surface  # (), and (None,) for a force alone
+    assert [t.n_fingers for t in rec.trials] == [0, 1] and rec.trials[1].force.shape == (4, 1)
     assert rec.meta == expected.meta
     rows = list_trials(V1_FILE)
     assert [r["has_contact"] for r in rows] == [False, False]
-    assert [r["finger_surface"] for r in rows] == [None, None]
+    assert [r["finger_surface"] for r in rows] == [(), (None,)]
     assert [r["has_force"] for r in rows] == [False, True]
 
 
 def test_v1_file_written_again_is_the_current_version(tmp_path):
     out = write_recording(read_recording(V1_FILE), tmp_path / "new.h5")
     back = read_recording(out)
-    assert back.format_version == FORMAT_VERSION == 3
+    assert back.format_version == FORMAT_VERSION == 4
     assert [t.has_ground_truth for t in back.trials] == [False, False]
     with h5py.File(out, "r") as f:
-        assert int(f.attrs["format_version"]) == 3
+        assert int(f.attrs["format_version"]) == 4
         assert list(f["trials/has_contact"][()]) == [False, False]
         assert "contact" not in f["frames"]  # no trial has it: no dataset
 
@@ -225,7 +229,13 @@ def _recording(layout) -> Recording:
     return Recording(
         layout,
         [
-            trial("touch", layout=layout, **t, finger_surface="front", force=np.linspace(0, 1, N)),
+            trial(
+                "touch",
+                layout=layout,
+                **t,
+                finger_surface="front",
+                force=np.where(t["contact"], np.linspace(0, 1, N), 0.0),  # 0 off the skin
+            ),
             trial("hover", layout=layout, **hover, finger_surface="back"),
             trial("none", layout=layout),
         ],
@@ -288,7 +298,7 @@ def test_append_writer_round_trip_and_checks(tmp_path, layout):
                 lambda: w.append(
                     np.ones(P), 0.3, contact=True, finger_uv_mm=(1, 2), finger_height_mm=1.0
                 ),
-                r"frame 0 is in contact but finger_height_mm is 1.0, expected 0",
+                r"finger_height_mm\[0, 0\] is 1.0 in contact, expected 0",
             ),
             (
                 lambda: w.append(
@@ -298,7 +308,8 @@ def test_append_writer_round_trip_and_checks(tmp_path, layout):
                     finger_uv_mm=(1, 2),
                     finger_height_mm=0.0,
                 ),
-                r"finger_uv_mm must have shape \(2, 2\), got \(1, 2\)",
+                r"finger_uv_mm must have shape \(2, n_fingers, 2\) or, one finger, \(2, 2\); "
+                r"got \(1, 2\)",
             ),
             (lambda: w.start_trial("x", finger_surface="top"), r"got 'top'"),
         ]
@@ -309,27 +320,53 @@ def test_append_writer_round_trip_and_checks(tmp_path, layout):
     assert [t.name for t in back.trials] == ["touch", "hover", "none", "scalars"]
     _assert_same_truth(rec, Recording(layout, back.trials[:3], 30.0))
     s = back.trials[3]
-    assert s.finger_surface == "left" and s.contact.tolist() == [True, False, False]
-    assert np.array_equal(s.finger_uv_mm, [[1, 2], [1, 2], [np.nan, np.nan]], equal_nan=True)
-    assert np.array_equal(s.finger_height_mm, [0.0, 5.0, np.nan], equal_nan=True)
+    f = s.finger(0)
+    assert s.finger_surface == ("left",) and f.contact.tolist() == [True, False, False]
+    assert np.array_equal(f.uv_mm, [[1, 2], [1, 2], [np.nan, np.nan]], equal_nan=True)
+    assert np.array_equal(f.height_mm, [0.0, 5.0, np.nan], equal_nan=True)
     # the two writers store the same recording
     other = read_recording(write_recording(back, tmp_path / "batch.h5"))
     _assert_same_truth(back, other)
 
 
-def test_docs_snippet_reads_version_1_and_2(tmp_path):
-    """The h5py-only reader of docs/recording-format.md reads both versions."""
+def load_with_docs_snippet(path):
+    """The h5py-only reader of docs/recording-format.md, run on ``path``."""
     docs = Path(__file__).resolve().parents[2] / "docs" / "recording-format.md"
     text = docs.read_text(encoding="utf-8")
     section = text[text.index("## Reading without ectskin") :]
     code = re.search(r"```python\n(.*?)```", section, re.DOTALL).group(1)
     namespace: dict = {}
     exec(compile(code, str(docs), "exec"), namespace)  # noqa: S102 (our own docs)
-    old, _, _ = namespace["load"](V1_FILE)
+    return namespace["load"](path)
+
+
+def assert_snippet_agrees(path) -> None:
+    """The snippet gives each trial's fingers as read_recording does, bit for bit."""
+    trials, _, _ = load_with_docs_snippet(path)
+    rec = read_recording(path)
+    assert list(trials) == [t.name for t in rec.trials]
+    for t in rec.trials:
+        got = trials[t.name]
+        assert got["n_fingers"] == t.n_fingers, t.name
+        assert got["finger_surface"] == list(t.finger_surface), t.name
+        for field in ("force", *GROUND_TRUTH_FIELDS):
+            want = getattr(t, field)
+            assert (got[field] is None) == (want is None), (t.name, field)
+            if want is not None:
+                assert got[field].dtype == want.dtype and got[field].shape == want.shape
+                assert got[field].tobytes() == want.tobytes(), (t.name, field)
+
+
+def test_docs_snippet_reads_version_1_and_2(tmp_path):
+    """The h5py-only reader of docs/recording-format.md reads version 1 and the current one."""
+    old, _, _ = load_with_docs_snippet(V1_FILE)
     assert [t["contact"] for t in old.values()] == [None, None]
-    assert [t["finger_surface"] for t in old.values()] == [None, None]
-    assert old["trial_0001"]["force"].tolist() == [0.0, 0.5, 1.0, 1.5]
+    assert [t["finger_surface"] for t in old.values()] == [[], [None]]
+    assert old["trial_0001"]["force"].tolist() == [[0.0], [0.5], [1.0], [1.5]]
+    assert_snippet_agrees(V1_FILE)
     rec = read_recording(V1_FILE)
-    new, _, _ = namespace["load"](write_recording(_recording(rec.layout), tmp_path / "v2.h5"))
-    assert new["touch"]["finger_surface"] == "front" and new["none"]["contact"] is None
-    assert new["touch"]["contact"].tolist() == truth()["contact"].tolist()
+    path = write_recording(_recording(rec.layout), tmp_path / "v4.h5")
+    new, _, _ = load_with_docs_snippet(path)
+    assert new["touch"]["finger_surface"] == ["front"] and new["none"]["contact"] is None
+    assert new["touch"]["contact"][:, 0].tolist() == truth()["contact"].tolist()
+    assert_snippet_agrees(path)

@@ -79,17 +79,23 @@ def special_recording(layout, seed: int = 0) -> Recording:
         if with_markers:
             markers = rng.normal(0, 50, size=(n, layout.n_markers, 3))
             markers[::4, 2] = np.nan  # occluded marker
+        timestamps = np.cumsum(rng.uniform(0.02, 0.05, size=n))
+        labels = rng.integers(0, layout.n_regions + 1, size=n).astype(np.int16)
+        force = rng.uniform(0, 2, size=n) if with_force else None
+        fingers = {f: v for f, v in finger_truth(n, rng).items() if f in truth}
+        if force is not None and "contact" in fingers:  # no force off the skin
+            force = np.where(fingers["contact"], force, 0.0)
         trials.append(
             Trial(
                 name=f"trial_{k:04d}",
                 capacitance=cap,
-                timestamps=np.cumsum(rng.uniform(0.02, 0.05, size=n)),
-                labels=rng.integers(0, layout.n_regions + 1, size=n).astype(np.int16),
+                timestamps=timestamps,
+                labels=labels,
                 inflation=inflation,
                 region=region,
                 markers=markers,
-                force=rng.uniform(0, 2, size=n) if with_force else None,
-                **{f: v for f, v in finger_truth(n, rng).items() if f in truth},
+                force=force,
+                **fingers,
                 finger_surface=surface,
                 meta={"index": k, "note": "Berührung ✓", "nested": {"list": [1, 2.5, None, True]}},
             )
@@ -142,10 +148,10 @@ def test_round_trip_is_bit_exact(tmp_path, layout):
     assert back.trials[0].finger_height_mm[1:2].tobytes() == NAN_PAYLOAD.tobytes()
     assert back.trials[0].has_ground_truth and back.trials[1].has_ground_truth
     assert back.trials[0].contact.dtype == np.bool_
-    assert back.format_version == FORMAT_VERSION == 3 and back.source == str(path)
+    assert back.format_version == FORMAT_VERSION == 4 and back.source == str(path)
     with h5py.File(path, "r") as f:  # a closed file opens in any HDF5 tool
         assert f.attrs["complete"] and f.attrs["format"] == "ectskin.recording"
-        assert f.attrs["format_version"] == 3
+        assert f.attrs["format_version"] == 4
         assert f["frames/capacitance"].compression == "gzip"
         assert list(f["frames/capacitance"].attrs["pair_names"])[:2] == list(layout.pair_names[:2])
 
@@ -171,12 +177,13 @@ def test_docs_snippet_reads_the_file_without_ectskin(tmp_path, layout):
         assert (got["markers"] is None) == (t.markers is None)
         if t.markers is not None:
             assert np.array_equal(got["markers"], t.markers, equal_nan=True)
-        assert (got["force"] is None) == (t.force is None)
-        for field in GROUND_TRUTH_FIELDS:
+        for field in ("force", *GROUND_TRUTH_FIELDS):  # on the fingers axis
             assert (got[field] is None) == (getattr(t, field) is None), (t.name, field)
             if got[field] is not None:
+                assert got[field].shape == getattr(t, field).shape, (t.name, field)
                 assert got[field].tobytes() == getattr(t, field).tobytes(), (t.name, field)
-        assert got["finger_surface"] == t.finger_surface
+        assert got["finger_surface"] == list(t.finger_surface)
+        assert got["n_fingers"] == t.n_fingers
         assert tuple(got["inflation_ml"]) == t.inflation
         assert got["region"] == t.region and got["meta"] == t.meta
 
@@ -206,7 +213,8 @@ def test_list_trials_and_read_layout_load_no_frames(tmp_path, layout, monkeypatc
     assert [r["has_contact"] for r in rows] == [True, True, False, True]
     assert [r["has_finger_uv_mm"] for r in rows] == [True, True, False, False]
     assert [r["has_finger_height_mm"] for r in rows] == [True, True, False, False]
-    assert [r["finger_surface"] for r in rows] == ["front", "back", None, None]
+    assert [r["n_fingers"] for r in rows] == [1, 1, 1, 1]  # (the last two: force only)
+    assert [r["finger_surface"] for r in rows] == [("front",), ("back",), (None,), (None,)]
 
 
 def test_read_selected_trials_in_requested_order(tmp_path, layout):
@@ -224,6 +232,22 @@ def test_meta_with_numpy_values_is_stored_as_json(tmp_path, layout):
     rec.meta = {"n": np.int64(3), "p": np.array([0.0, 10.0]), "x": np.float32(0.5)}
     back = read_recording(write_recording(rec, tmp_path / "rec.h5"))
     assert back.meta == {"n": 3, "p": [0.0, 10.0], "x": 0.5}
+
+
+def test_meta_keeps_non_finite_floats_and_refuses_other_objects(tmp_path, layout):
+    """Metadata round-trips exactly: NaN and +-inf come back as those floats (JSON's NaN /
+    Infinity extension), not as null as in the result files of ectskin._files; a value that is
+    not JSON (a path, a dataclass) is refused, naming its key, not turned into text."""
+    rec = special_recording(layout)
+    rec.meta = {"a": float("nan"), "b": [np.inf, -np.inf], "c": {"d": np.float64("nan")}}
+    back = read_recording(write_recording(rec, tmp_path / "rec.h5"))
+    assert np.isnan(back.meta["a"]) and np.isnan(back.meta["c"]["d"])
+    assert back.meta["b"] == [np.inf, -np.inf]
+    for bad in (Path("x.h5"), layout.skins[0]):
+        rec.meta = {"ok": 1, "where": bad}
+        with pytest.raises(EctskinError, match=r"recording meta must hold JSON-able values .*"
+                           r"\(at \['where'\]\)"):
+            write_recording(rec, tmp_path / "bad.h5")
 
 
 # ------------------------------------------------------------------------ writing safely
@@ -313,7 +337,7 @@ MALFORMED = {
     ),
     "missing ground-truth column": (
         lambda p: _edit(p, lambda f: f.__delitem__("trials/has_contact")),
-        r"missing dataset /trials/has_contact \(required by ectskin.recording version 3\)",
+        r"missing dataset /trials/has_contact \(required by ectskin.recording version 4\)",
     ),
     "missing ground-truth dataset": (
         lambda p: _edit(p, lambda f: f.__delitem__("frames/finger_uv_mm")),
@@ -336,8 +360,8 @@ MALFORMED = {
     ),
     "uv and height disagree": (
         lambda p: _edit(p, lambda f: f["frames/finger_height_mm"].__setitem__(0, 3.0)),
-        r"/frames rows 0:40: trial 'trial_0000': frame 0 has finger_uv_mm \[nan, nan\] but "
-        r"finger_height_mm 3.0",
+        r"/frames rows 0:40: trial 'trial_0000': frame 0, finger 0 has finger_uv_mm \[nan, nan\] "
+        r"but finger_height_mm 3.0",
     ),
     "incomplete": (
         lambda p: _edit(p, lambda f: f.attrs.__setitem__("complete", False)),
@@ -388,6 +412,33 @@ def test_malformed_file_gives_one_clear_error(tmp_path, layout, case):
     if case not in ("incomplete", "contact not 0/1", *frame_content):
         with pytest.raises(EctskinError, match=re.escape(str(path))):
             list_trials(path, allow_partial=True)
+
+
+@pytest.mark.parametrize(
+    "volumes, shown",
+    [([np.nan, 0.0, 0.0], "nan"), ([-1e9], "-1000000000.0"), ([0.0, np.inf, 0.0], "inf")],
+)
+def test_reader_refuses_a_non_finite_or_negative_inflation(tmp_path, layout, volumes, shown):
+    """Chamber volumes are >= 0 ml (the twin's 0..30 ml): NaN, inf or a negative volume in
+    /trials/inflation_ml is one error naming the trial and the value, from read_recording and
+    list_trials alike. (A NaN in the rest trial was reported later, by the calibration, as a
+    recording without a rest-state trial.)"""
+    P = layout.n_pairs
+    rest = Trial("rest", np.ones((3, P)), np.arange(3.0), np.zeros(3, np.int16),
+                 inflation=(0.0, 0.0, 0.0), meta={"kind": "no_contact"})
+    touch = Trial("touch", np.ones((3, P)), np.arange(3.0), np.full(3, 2, np.int16),
+                  inflation=(0.0, 0.0, 0.0), region=2, meta={"kind": "touch"})
+    path = write_recording(Recording(layout, [touch, rest], 30.0), tmp_path / "x.h5")
+    with h5py.File(path, "a") as f:
+        f["trials/inflation_ml"][1] = np.asarray(volumes, dtype=np.float64)
+    want = (
+        rf"^{re.escape(str(path))}: /trials/inflation_ml\[1\] \(trial 'rest'\) holds {shown} "
+        r"in \[.*\], expected finite chamber volumes >= 0 ml$"
+    )
+    with pytest.raises(EctskinError, match=want):
+        read_recording(path)
+    with pytest.raises(EctskinError, match=want):
+        list_trials(path)
 
 
 def test_missing_file_and_directory(tmp_path, layout):
@@ -573,7 +624,7 @@ def test_writer_trial_row_written_before_its_first_frame_is_updated(tmp_path, la
         markers = np.arange(2 * layout.n_markers * 3, dtype=float).reshape(2, layout.n_markers, 3)
         w.append(np.ones((2, layout.n_pairs)), [0.0, 1.0], markers=markers, force=[0.5, 0.7])
     (t,) = read_recording(path).trials
-    assert np.array_equal(t.markers, markers) and np.array_equal(t.force, [0.5, 0.7])
+    assert np.array_equal(t.markers, markers) and np.array_equal(t.force, [[0.5], [0.7]])
     assert (t.inflation, t.region, t.meta) == ((1.0, 2.0, 3.0), 5, {"a": 1})
 
 

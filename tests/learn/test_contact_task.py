@@ -21,7 +21,7 @@ def test_dataset_targets_by_hand(layout, contact_recording):
     t = rec.trials[1]
     t.contact[3:] = False
     t.finger_uv_mm[3:] = np.nan
-    t.finger_height_mm[3:] = [4.0, 40.0]
+    t.finger_height_mm[3:, 0] = [4.0, 40.0]  # (finger 0 of the fingers axis)
     t.force[3:] = 0.0
     d = contact_dataset(rec, window=3)
     assert d.x.shape == (15, 3, layout.n_pairs)
@@ -30,7 +30,7 @@ def test_dataset_targets_by_hand(layout, contact_recording):
     assert d.hover[rows].tolist() == [0, 0, 0, 1, 0]
     assert d.face[rows, 0].tolist() == [0, 0, 0, -1, -1]
     assert (d.face[:, 1] == -1).all() and MAX_FINGERS == 2
-    np.testing.assert_allclose(d.uv[rows][0, 0], t.finger_uv_mm[0])
+    np.testing.assert_allclose(d.uv[rows][0, 0], t.finger_uv_mm[0, 0])
     # the window of frame 0 is frame 0 repeated; of frame 4, frames 2, 3, 4
     np.testing.assert_array_equal(d.x[rows][0, 0], d.x[rows][0, 2])
     np.testing.assert_array_equal(d.x[rows][4, 0], d.x[rows][2, 2])

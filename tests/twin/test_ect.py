@@ -142,10 +142,11 @@ def test_metrics_on_a_hand_built_recording(imager):
             two,
             name="t3",
             capacitance=np.stack([two.capacitance[0], far]),
-            contact2=np.array([False, True]),
-            finger2_uv_mm=np.array([[np.nan, np.nan], [15.0, 100.0]]),
-            force2=np.array([0.0, 1.0]),
-            finger2_surface="back",
+            contact=np.array([[True, False], [True, True]]),  # finger 1 in the second frame
+            finger_uv_mm=np.array([[touches[0][1], [np.nan, np.nan]], [touches[0][1], [15.0, 100.0]]]),
+            finger_height_mm=np.array([[0.0, np.nan], [0.0, 0.0]]),
+            force=np.array([[1.0, 0.0], [1.0, 1.0]]),
+            finger_surface=(touches[0][0], "back"),
         )
     )
     rec = Recording(layout=layout, trials=trials, frame_rate_hz=1.0)

@@ -384,15 +384,15 @@ def test_trials_carry_the_fingers_ground_truth(layout):
     assert (
         rest.has_ground_truth and not rest.contact.any() and np.isnan(rest.finger_height_mm).all()
     )
-    assert touch.has_ground_truth and touch.finger_surface == layout.region(touch.region).surface
-    on = touch.contact
+    assert touch.has_ground_truth and touch.finger_surface == (layout.region(touch.region).surface,)
+    on = touch.contact[:, 0]  # (one finger: finger 0 of the fingers axis)
     assert on.any() and (~on).any()
     assert np.all(touch.finger_height_mm[on] == 0) and np.all(touch.finger_height_mm[~on] > 0)
     assert np.all(touch.force[~on] == 0) and np.all(touch.force[on] > 0)
     np.testing.assert_array_equal(touch.labels != 0, on)
     reg = layout.region(touch.region)
     assert np.all(
-        (touch.finger_uv_mm[:, 0] > reg.u_mm[0]) & (touch.finger_uv_mm[:, 0] < reg.u_mm[1])
+        (touch.finger_uv_mm[:, 0, 0] > reg.u_mm[0]) & (touch.finger_uv_mm[:, 0, 0] < reg.u_mm[1])
     )
 
 

@@ -20,9 +20,9 @@ from ectskin.twin import Protocol, SensorModel, Touch, plan_trials, simulate_exp
 from ectskin.twin.human import finger_path, hand_push, second_finger_path
 from ectskin.twin.mechanics import Handling, Manipulator, touch_loads
 from ectskin.twin.protocol import finger_separation_mm, region_bounds
+from ectskin.twin.response import SecondFingerResponse, TouchResponse
 from ectskin.twin.rod import PointLoad
 from ectskin.twin.rod import solve as solve_rod
-from ectskin.twin.response import SecondFingerResponse, TouchResponse
 
 BASELINE = Path(__file__).resolve().parents[1] / "data" / "twin_single_finger_baseline.npz"
 
@@ -62,7 +62,7 @@ def test_second_finger_at_zero_gives_the_earlier_numbers(one_finger_rec):
     # bit for bit on the machine that wrote the baseline; a hair of BLAS rounding elsewhere
     np.testing.assert_allclose(cap, base["capacitance"], rtol=1e-12, atol=0)
     np.testing.assert_allclose(markers, base["markers"], rtol=1e-12, atol=1e-12)
-    assert all(not t.has_second_finger and t.finger2_surface is None for t in rec.trials)
+    assert all(t.n_fingers == 1 and t.contact.shape == (t.n_frames, 1) for t in rec.trials)
 
 
 @pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan"), True, "0.3", None])
@@ -278,33 +278,39 @@ def test_two_finger_trials_carry_both_fingers(two_finger_rec, layout):
     proto = _small(second_finger=1.0)
     touch = [t for t in two_finger_rec.trials if t.meta["kind"] == "touch"]
     assert len(touch) == 2
-    for t in touch:
-        assert t.has_second_finger and t.finger2_surface == t.meta["second_finger"]["surface"]
+    for t in touch:  # the second finger is finger 1 of the fingers axis
+        assert t.n_fingers == 2 and t.finger_surface[1] == t.meta["second_finger"]["surface"]
+        assert t.finger_surface[0] == t.meta["surface"]
         assert t.meta["mom_solves"] == 11 + proto.force_nodes + 4
         counts = np.bincount(t.n_contacts, minlength=3)
         assert counts[0] == 0 and counts[1] > 0 and counts[2] > 0  # 1- and 2-contact frames
-        on = t.contact2
+        second = t.finger(1)
+        on = second.contact
         assert not on[0] and not on[-1]
         reg2 = layout.region(t.meta["second_finger"]["region"])
         lo, hi = region_bounds(reg2, proto.touch_margin)
-        assert np.all((lo <= t.finger2_uv_mm[on]) & (t.finger2_uv_mm[on] <= hi))
-        assert np.all(t.force2[on] > 0) and np.all(t.force2[~on] == 0)
+        assert np.all((lo <= second.uv_mm[on]) & (second.uv_mm[on] <= hi))
+        assert np.isnan(second.uv_mm[~on]).all()
+        assert np.all(second.height_mm[on] == 0) and np.isnan(second.height_mm[~on]).all()
+        assert np.all(second.force[on] > 0) and np.all(second.force[~on] == 0)
     none = two_finger_rec.trials[0]
-    assert none.meta["kind"] == "no_contact" and not none.has_second_finger
+    assert none.meta["kind"] == "no_contact" and none.n_fingers == 1
 
 
 def test_the_option_leaves_the_first_finger_alone(one_finger_rec, two_finger_rec):
     """The second finger draws from its own stream: the first finger's truth, and the readout
     of the frames without the second finger, are those of the one-finger simulation."""
     for a, b in zip(one_finger_rec.trials, two_finger_rec.trials):
-        if b.has_second_finger:  # the readout moves by tens of fF where both press, only there
-            both = b.contact2
+        if b.n_fingers == 2:  # the readout moves by tens of fF where both press, only there
+            both = b.contact[:, 1]
             assert np.abs(b.capacitance[both] - a.capacitance[both]).max() > 5e-3
             assert np.array_equal(b.capacitance[~both], a.capacitance[~both])
         else:
             assert np.array_equal(b.capacitance, a.capacitance)
-        for field in ("contact", "finger_uv_mm", "force", "finger_height_mm", "labels"):
-            assert np.array_equal(getattr(a, field), getattr(b, field), equal_nan=True), field
+        assert np.array_equal(a.labels, b.labels)
+        for field in ("contact", "finger_uv_mm", "force", "finger_height_mm"):  # finger 0
+            first = getattr(b, field)[:, :1]
+            assert np.array_equal(getattr(a, field), first, equal_nan=True), field
 
 
 # ------------------------------------------------------------------------------ resting on skin

@@ -6,8 +6,9 @@ dispatches on the file's suffix (HDF5 ``.h5``/``.hdf5`` → :mod:`ectskin.io.hdf
 
 Modules, by job:
 
-* :mod:`~ectskin.io.recording`: :class:`Recording` and :class:`Trial`, checked at construction,
-  and :func:`require_ground_truth` for code that needs the finger's per-frame ground truth;
+* :mod:`~ectskin.io.recording`: :class:`Recording` and :class:`Trial` (its fingers on an axis,
+  :meth:`Trial.finger` gives one as a :class:`FingerTruth`), checked at construction, and
+  :func:`require_ground_truth` for code that needs the fingers' per-frame ground truth;
 * :mod:`~ectskin.io.hdf5`: the recording file format (schema, reader, batch and append writers);
 * :mod:`~ectskin.io.generic`: recordings from other sources in a documented NPZ/CSV layout;
 * :mod:`~ectskin.io.capmeter`, :mod:`~ectskin.io.motive`: instrument exports (capacitance meter,
@@ -27,7 +28,13 @@ from ectskin._check import EctskinError
 from ectskin.io import hdf5
 from ectskin.io.generic import load_generic
 from ectskin.io.hdf5 import RecordingWriter, list_trials, read_layout, write_recording
-from ectskin.io.recording import GROUND_TRUTH_FIELDS, Recording, Trial, require_ground_truth
+from ectskin.io.recording import (
+    GROUND_TRUTH_FIELDS,
+    FingerTruth,
+    Recording,
+    Trial,
+    require_ground_truth,
+)
 
 #: Suffixes :func:`read_recording` takes, by reader.
 GENERIC_SUFFIXES = (".npz", ".csv")
@@ -48,6 +55,7 @@ def read_recording(path: str | os.PathLike, **kwargs) -> Recording:
 
 __all__ = [
     "GROUND_TRUTH_FIELDS",
+    "FingerTruth",
     "Recording",
     "RecordingWriter",
     "Trial",

@@ -94,7 +94,11 @@ def ect_image_metrics(
     touch = [
         t
         for t in rec.trials
-        if t.name in wanted and t.contact is not None and t.contact.any() and t.finger_surface
+        if t.name in wanted
+        and t.contact is not None
+        and t.n_fingers
+        and t.contact[:, 0].any()
+        and t.finger_surface[0]  # (finger 0, which the labels follow)
     ]
     if not touch:
         raise EctskinError("ect_image_metrics: no trial with contact frames to evaluate")
@@ -141,13 +145,13 @@ def ect_image_metrics(
         pix_mats = {m: None if r.matrix is None else L @ r.matrix for m, r in builders.items()}
         for t in ts:
             c0 = ref if ref is not None else fallback[t.name]
-            single = t.contact if t.contact2 is None else t.contact & ~t.contact2
+            single = t.contact[:, 0] & (t.n_contacts == 1)  # finger 0 alone on the skin
             idx = np.flatnonzero(single)[::frame_step]
             idx = idx[np.all(np.isfinite(t.capacitance[idx]), axis=1)]
             if idx.size == 0:
                 continue
             dc = t.capacitance[idx] - c0[None, :]
-            true_face = t.finger_surface
+            true_face = t.finger_surface[0]
             for m, r in builders.items():
                 t1 = time.perf_counter()
                 if pix_mats[m] is not None:
@@ -159,7 +163,7 @@ def ect_image_metrics(
                 for row, k in zip(img, idx):
                     f, uv, _ = locate(row, grid, localisation)
                     face = grid.faces[f]
-                    d = on_skin_distance(face, uv, true_face, t.finger_uv_mm[k], w_mm, t_mm)
+                    d = on_skin_distance(face, uv, true_face, t.finger_uv_mm[k, 0], w_mm, t_mm)
                     errors[m].append(float(d))
                     face_ok[m].append(face == true_face)
             if (
@@ -180,7 +184,7 @@ def ect_image_metrics(
                         "trial": t.name,
                         "frame": int(k),
                         "images": grid.face_images(row),
-                        "true": (true_face, *map(float, t.finger_uv_mm[k])),
+                        "true": (true_face, *map(float, t.finger_uv_mm[k, 0])),
                         "pred": (grid.faces[f], float(uv[0]), float(uv[1])),
                     }
                 )

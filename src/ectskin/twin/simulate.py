@@ -51,12 +51,13 @@ def simulate_trial(
     t = np.arange(n) / fps
     p = plan.inflation
     n_markers = sensor.layout.n_markers
-    truth = {  # per-frame ground truth; without a finger: no contact, no point, no height
+    truth = {  # per-frame ground truth of one finger; away: no contact, no point, no height
         "contact": np.zeros(n, dtype=bool),
         "finger_uv_mm": np.full((n, 2), np.nan),
         "force_n": np.zeros(n),
         "finger_height_mm": np.full(n, np.nan),
     }
+    surfaces = (plan.surface,)
     labels = np.zeros(n, dtype=np.int16)
     n_solves = 1
     if plan.kind == "touch":
@@ -84,19 +85,16 @@ def simulate_trial(
                 sensor, p, plan, protocol, seg, seg_hand, seg2, push_dir
             )
             n_solves += solves
-        if path2 is not None:  # (a trial of a few frames may end before it lands)
-            truth.update(
-                contact2=path2.contact,
-                finger2_uv_mm=path2.uv_mm,
-                force2=path2.force_n,
-                finger2_surface=plan.second_surface,
-            )
+        # the fingers axis: finger 0, and the second finger as finger 1 (a trial of a few
+        # frames may end before it lands)
+        paths = (path,) if path2 is None else (path, path2)
+        surfaces = (plan.surface,) if path2 is None else (plan.surface, plan.second_surface)
         labels[path.contact] = plan.region
         truth.update(
-            contact=path.contact,
-            finger_uv_mm=path.uv_mm,
-            force_n=path.force_n,
-            finger_height_mm=path.height_mm,
+            contact=np.stack([q.contact for q in paths], axis=1),
+            finger_uv_mm=np.stack([q.uv_mm for q in paths], axis=1),
+            force_n=np.stack([q.force_n for q in paths], axis=1),
+            finger_height_mm=np.stack([q.height_mm for q in paths], axis=1),
         )
     else:
         c_true = np.repeat(sensor.capacitance(p, None, [0.0]), n, axis=0)
@@ -132,11 +130,7 @@ def simulate_trial(
         contact=truth["contact"],
         finger_uv_mm=truth["finger_uv_mm"],
         finger_height_mm=truth["finger_height_mm"],
-        finger_surface=plan.surface,
-        contact2=truth.get("contact2"),
-        finger2_uv_mm=truth.get("finger2_uv_mm"),
-        force2=truth.get("force2"),
-        finger2_surface=truth.get("finger2_surface"),
+        finger_surface=surfaces,
         meta=meta,
     )
 

@@ -359,9 +359,10 @@ def _trial(
 
 
 def _truth(f: Fields, groups: _Groups, k: int, idx: np.ndarray) -> dict[str, Any]:
-    """The Trial's ground-truth fields of group ``k`` (rows ``idx``) from the file's contact
-    labels: contact, finger_uv_mm, finger_height_mm, force, finger_surface (the one face of
-    the group; a group naming two faces is an error naming the group and the row)."""
+    """The Trial's finger fields of group ``k`` (rows ``idx``) from the file's contact labels,
+    on the fingers axis: contact, finger_uv_mm, finger_height_mm, force, and finger_surface (per
+    finger the one face of the group; a group naming two faces for a finger is an error naming
+    the group and the row)."""
     gt = f.truth
     if gt is None:
         return {}
@@ -370,16 +371,29 @@ def _truth(f: Fields, groups: _Groups, k: int, idx: np.ndarray) -> dict[str, Any
         "finger_uv_mm": None if gt.position_mm is None else gt.position_mm[idx],
         "finger_height_mm": None if gt.height_mm is None else gt.height_mm[idx],
         "force": None if gt.force_n is None else gt.force_n[idx],
+        "finger_surface": (None,) * gt.n_fingers,
     }
     if gt.surface is not None:
-        faces = gt.surface[idx]
-        named = faces[faces != ""]
-        if named.size and np.any(named != named[0]):
-            j = int(idx[np.argmax((faces != "") & (faces != named[0]))])
-            raise EctskinError(
-                f"{f.source}: group {groups.keys[k].item()!r}: surface must be one face per "
-                f"group, expected {str(named[0])!r} (as in its first rows), found "
-                f"{str(gt.surface[j])!r} at {f.row(j)}"
-            )
-        out["finger_surface"] = str(named[0]) if named.size else None
+        out["finger_surface"] = tuple(
+            _one_face(f, groups, k, idx, gt.surface[:, j], gt.n_fingers > 1 and j)
+            for j in range(gt.n_fingers)
+        )
     return out
+
+
+def _one_face(
+    f: Fields, groups: _Groups, k: int, idx: np.ndarray, surface: np.ndarray, finger: Any
+) -> str | None:
+    """The one face a group names for a finger (``finger``: its index in messages, or False
+    for a file of one finger), None where it names none."""
+    faces = surface[idx]
+    named = faces[faces != ""]
+    if named.size and np.any(named != named[0]):
+        j = int(idx[np.argmax((faces != "") & (faces != named[0]))])
+        which = "" if finger is False else f" of finger {finger}"
+        raise EctskinError(
+            f"{f.source}: group {groups.keys[k].item()!r}: surface{which} must be one face per "
+            f"group, expected {str(named[0])!r} (as in its first rows), found "
+            f"{str(surface[j])!r} at {f.row(j)}"
+        )
+    return str(named[0]) if named.size else None

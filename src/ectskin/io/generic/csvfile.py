@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 from array import array
 from collections import deque
 from dataclasses import dataclass, field
@@ -20,12 +21,12 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
-from ectskin.io.frame_rate import stated_rate
 from ectskin.io.generic.fields import (
     CSV_COLUMNS,
     Fields,
     check_magnitude,
     class_labels,
+    file_rate,
     ground_truth,
     group_ids,
 )
@@ -46,7 +47,8 @@ class _Scan:
     numeric: list[int] = field(default_factory=list)  # columns parsed as numbers (all but text)
     flat: array = field(default_factory=lambda: array("d"))
     groups: list[str] = field(default_factory=list)
-    surfaces: list[str] = field(default_factory=list)  # the 'surface' column, when present
+    surfaces: dict[int, list[str]] = field(default_factory=dict)  # per finger: its 'surface'
+    text: tuple[int, ...] = ()  # the text columns: 'group' and the 'surface' columns
     lines: array = field(default_factory=lambda: array("q"))
     # the last data rows read, (line, cells): how the file's last row should look
     tail: deque = field(default_factory=lambda: deque(maxlen=TAIL_ROWS + 1))
@@ -58,7 +60,7 @@ class _Scan:
             return self.add(line, cells)
         if all(not c.strip() for c in cells):
             return None
-        last_is_text = len(self.header) - 1 in (self.cols["group"], self.cols.get("surface"))
+        last_is_text = len(self.header) - 1 in self.text
         rows = [*self.tail, (line, cells)]
         why = cut_last_row(rows, len(self.header), None if last_is_text else _is_number)
         if why is None:
@@ -83,8 +85,10 @@ class _Scan:
             self.header = [c.strip() for c in cells]
             self.header_line = line
             self.cols = _csv_columns(self.header, self.src, line)
-            text = (self.cols["group"], self.cols.get("surface"))
-            self.numeric = [j for j in range(len(self.header)) if j not in text]
+            faces = {k: c["surface"] for k, c in self.cols["fingers"].items() if "surface" in c}
+            self.surfaces = {k: [] for k in faces}
+            self.text = (self.cols["group"], *faces.values())
+            self.numeric = [j for j in range(len(self.header)) if j not in self.text]
             return
         if len(cells) != len(self.header):
             raise EctskinError(
@@ -108,8 +112,8 @@ class _Scan:
             row = self._slow_row(values, line)
         self.flat.extend(row)  # only a row that reads whole is taken
         self.groups.append(g)
-        if "surface" in self.cols:
-            self.surfaces.append(cells[self.cols["surface"]].strip())
+        for k, faces in self.surfaces.items():
+            faces.append(cells[self.cols["fingers"][k]["surface"]].strip())
         self.lines.append(line)
         self.tail.append((line, cells))
 
@@ -195,21 +199,7 @@ def read_csv(path: Path) -> Fields:
     timestamps = column(cols["time_s"]) if "time_s" in cols else None
     if timestamps is not None:
         check_magnitude(timestamps, src, "time", lambda k: f"{row(k[0])}, column 'time_s'")
-    truth = ground_truth(
-        src,
-        n,
-        row,
-        lambda key: "columns 'x_mm', 'z_mm'" if key == "position_mm" else f"column {key!r}",
-        contact=column(cols["contact"]) if "contact" in cols else None,
-        position_mm=(
-            np.stack([column(cols["x_mm"]), column(cols["z_mm"])], axis=1)
-            if "x_mm" in cols
-            else None
-        ),
-        force_n=column(cols["force_n"]) if "force_n" in cols else None,
-        height_mm=column(cols["height_mm"]) if "height_mm" in cols else None,
-        surface=np.asarray(scan.surfaces, dtype=str) if "surface" in cols else None,
-    )
+    truth = _truth(scan, n, row, column)
     return Fields(
         src,
         readouts,
@@ -218,12 +208,55 @@ def read_csv(path: Path) -> Fields:
         markers,
         reference,
         timestamps,
-        _frame_rate(scan.meta, src),
+        file_rate(scan.meta.get("frame_rate_hz"), f"{src}: '# frame_rate_hz'"),
         [header[j][2:] for j in cols["c"]],
         marker_names,
         row,
         scan.notes,
         truth,
+    )
+
+
+def _truth(scan: _Scan, n: int, row: Any, column: Any) -> Any:
+    """The contact labels on the fingers axis: finger 0's columns unprefixed, finger k's
+    ``f<k>:<column>`` (every finger with the same columns, :func:`_csv_columns`)."""
+    fingers = scan.cols["fingers"]
+    if not fingers:
+        return None
+    order = sorted(fingers)
+    first = fingers[0]
+
+    def axis(key: str) -> np.ndarray | None:
+        if key not in first:
+            return None
+        return np.stack([column(fingers[k][key]) for k in order], axis=1)
+
+    def name(key: str, k: int) -> str:
+        pre = f"f{k}:" if k else ""
+        if key == "position_mm":
+            return f"columns '{pre}x_mm', '{pre}z_mm'"
+        return f"column '{pre}{key}'"
+
+    position = None
+    if "x_mm" in first:
+        position = np.stack(
+            [np.stack([column(fingers[k]["x_mm"]), column(fingers[k]["z_mm"])], axis=1)
+             for k in order],
+            axis=1,
+        )
+    surface = None
+    if "surface" in first:
+        surface = np.stack([np.asarray(scan.surfaces[k], dtype=str) for k in order], axis=1)
+    return ground_truth(
+        scan.src,
+        n,
+        row,
+        name,
+        contact=axis("contact"),
+        position_mm=position,
+        force_n=axis("force_n"),
+        height_mm=axis("height_mm"),
+        surface=surface,
     )
 
 
@@ -264,15 +297,11 @@ def _scan(path: Path) -> _Scan:
     return scan
 
 
-def _frame_rate(meta: dict[str, str], src: str) -> float | None:
-    """``# frame_rate_hz: 30`` above the header (:func:`~ectskin.io.frame_rate.stated_rate`)."""
-    if "frame_rate_hz" not in meta:
-        return None
-    return stated_rate(meta["frame_rate_hz"], f"{src}: '# frame_rate_hz'")
-
-
 def _csv_kind(name: str) -> tuple[str, bool]:
     """What a numeric CSV column holds (for messages) and whether an empty cell means NaN."""
+    finger = _FINGER_PREFIX.match(name)
+    if finger:
+        name = name[finger.end() :]
     if name.startswith("c:"):
         return "a number (empty = masked)", True
     if name.startswith("m:"):
@@ -292,8 +321,10 @@ def _csv_kind(name: str) -> tuple[str, bool]:
     return "a time in s", False
 
 
-#: the optional contact-label columns (docs/import-format.md)
+#: the optional contact-label columns (docs/import-format.md): finger 0's as named here,
+#: finger k's (k = 1, 2, ...) with the prefix ``f<k>:``
 TRUTH_COLUMNS = ("contact", "x_mm", "z_mm", "force_n", "height_mm", "surface")
+_FINGER_PREFIX = re.compile(r"f([1-9][0-9]*):")
 
 
 def _csv_columns(header: list[str], src: str, line: int) -> dict[str, Any]:
@@ -305,11 +336,16 @@ def _csv_columns(header: list[str], src: str, line: int) -> dict[str, Any]:
         if h in seen:
             raise EctskinError(f"{src}: line {line}: duplicate column {h!r}")
         seen[h] = j
-    cols: dict[str, Any] = {"c": [], "ref": [], "m": {}}
+    cols: dict[str, Any] = {"c": [], "ref": [], "m": {}, "fingers": {}}
     refs: dict[str, int] = {}
     for j, h in enumerate(header):
-        if h in ("group", "time_s", "label", *TRUTH_COLUMNS):
+        finger = _FINGER_PREFIX.match(h)
+        if h in ("group", "time_s", "label"):
             cols[h] = j
+        elif h in TRUTH_COLUMNS:
+            cols["fingers"].setdefault(0, {})[h] = j
+        elif finger and h[finger.end() :] in TRUTH_COLUMNS:
+            cols["fingers"].setdefault(int(finger.group(1)), {})[h[finger.end() :]] = j
         elif h.startswith("c:") and len(h) > 2:
             cols["c"].append(j)
         elif h.startswith("ref:") and len(h) > 4:
@@ -326,11 +362,7 @@ def _csv_columns(header: list[str], src: str, line: int) -> dict[str, Any]:
         raise EctskinError(
             f"{src}: line {line}: no readout columns; name them 'c:<channel>' (e.g. 'c:E1-E2')"
         )
-    if ("x_mm" in cols) != ("z_mm" in cols):
-        raise EctskinError(
-            f"{src}: line {line}: the position on the skin needs both columns 'x_mm' and 'z_mm', "
-            f"found only {'x_mm' if 'x_mm' in cols else 'z_mm'!r}"
-        )
+    _finger_columns(cols["fingers"], src, line)
     if refs:
         names = [header[j][2:] for j in cols["c"]]
         missing = [c for c in names if c not in refs]
@@ -351,3 +383,28 @@ def _csv_columns(header: list[str], src: str, line: int) -> dict[str, Any]:
             )
         cols["m"][name] = [axes["x"], axes["y"], axes["z"]]
     return cols
+
+
+def _finger_columns(fingers: dict[int, dict[str, int]], src: str, line: int) -> None:
+    """The contact-label columns of fingers 0, 1, ... (none missing in between), each finger
+    with the same columns, x_mm and z_mm together."""
+    for k in range(max(fingers, default=-1) + 1):
+        if k not in fingers:
+            raise EctskinError(
+                f"{src}: line {line}: contact-label columns of finger {max(fingers)} but none "
+                f"of finger {k}; number the fingers 1, 2, ... after the unprefixed finger 0"
+            )
+    for k, have in fingers.items():
+        pre = f"f{k}:" if k else ""
+        if ("x_mm" in have) != ("z_mm" in have):
+            found = f"{pre}x_mm" if "x_mm" in have else f"{pre}z_mm"
+            raise EctskinError(
+                f"{src}: line {line}: the position on the skin needs both columns "
+                f"'{pre}x_mm' and '{pre}z_mm', found only {found!r}"
+            )
+        if set(have) != set(fingers[0]):
+            raise EctskinError(
+                f"{src}: line {line}: finger {k} has the contact-label columns "
+                f"{', '.join(pre + c for c in sorted(have))}, finger 0 "
+                f"{', '.join(sorted(fingers[0]))}; every finger gives the same columns"
+            )

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
+from ectskin.io.frame_rate import stated_rate
 from ectskin.io.text import MAX_ABS_VALUE
 
 NPZ_FIELDS = (
@@ -30,7 +31,7 @@ NPZ_FIELDS = (
 )
 CSV_COLUMNS = (
     "group, time_s, label, c:<channel>, ref:<channel>, m:<marker>.x|.y|.z, contact, x_mm, z_mm, "
-    "force_n, height_mm, surface"
+    "force_n, height_mm, surface (and f<k>:<column> of these for finger k = 1, 2, ...)"
 )
 #: the faces a ``surface`` may name (those of ectskin.layout.layout.SURFACES)
 SURFACE_NAMES = ("front", "back", "right", "left")
@@ -59,11 +60,12 @@ class Fields:
 
 @dataclass
 class GroundTruth:
-    """Per-frame contact labels of a file, checked (n frames); each None where not given.
+    """Per-frame contact labels of a file on the fingers axis, checked (n frames, K fingers);
+    each None where not given.
 
-    ``contact`` (n,) bool; ``position_mm`` (n, 2) float64 (u, v) of the point under the finger,
-    NaN rows without a finger; ``height_mm`` (n,) float64, 0 in contact, NaN without a finger;
-    ``force_n`` (n,) float64 ≥ 0; ``surface`` (n,) str ("" = not given).
+    ``contact`` (n, K) bool; ``position_mm`` (n, K, 2) float64 (u, v) of the point under each
+    finger, NaN without the finger; ``height_mm`` (n, K) float64, 0 in contact, NaN without the
+    finger; ``force_n`` (n, K) float64 ≥ 0; ``surface`` (n, K) str ("" = not given).
     """
 
     contact: np.ndarray | None
@@ -72,8 +74,57 @@ class GroundTruth:
     force_n: np.ndarray | None
     surface: np.ndarray | None
 
+    @property
+    def n_fingers(self) -> int:
+        given = (self.contact, self.position_mm, self.height_mm, self.force_n, self.surface)
+        return next(a.shape[1] for a in given if a is not None)
+
 
 def ground_truth(
+    src: str,
+    n: int,
+    row: Callable[[int], str],
+    name: Callable[[str, int], str],
+    *,
+    contact: np.ndarray | None,
+    position_mm: np.ndarray | None,
+    force_n: np.ndarray | None,
+    height_mm: np.ndarray | None,
+    surface: np.ndarray | None,
+) -> GroundTruth | None:
+    """Check the contact labels of a file and complete them (``docs/import-format.md``).
+
+    Inputs are on the fingers axis, all of the same K fingers: float64 arrays (NaN = empty) of
+    n rows, (n, K) and ``position_mm`` (n, K, 2), ``surface`` (n, K) text; ``name(key, k)`` is
+    how the format calls finger k's field in messages ("field 'contact' (finger 1)", "column
+    'f1:contact'"). Rules, per finger: contact is 0 or 1; a position row is two finite numbers
+    or empty; a contact frame has a position (when positions are given); without a ``contact``
+    field a frame with a position is a contact frame; force finite and ≥ 0, and 0 without
+    contact; height ≥ 0, 0 (or empty) in contact, and given exactly where a position is outside
+    contact (without a height field the height is 0 in contact, and a position outside contact
+    is an error: its height is unknown). Every refusal names the file, the row, the field, what
+    was expected and found.
+    """
+    given = {"contact": contact, "position_mm": position_mm, "force_n": force_n}
+    given.update(height_mm=height_mm, surface=surface)
+    present = [v for v in given.values() if v is not None]
+    if not present:
+        return None
+    K = present[0].shape[1]
+    fingers = [
+        _finger_truth(src, n, row, lambda key, k=k: name(key, k), **{
+            key: None if v is None else v[:, k] for key, v in given.items()
+        })
+        for k in range(K)
+    ]
+    out = {}
+    for key in ("contact", "position_mm", "height_mm", "force_n", "surface"):
+        cols = [f[key] for f in fingers]
+        out[key] = None if cols[0] is None else np.stack(cols, axis=1)
+    return GroundTruth(**out)
+
+
+def _finger_truth(
     src: str,
     n: int,
     row: Callable[[int], str],
@@ -84,20 +135,8 @@ def ground_truth(
     force_n: np.ndarray | None,
     height_mm: np.ndarray | None,
     surface: np.ndarray | None,
-) -> GroundTruth | None:
-    """Check the contact labels of a file and complete them (``docs/import-format.md``).
-
-    Inputs are float64 arrays (NaN = empty) of n rows, ``position_mm`` (n, 2), ``surface`` (n,)
-    text; ``name(key)`` is how the format calls a field in messages ("field 'contact'",
-    "column 'contact'"). Rules: contact is 0 or 1; a position row is two finite numbers or
-    empty; a contact frame has a position (when positions are given); without a ``contact``
-    field a frame with a position is a contact frame; force finite and ≥ 0; height ≥ 0, 0 (or
-    empty) in contact, and given exactly where a position is outside contact (without a height
-    field the height is 0 in contact, and a position outside contact is an error: its height is
-    unknown). Every refusal names the file, the row, the field, what was expected and found.
-    """
-    if all(v is None for v in (contact, position_mm, force_n, height_mm, surface)):
-        return None
+) -> dict[str, np.ndarray | None]:
+    """:func:`ground_truth` of one finger: (n,) arrays, ``position_mm`` (n, 2)."""
 
     def fail(i: int, key: str, expected: str, found: Any) -> EctskinError:
         return EctskinError(f"{src}: {row(i)}, {name(key)}: expected {expected}, found {found}")
@@ -131,6 +170,9 @@ def ground_truth(
             i = int(np.argmax(bad))
             raise fail(i, "force_n", "a finite force >= 0 N", force_n[i])
         check_magnitude(force_n, src, "force", lambda k: f"{row(k[0])}, {name('force_n')}")
+        if touching is not None and np.any(~touching & (force_n != 0)):
+            i = int(np.argmax(~touching & (force_n != 0)))
+            raise fail(i, "force_n", "0 N in a frame without contact", force_n[i])
     height = None
     if height_mm is not None:
         height = height_mm.copy()
@@ -168,13 +210,19 @@ def ground_truth(
         if bad.any():
             i = int(np.argmax(bad))
             raise fail(i, "surface", f"one of {', '.join(SURFACE_NAMES)}", repr(str(surface[i])))
-    return GroundTruth(
-        contact=None if touching is None else touching.astype(bool),
-        position_mm=position_mm,
-        height_mm=height,
-        force_n=force_n,
-        surface=surface,
-    )
+    return {
+        "contact": None if touching is None else touching.astype(bool),
+        "position_mm": position_mm,
+        "height_mm": height,
+        "force_n": force_n,
+        "surface": surface,
+    }
+
+
+def file_rate(value: Any, where: str) -> float | None:
+    """The frame rate a file states (an NPZ field, a ``# frame_rate_hz`` line), checked by
+    :func:`~ectskin.io.frame_rate.stated_rate`; None where it states none."""
+    return None if value is None else stated_rate(value, where)
 
 
 def check_magnitude(

@@ -9,13 +9,13 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
-from ectskin.io.frame_rate import stated_rate
 from ectskin.io.generic.fields import (
     NPZ_FIELDS,
     Fields,
     GroundTruth,
     check_magnitude,
     class_labels,
+    file_rate,
     ground_truth,
     group_ids,
 )
@@ -54,7 +54,7 @@ def read_npz(path: Path) -> Fields:
                 f"{timestamps.shape}"
             )
         check_magnitude(timestamps, src, "time", lambda k: f"field 'timestamps' row {k[0]}")
-    frame_rate = _frame_rate(raw["frame_rate_hz"], src)
+    frame_rate = file_rate(raw["frame_rate_hz"], f"{src}: frame_rate_hz")
     channel_names = _names(raw["channel_names"], m, src, "channel_names") or [
         f"ch{j + 1}" for j in range(m)
     ]
@@ -80,33 +80,55 @@ def read_npz(path: Path) -> Fields:
 
 
 def _truth(raw: dict[str, np.ndarray | None], n: int, src: str) -> GroundTruth | None:
-    """The contact labels (contact, position_mm, force_n, height_mm, surface), checked."""
+    """The contact labels (contact, position_mm, force_n, height_mm, surface), checked: each
+    on the fingers axis (n, K[, 2]) or, one finger, without it (n[, 2]); all of the same K."""
     arrays: dict[str, np.ndarray | None] = {}
-    for key, shape in (
-        ("contact", (n,)),
-        ("position_mm", (n, 2)),
-        ("force_n", (n,)),
-        ("height_mm", (n,)),
+    fingers: dict[str, int] = {}
+    for key, tail in (
+        ("contact", ()),
+        ("position_mm", (2,)),
+        ("force_n", ()),
+        ("height_mm", ()),
+        ("surface", ()),
     ):
         a = raw[key]
-        if a is not None:
-            a = _numeric(a, src, key)
-            if a.shape != shape:
+        if a is None:
+            arrays[key] = None
+            continue
+        if key == "surface":
+            if a.dtype.kind == "S":
+                a = np.char.decode(a, "ascii", errors="replace")
+            if a.dtype.kind != "U":
                 raise EctskinError(
-                    f"{src}: field {key!r} must have shape {shape} (one per frame), got {a.shape}"
+                    f"{src}: field 'surface' must hold a face name per frame (text), got dtype "
+                    f"{a.dtype}"
                 )
-        arrays[key] = a
-    surface = raw["surface"]
-    if surface is not None:
-        if surface.dtype.kind == "S":
-            surface = np.char.decode(surface, "ascii", errors="replace")
-        if surface.dtype.kind != "U" or surface.shape != (n,):
+            a = np.char.strip(a).astype(str)
+        else:
+            a = _numeric(a, src, key)
+        if a.ndim == 1 + len(tail):
+            a = a[:, None]  # one finger
+        if a.ndim != 2 + len(tail) or a.shape[0] != n or a.shape[2:] != tail:
+            one = ", ".join(map(str, (n, *tail))) + ("," if not tail else "")
+            axis = ", ".join(map(str, (n, "n_fingers", *tail)))
             raise EctskinError(
-                f"{src}: field 'surface' must hold a face name per frame (text, shape ({n},)), "
-                f"got dtype {surface.dtype}, shape {surface.shape}"
+                f"{src}: field {key!r} must have shape ({one}) (one per frame) or ({axis}) "
+                f"(one per frame and finger), got {raw[key].shape}"
             )
-        surface = np.char.strip(surface).astype(str)
-    return ground_truth(src, n, _row, lambda key: f"field {key!r}", surface=surface, **arrays)
+        arrays[key] = a
+        fingers[key] = a.shape[1]
+    if len(set(fingers.values())) > 1:
+        found = ", ".join(f"{k!r} {v}" for k, v in fingers.items())
+        raise EctskinError(
+            f"{src}: the contact fields disagree on the number of fingers ({found}); give every "
+            "one for the same fingers"
+        )
+    several = max(fingers.values(), default=1) > 1
+
+    def name(key: str, k: int) -> str:
+        return f"field {key!r} (finger {k})" if several else f"field {key!r}"
+
+    return ground_truth(src, n, _row, name, **arrays)
 
 
 def _load(path: Path, src: str) -> dict[str, np.ndarray | None]:
@@ -188,15 +210,6 @@ def _labels_and_markers(
             markers, src, "marker coordinate", lambda k: f"field {marker_field!r} row {k[0]}"
         )
     return labels, markers
-
-
-def _frame_rate(fr: np.ndarray | None, src: str) -> float | None:
-    """Field ``frame_rate_hz``: one number (:func:`~ectskin.io.frame_rate.stated_rate`)."""
-    if fr is None:
-        return None
-    if fr.size != 1:
-        raise EctskinError(f"{src}: field 'frame_rate_hz' must be one number, got shape {fr.shape}")
-    return stated_rate(_numeric(fr, src, "frame_rate_hz"), f"{src}: frame_rate_hz")
 
 
 def _numeric(a: np.ndarray, src: str, name: str) -> np.ndarray:

@@ -1,11 +1,11 @@
 """HDF5 recordings: one file per experiment holding the layout and every trial.
 
-The schema (``format = "ectskin.recording"``, ``format_version = 3``; version 1 files, which
-predate the finger ground truth, and version 2 files, which predate the second finger, are still
-read) is documented in
-``docs/recording-format.md``. In short, all frames of all trials are stored back to back in one set
-of resizable datasets under ``/frames`` and a trial index under ``/trials`` says where each trial
-starts; ``/committed`` records how many frames, trials and events are part of the recording::
+The schema (``format = "ectskin.recording"``, ``format_version = 4``; files of versions 1 to 3
+are still read, see below) is documented in ``docs/recording-format.md``. In short, all frames of
+all trials are stored back to back in one set of resizable datasets under ``/frames`` and a trial
+index under ``/trials`` says where each trial starts; ``/committed`` records how many frames,
+trials and events are part of the recording. The fingers are an axis (K: as wide as the trial
+with the most fingers; ``/trials/n_fingers`` says how many columns of it each trial uses)::
 
     /                attrs format, format_version, complete, frame_rate_hz, created_utc,
                            ectskin_version, writer, meta_json
@@ -15,15 +15,18 @@ starts; ``/committed`` records how many frames, trials and events are part of th
     /frames/timestamps   (n_frames,) float64, s
     /frames/labels       (n_frames,) int16
     /frames/markers      (n_frames, n_markers, 3) float64, mm   [if any trial has markers]
-    /frames/force        (n_frames,) float64, N                 [if any trial has force]
-    /frames/contact      (n_frames,) bool                       [if any trial has it; v2]
-    /frames/finger_uv_mm (n_frames, 2) float64, mm              [if any trial has it; v2]
-    /frames/finger_height_mm  (n_frames,) float64, mm           [if any trial has it; v2]
-    /frames/contact2, force2 (n_frames,), finger2_uv_mm (n_frames, 2)  [a second finger; v3]
-    /trials/{name, start, region, inflation_ml, has_markers, has_force, meta_json,
-             has_contact, has_finger_uv_mm, has_finger_height_mm, finger_surface [v2],
-             has_contact2, has_finger2_uv_mm, has_force2, finger2_surface [v3]}  (n_trials,)
-    /events/{t_s, trial, text}                                                     (n_events,)
+    /frames/force        (n_frames, K) float64, N               [if any trial has force]
+    /frames/contact      (n_frames, K) bool                     [if any trial has it]
+    /frames/finger_uv_mm (n_frames, K, 2) float64, mm           [if any trial has it]
+    /frames/finger_height_mm  (n_frames, K) float64, mm         [if any trial has it]
+    /trials/{name, start, region, inflation_ml, has_markers, has_force, has_contact,
+             has_finger_uv_mm, has_finger_height_mm, n_fingers, meta_json}   (n_trials,)
+    /trials/{finger_surface, finger_radius_mm, finger_modulus_mpa}       (n_trials, K)
+    /events/{t_s, trial, text}                                           (n_events,)
+
+Older files: version 1 has no finger ground truth; versions 1 to 3 store one finger without the
+axis, and version 3 a second one in suffixed datasets (``contact2``, ``finger2_uv_mm``,
+``force2``, ``/trials/finger2_surface``), which the reader puts on the axis as finger 1.
 
 Why one set of datasets rather than a group per trial: the live :class:`RecordingWriter` uses
 HDF5 SWMR (single writer, multiple readers), whose on-disk file stays consistent while it is

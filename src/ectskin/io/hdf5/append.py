@@ -14,9 +14,6 @@ writing to the disk again and removed, and one :class:`~ectskin.EctskinError` sa
 carry on with a file whose write failed: closing it normally writes its caches again, and a
 second failure inside the library's close leaves its handles half released, which crashes the
 process when they are released later (a segfault with h5py 3.16 / HDF5 2.0).
-
-Size: one class, the SWMR writer: creation, appends, flushes and the full-disk guard all act on
-its one open file and its frame buffers; the argument checks live in ``frame_args.py``.
 """
 
 from __future__ import annotations
@@ -37,24 +34,26 @@ from typing import Any, Self
 import h5py
 import numpy as np
 
-from ectskin._check import EctskinError, check_option, check_type
+from ectskin._check import EctskinError, check_type
 from ectskin._files import os_error_text, remove_stale_temps, temp_path
 from ectskin.io.hdf5.frame_args import check_frames
 from ectskin.io.hdf5.schema import (
     EVENT_FIELDS,
     EVENTS_KEY,
+    FINGER_COLUMNS,
+    FINGER_FRAMES,
     OPTIONAL_FRAMES,
     TRIAL_FIELDS,
     create_frames,
     create_tables,
+    finger_row,
     to_json,
     write_events,
     write_root,
 )
 from ectskin.io.hdf5.write import file_image, fsync_path
-from ectskin.io.recording import check_name
+from ectskin.io.recording import FINGER_TRIAL_FIELDS, check_fingers, check_inflation, check_name
 from ectskin.layout import SensorLayout
-from ectskin.layout.layout import SURFACES
 
 logger = logging.getLogger(__name__)
 
@@ -133,10 +132,11 @@ class RecordingWriter:
     caller whose frames may stop arriving should call :meth:`flush` itself. Such a file opens with
     ``read_recording(path, allow_partial=True)`` (also while the writer still runs).
 
-    Within a trial, timestamps (s) must increase; labels default to 0; markers (mm), force (N)
-    and the finger ground truth (contact, finger_uv_mm, finger_height_mm; see
+    Within a trial, timestamps (s) must increase; labels default to 0; markers (mm) and the
+    fingers (force in N, contact, finger_uv_mm, finger_height_mm on the fingers axis; see
     :class:`~ectskin.io.recording.Trial`) are optional, but a trial gives each of them with every
-    append or never. Thread-safe.
+    append or never, for the same fingers. The fingers axis of the file widens when a trial
+    brings more fingers than the trials before it. Thread-safe.
     """
 
     def __init__(
@@ -188,6 +188,7 @@ class RecordingWriter:
         self._events: list[tuple[float, int, str]] = []
         self._n_events_written = 0
         self._has_markers_ds = layout.n_markers > 0
+        self._width = 1  # the file's fingers axis (widened by a trial with more fingers)
         self._create(meta_json, overwrite, chunk_frames)
         self._closed = False
         self._last_flush = self._clock()
@@ -277,34 +278,39 @@ class RecordingWriter:
         *,
         inflation: Sequence[float] = (),
         region: int = 0,
-        finger_surface: str | None = None,
-        finger2_surface: str | None = None,
+        finger_surface: str | Sequence[str | None] | None = None,
+        finger_radius_mm: Any = None,
+        finger_modulus_mpa: Any = None,
         meta: dict[str, Any] | None = None,
     ) -> None:
         """Start a new trial; the frames appended from now on belong to it.
 
-        ``inflation``: chamber volumes p in ml; ``region``: touched region (0 = none);
-        ``finger_surface``: the face the finger is on or over ("front", "back", ...; None =
-        unknown), the surface of the trial's ``finger_uv_mm``; ``finger2_surface``: the face a
-        second finger presses (None = no second finger; then no append gives ``contact2``,
-        ``finger2_uv_mm`` or ``force2``, else every append does).
+        ``inflation``: chamber volumes p in ml; ``region``: touched region (0 = none). Per
+        finger of the trial (each optional; given, they fix its number of fingers, which
+        the appends must then give): ``finger_surface`` the face each finger is on or over
+        ("front", "back", ...; None = not given; one name for one finger), the surface of its
+        ``finger_uv_mm``; ``finger_radius_mm`` and ``finger_modulus_mpa`` (NaN = unknown).
+        Without them the trial's first append decides its number of fingers.
         """
         with self._lock:
             self._check_open()
             infl = self._check_trial(name, inflation, region)
-            faces = {"finger_surface": finger_surface, "finger2_surface": finger2_surface}
-            for what, face in faces.items():
-                if face is not None:
-                    check_option(what, face, SURFACES, f"trial {name!r}")
+            given = {
+                "finger_surface": finger_surface,
+                "finger_radius_mm": finger_radius_mm,
+                "finger_modulus_mpa": finger_modulus_mpa,
+            }
+            given = {k: v for k, v in given.items() if v is not None}
+            fingers = check_fingers(f"{self.path}: trial {name!r}", 0, **given)
             row = {
                 "name": name,
                 "start": self.n_frames,
                 "region": int(region),
                 "inflation_ml": infl,
                 **{f"has_{k}": None for k in OPTIONAL_FRAMES},  # decided by the first append
-                "finger_surface": finger_surface or "",
-                "finger2_surface": finger2_surface or "",
+                **{k: fingers[k] for k in ("n_fingers", *FINGER_COLUMNS)},
                 "meta_json": to_json(f"trial {name!r}: meta", meta),
+                "_given": given,  # what the appends must agree with
             }
             self._names.append(name)
             self._trial_rows.append(row)
@@ -321,12 +327,7 @@ class RecordingWriter:
         check_name(f"{self.path}: trial name", name)
         if name in self._names:
             raise EctskinError(f"{self.path}: trial {name!r} already exists in this recording")
-        try:
-            infl = np.asarray([float(v) for v in inflation], dtype=np.float64)
-        except (TypeError, ValueError):
-            raise EctskinError(
-                f"trial {name!r}: inflation must be a sequence of numbers (ml), got {inflation!r}"
-            ) from None
+        infl = np.asarray(check_inflation(f"trial {name!r}", inflation), dtype=np.float64)
         if isinstance(region, bool) or not isinstance(region, (int, np.integer)):
             raise EctskinError(f"trial {name!r}: region must be an integer, got {region!r}")
         if not 0 <= int(region) <= self.layout.n_regions:
@@ -348,9 +349,6 @@ class RecordingWriter:
         contact: Any = None,
         finger_uv_mm: Any = None,
         finger_height_mm: Any = None,
-        contact2: Any = None,
-        finger2_uv_mm: Any = None,
-        force2: Any = None,
     ) -> None:
         """Append frames to the current trial.
 
@@ -358,17 +356,17 @@ class RecordingWriter:
         timestamps: (n,) or a scalar, s, finite and increasing within the trial.
         labels: (n,) or a scalar class 0..n_regions, default 0.
         markers: (n, n_markers, 3) or (n_markers, 3), mm, NaN = occluded.
-        force: (n,) or a scalar, N.
-        contact: (n,) or a scalar bool, the finger is on the skin.
-        finger_uv_mm: (n, 2) or (2,), mm, the skin point under the fingertip; NaN = no finger.
-        finger_height_mm: (n,) or a scalar, mm above the skin (0 in contact); NaN = no finger.
-        contact2, finger2_uv_mm, force2: a second finger's, as the first's (NaN point where it
-        is not on the skin); all three with every append of a trial started with a
-        ``finger2_surface``, else none.
+        The fingers, on the fingers axis (n, n_fingers, ...), or one finger without it:
+        force: (n, K), (n,) or a scalar, N.
+        contact: (n, K), (n,) or a scalar bool, the finger is on the skin.
+        finger_uv_mm: (n, K, 2), (n, 2) or (2,) (one frame), mm, the skin point under the
+        fingertip; NaN = the finger away.
+        finger_height_mm: (n, K), (n,) or a scalar, mm above the skin (0 in contact); NaN = the
+        finger away.
 
         The first append of a trial decides which of markers, force, contact, finger_uv_mm and
-        finger_height_mm the trial carries; an append of 0 frames only declares that (for a trial
-        that may stay empty).
+        finger_height_mm the trial carries, and for how many fingers (unless ``start_trial`` was
+        given them); an append of 0 frames only declares that (for a trial that may stay empty).
         """
         with self._lock:
             self._check_open()
@@ -381,9 +379,6 @@ class RecordingWriter:
                 "contact": contact,
                 "finger_uv_mm": finger_uv_mm,
                 "finger_height_mm": finger_height_mm,
-                "contact2": contact2,
-                "finger2_uv_mm": finger2_uv_mm,
-                "force2": force2,
             }
             frames = check_frames(
                 self.layout,
@@ -393,9 +388,9 @@ class RecordingWriter:
                 timestamps,
                 labels,
                 given,
-                self._cur["finger2_surface"] or None,
+                self._cur["_given"],
             )
-            self._check_flags(src, {k: frames[k] is not None for k in OPTIONAL_FRAMES})
+            self._check_flags(src, {k: frames[k] is not None for k in OPTIONAL_FRAMES}, frames)
             n = frames["capacitance"].shape[0]
             if n == 0:
                 return
@@ -408,8 +403,9 @@ class RecordingWriter:
             self._n_buf += n
             self._maybe_flush()
 
-    def _check_flags(self, src: str, has: dict[str, bool]) -> None:
-        """Each optional dataset given with every append of a trial or never; the first decides."""
+    def _check_flags(self, src: str, has: dict[str, bool], frames: dict[str, Any]) -> None:
+        """Each optional dataset given with every append of a trial or never, for the same
+        fingers; the first append decides (and the trial's fingers, unless start_trial did)."""
         flags = {f"has_{k}": v for k, v in has.items()}
         for key, given in flags.items():
             what = key[4:]
@@ -421,8 +417,15 @@ class RecordingWriter:
                 )
         if flags["has_markers"] and not self._has_markers_ds:
             raise EctskinError(f"{src}: layout {self.layout.name!r} has no markers")
-        if self._cur["has_markers"] is None:  # the trial's first append decides
+        first = self._cur["has_markers"] is None
+        if not first and frames["n_fingers"] != self._cur["n_fingers"]:
+            raise EctskinError(
+                f"{src}: {frames['n_fingers']} finger(s) here, but the trial's earlier frames "
+                f"had {self._cur['n_fingers']}; a trial keeps its fingers"
+            )
+        if first:  # the trial's first append decides
             self._cur.update(flags)
+            self._cur.update({k: frames[k] for k in ("n_fingers", *FINGER_COLUMNS)})
             if not any(r is self._cur for r in self._trial_rows):
                 self._trial_rows.append(self._cur)  # already written: rewrite its flags
 
@@ -532,6 +535,7 @@ class RecordingWriter:
 
     def _write_buffers(self) -> None:
         t0 = time.perf_counter()
+        self._widen([row["n_fingers"] for row in self._trial_rows])
         self._write_trial_rows()  # new trials, and flag updates of the current one
         write_events(self._eds, self._events, self._n_events_written)
         self._n_events_written += len(self._events)
@@ -553,17 +557,34 @@ class RecordingWriter:
             1e3 * (time.perf_counter() - t0),
         )
 
+    def _widen(self, n_fingers: list[int]) -> None:
+        """Widen the fingers axis of the file (frames and trial columns) to ``max(n_fingers)``."""
+        need = max(n_fingers, default=0)
+        if need <= self._width:
+            return
+        for key in FINGER_FRAMES:
+            if key in self._fds:
+                ds = self._fds[key]
+                ds.resize((ds.shape[0], need, *ds.shape[2:]))
+        for key in FINGER_COLUMNS:
+            self._tds[key].resize((self._tds[key].shape[0], need))
+        self._width = need
+
     def _write_trial_rows(self) -> None:
         for row in self._trial_rows:
             k = self._names.index(row["name"])
             if k >= self._n_trials_written:
                 for ds in self._tds.values():
-                    ds.resize((k + 1,))
+                    ds.resize((k + 1, *ds.shape[1:]))
                 self._n_trials_written = k + 1
             for key in TRIAL_FIELDS:
                 value = row[key]
                 if key.startswith("has_"):
                     value = bool(value)
+                elif key == "finger_surface":
+                    value = finger_row([s or "" for s in value], self._width, "")
+                elif key in FINGER_TRIAL_FIELDS:  # (None: unknown for every finger)
+                    value = finger_row([] if value is None else list(value), self._width, np.nan)
                 self._tds[key][k] = value
         self._trial_rows = []
 
@@ -577,7 +598,11 @@ class RecordingWriter:
             self._fds[key][s:e] = np.concatenate(self._buf[key])
         for key in OPTIONAL_FRAMES:
             for off, arr in self._buf.get(key, []):
-                self._fds[key][s + off : s + off + arr.shape[0]] = arr
+                rows = slice(s + off, s + off + arr.shape[0])
+                if key not in FINGER_FRAMES:
+                    self._fds[key][rows] = arr
+                elif arr.shape[1]:  # the trial's columns of the fingers axis
+                    self._fds[key][rows, : arr.shape[1]] = arr
         self._n_frames_written = e
         self._buf = {}
         self._n_buf = 0

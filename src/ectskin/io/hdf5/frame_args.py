@@ -1,7 +1,7 @@
 """Checks of the frames handed to :meth:`RecordingWriter.append
 <ectskin.io.hdf5.append.RecordingWriter.append>`: shapes, units, one frame or many, broadcast
-scalars, labels within the layout, increasing timestamps and the finger ground truth (with the
-policy of :func:`ectskin.io.recording.check_ground_truth`).
+scalars, labels within the layout, increasing timestamps and the fingers (with the policy of
+:func:`ectskin.io.recording.check_fingers`).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError, check_array
-from ectskin.io.recording import check_ground_truth, check_second_finger
+from ectskin.io.recording import FINGER_FRAME_FIELDS, check_fingers
 from ectskin.layout import SensorLayout
 
 
@@ -48,14 +48,18 @@ def check_frames(
     timestamps: Any,
     labels: Any,
     optional: dict[str, Any],
-    finger2_surface: str | None = None,
-) -> dict[str, np.ndarray | None]:
+    trial_fingers: dict[str, Any],
+) -> dict[str, Any]:
     """The arguments of ``RecordingWriter.append`` as checked arrays by ``/frames`` dataset.
 
     ``optional`` maps each of :data:`~ectskin.io.hdf5.schema.OPTIONAL_FRAMES` to its argument
-    (None = not given, returned as None). ``last_t``: the trial's last timestamp so far, s
-    (-inf before its first frame). ``finger2_surface``: the trial's second finger's face (None:
-    no second finger), checked with the second finger's arrays. Errors name ``src``.
+    (None = not given, returned as None); the finger fields come back on the fingers axis
+    (n, n_fingers, ...), with ``n_fingers``. A scalar ``force``, ``contact`` or
+    ``finger_height_mm`` is one finger in every frame, a ``finger_uv_mm`` of shape (2,) one
+    finger in one frame. ``trial_fingers``: the trial's ``finger_surface``,
+    ``finger_radius_mm`` and ``finger_modulus_mpa`` as given to ``start_trial`` (None = not
+    given), which the arrays must agree with. ``last_t``: the trial's last timestamp so far, s
+    (-inf before its first frame). Errors name ``src``.
     """
     L = layout
     cap = _frames_arg("capacitance", capacitance, (L.n_pairs,), None, src)
@@ -72,32 +76,20 @@ def check_frames(
                 f"{src}: labels[{k}] is {lab[k]}, expected an integer 0..{L.n_regions}"
             )
         lab = lab.astype(np.int16)
-    out = {"capacitance": cap, "timestamps": ts, "labels": lab}
-    tails = {
-        "markers": (L.n_markers, 3),
-        "force": (),
-        "finger_uv_mm": (2,),
-        "finger_height_mm": (),
-        "finger2_uv_mm": (2,),
-        "force2": (),
-    }
-    for key, tail in tails.items():  # (n, *tail), one frame, or a scalar for all (tail ())
+    out: dict[str, Any] = {"capacitance": cap, "timestamps": ts, "labels": lab}
+    markers = optional["markers"]
+    out["markers"] = (
+        None if markers is None else _frames_arg("markers", markers, (L.n_markers, 3), n, src)
+    )
+    fingers = {}
+    for key in FINGER_FRAME_FIELDS:
         value = optional[key]
-        out[key] = (
-            None if value is None else _frames_arg(key, value, tail, n, src, broadcast=not tail)
-        )
-    contact = optional["contact"]
-    if contact is not None and np.ndim(contact) == 0:
-        contact = np.full(n, contact)
-    out["contact"], out["finger_uv_mm"], out["finger_height_mm"] = check_ground_truth(
-        src, n, contact, out["finger_uv_mm"], out["finger_height_mm"]
-    )
-    contact2 = optional["contact2"]
-    if contact2 is not None and np.ndim(contact2) == 0:
-        contact2 = np.full(n, contact2)
-    out["contact2"], out["finger2_uv_mm"], out["force2"] = check_second_finger(
-        src, n, contact2, out["finger2_uv_mm"], out["force2"], finger2_surface
-    )
+        if value is not None and np.ndim(value) == 0:  # one finger, every frame
+            value = np.full(n, value)
+        elif key == "finger_uv_mm" and value is not None and np.shape(value) == (2,):
+            value = np.asarray(value)[None]  # one finger, one frame
+        fingers[key] = value
+    out.update(check_fingers(src, n, **fingers, **trial_fingers))
     prev = np.concatenate([[last_t], ts])
     if n and np.any(np.diff(prev) <= 0):
         k = int(np.argmax(np.diff(prev) <= 0))

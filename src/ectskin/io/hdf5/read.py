@@ -106,11 +106,13 @@ def read_recording(
 
     ``trials``: names of the trials to load (in that order); default all, in file order.
     Arrays are returned exactly as written (float64 capacitance in pF, timestamps in s, int16
-    labels, markers in mm, force in N, the finger ground truth). Events, if any, are in
-    ``meta["events"]`` as a list of ``{"t_s": float, "trial": str | None, "text": str}``.
-    Files of format version 1 predate the finger ground truth: their trials have ``contact``,
-    ``finger_uv_mm``, ``finger_height_mm`` and ``finger_surface`` None. The recording's
-    ``source`` is ``path`` and its ``format_version`` the file's.
+    labels, markers in mm, and on the fingers axis force in N and the finger ground truth).
+    Events, if any, are in ``meta["events"]`` as a list of
+    ``{"t_s": float, "trial": str | None, "text": str}``. Files of format version 1 predate the
+    finger ground truth: their trials have ``contact``, ``finger_uv_mm`` and ``finger_height_mm``
+    None. Files of versions 1 to 3 give one finger per trial, a version-3 trial's second finger
+    as finger 1 (``docs/recording-format.md``, "Versioning"). The recording's ``source`` is
+    ``path`` and its ``format_version`` the file's.
     """
 
     def run(r: FileReader) -> Recording:
@@ -165,13 +167,16 @@ def list_trials(path: str | os.PathLike, *, allow_partial: bool = False) -> list
 
     Keys: ``name``, ``n_frames``, ``region``, ``inflation`` (tuple, ml), ``start_frame`` (row in
     ``/frames``), ``has_markers``, ``has_force``, ``has_contact``, ``has_finger_uv_mm``,
-    ``has_finger_height_mm`` (all False in a version-1 file), ``finger_surface`` (str or None),
-    ``meta``. Incomplete files as in :func:`read_recording`.
+    ``has_finger_height_mm`` (all False in a version-1 file), ``n_fingers``, and per finger (a
+    tuple of ``n_fingers``) ``finger_surface`` (str or None), ``finger_radius_mm`` and
+    ``finger_modulus_mpa`` (NaN = unknown); ``meta``. Incomplete files as in
+    :func:`read_recording`.
     """
 
     def run(r: FileReader) -> list[dict[str, Any]]:
         head = r.header(allow_partial)
         layout = r.layout()
-        return r.index(layout, head["complete"])["trials"]
+        rows = r.index(layout, head["complete"])["trials"]
+        return [{k: v for k, v in row.items() if not k.startswith("_")} for row in rows]
 
     return guarded(path, run)

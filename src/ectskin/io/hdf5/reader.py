@@ -6,10 +6,12 @@ event tables (:meth:`~FileReader.index`), then the frames of the selected trials
 (:meth:`~FileReader.trials`). ``field`` names the part being read, so an unexpected h5py error
 can still be reported against it (:func:`ectskin.io.hdf5.read.guarded`).
 
-Files of every version up to :data:`~ectskin.io.hdf5.schema.FORMAT_VERSION` are read: a version-1
-file has no finger ground truth, so its trials come back with ``contact``, ``finger_uv_mm``,
-``finger_height_mm`` and ``finger_surface`` None; version 1 and 2 files have no second finger
-(``contact2``, ``finger2_uv_mm``, ``force2`` and ``finger2_surface`` None).
+Files of every version up to :data:`~ectskin.io.hdf5.schema.FORMAT_VERSION` are read onto the
+fingers axis of :class:`~ectskin.io.recording.Trial`: a version-1 file has no finger ground
+truth, so its trials come back without ``contact``, ``finger_uv_mm`` and ``finger_height_mm``;
+in files of versions 1 to 3 the finger datasets hold one finger (finger 0), and a version-3
+trial's second finger (``contact2``, ``finger2_uv_mm``, ``force2``, ``finger2_surface``) becomes
+finger 1 (:func:`v3_second_finger`).
 """
 
 from __future__ import annotations
@@ -27,12 +29,15 @@ import numpy as np
 from ectskin._check import EctskinError
 from ectskin.io.hdf5.schema import (
     EVENT_FIELDS,
+    FINGER_COLUMNS,
+    FINGER_FRAMES,
     FORMAT,
     FORMAT_VERSION,
     OPTIONAL_FRAMES,
     TRIAL_FIELDS_OF_VERSION,
+    V3_SECOND_FINGER,
 )
-from ectskin.io.recording import Trial
+from ectskin.io.recording import FINGER_FRAME_FIELDS, FINGER_TRIAL_FIELDS, Trial
 from ectskin.layout import SensorLayout
 from ectskin.layout.layout import SURFACES
 
@@ -176,9 +181,9 @@ class FileReader:
                 "region": int(cols["region"][k]),
                 "inflation": cols["inflation"][k],
                 **{f"has_{d}": bool(cols[f"has_{d}"][k]) for d in OPTIONAL_FRAMES},
-                "finger_surface": cols["finger_surface"][k],
-                "finger2_surface": cols["finger2_surface"][k],
+                **{c: cols[c][k] for c in ("n_fingers", *FINGER_COLUMNS)},
                 "meta": cols["meta"][k],
+                "_v3_second": bool(cols["_v3_second"][k]),  # (read by _trial, not listed)
             }
             for k in range(n_trials)
         ]
@@ -209,6 +214,15 @@ class FileReader:
         for k in ("finger_surface", "finger2_surface"):
             if k in tds:
                 self._check_strings(tds[k])
+        if self.version >= 4:
+            self._check_kind(tds["n_fingers"], "iu", "an integer")
+            for k in FINGER_TRIAL_FIELDS:
+                self._check_kind(tds[k], "f", "a float")
+            for k in FINGER_COLUMNS:
+                if tds[k].ndim != 2:
+                    raise self.fail(
+                        f"/trials/{k} has shape {tds[k].shape}, expected (n_trials, n_fingers)"
+                    )
         if h5py.check_vlen_dtype(tds["inflation_ml"].dtype) is None:
             raise self.fail(
                 f"/trials/inflation_ml has dtype {tds['inflation_ml'].dtype}, expected variable-"
@@ -219,30 +233,35 @@ class FileReader:
     def _frame_datasets(
         self, layout: SensorLayout, n_frames: int, complete: bool
     ) -> tuple[dict, int]:
+        second = V3_SECOND_FINGER if self.version == 3 else ()
         fds = {}
-        for k in ("capacitance", "timestamps", "labels", *OPTIONAL_FRAMES):
-            if k in OPTIONAL_FRAMES and f"frames/{k}" not in self.f:
+        for k in ("capacitance", "timestamps", "labels", *OPTIONAL_FRAMES, *second):
+            if (k in OPTIONAL_FRAMES or k in second) and f"frames/{k}" not in self.f:
                 continue
             fds[k] = self.node(f"/frames/{k}")
-        tails = {
-            "capacitance": ((layout.n_pairs,), f"(n_frames, {layout.n_pairs})", "f"),
-            "timestamps": ((), "(n_frames,)", "f"),
-            "labels": ((), "(n_frames,)", "iu"),
-            "markers": ((layout.n_markers, 3), f"(n_frames, {layout.n_markers}, 3)", "f"),
-            "force": ((), "(n_frames,)", "f"),
-            "contact": ((), "(n_frames,)", "biu"),
-            "finger_uv_mm": ((2,), "(n_frames, 2)", "f"),
-            "finger_height_mm": ((), "(n_frames,)", "f"),
-            "contact2": ((), "(n_frames,)", "biu"),
-            "finger2_uv_mm": ((2,), "(n_frames, 2)", "f"),
-            "force2": ((), "(n_frames,)", "f"),
+        tails: dict[str, tuple[tuple[int | None, ...], str]] = {
+            "capacitance": ((layout.n_pairs,), "f"),
+            "timestamps": ((), "f"),
+            "labels": ((), "iu"),
+            "markers": ((layout.n_markers, 3), "f"),
+            "contact2": ((), "biu"),  # version 3
+            "finger2_uv_mm": ((2,), "f"),
+            "force2": ((), "f"),
         }
+        axis = (None,) if self.version >= 4 else ()  # the fingers axis (version 4)
+        for k, tail in FINGER_FRAME_FIELDS.items():
+            tails[k] = ((*axis, *tail), "biu" if k == "contact" else "f")
         kind_names = {"f": "a float", "iu": "an integer", "biu": "a boolean"}
         for k, ds in fds.items():
-            tail, want, kinds = tails[k]
-            if ds.ndim != 1 + len(tail) or tuple(ds.shape[1:]) != tail:
+            tail, kinds = tails[k]
+            if ds.ndim != 1 + len(tail) or any(
+                t is not None and t != d for t, d in zip(tail, ds.shape[1:])
+            ):
+                dims = ("n_fingers" if t is None else str(t) for t in tail)
+                want = ", ".join(("n_frames", *dims)) + "," * (not tail)
                 raise self.fail(
-                    f"/frames/{k} has shape {ds.shape}, expected {want} for layout {layout.name!r}"
+                    f"/frames/{k} has shape {ds.shape}, expected ({want}) for layout "
+                    f"{layout.name!r}"
                 )
             self._check_kind(ds, kinds, kind_names[kinds])
         return fds, self._check_rows(fds, "frames", n_frames, complete)
@@ -255,18 +274,24 @@ class FileReader:
             "start": np.asarray(tds["start"][:n_trials], dtype=np.int64),
             "region": np.asarray(tds["region"][:n_trials], dtype=np.int64),
             "inflation": [tuple(float(v) for v in row) for row in tds["inflation_ml"][:n_trials]],
-            **{  # a version-1 (2) file has no (second finger's) ground-truth columns: all False
+            **{  # a version-1 file has no ground-truth columns, version 3 its second finger's
                 f"has_{k}": (
                     np.asarray(tds[f"has_{k}"][:n_trials]).astype(bool)
                     if f"has_{k}" in tds
                     else np.zeros(len(names), dtype=bool)
                 )
-                for k in OPTIONAL_FRAMES
+                for k in (*OPTIONAL_FRAMES, *V3_SECOND_FINGER)
             },
-            "finger_surface": self._finger_surfaces(tds, names),
-            "finger2_surface": self._finger_surfaces(tds, names, "finger2_surface"),
             "meta": [],
         }
+        for k, values in enumerate(cols["inflation"]):
+            bad = [v for v in values if not (math.isfinite(v) and v >= 0)]
+            if bad:
+                raise self.fail(
+                    f"/trials/inflation_ml[{k}] (trial {names[k]!r}) holds {bad[0]} in "
+                    f"{list(values)}, expected finite chamber volumes >= 0 ml"
+                )
+        self._finger_columns(tds, names, cols)
         for k, text in enumerate(tds["meta_json"].asstr()[:n_trials]):
             try:
                 m = json.loads(text)
@@ -286,22 +311,71 @@ class FileReader:
             seen.add(name)
         return cols
 
-    def _finger_surfaces(
-        self, tds: dict, names: list[str], column: str = "finger_surface"
-    ) -> list[str | None]:
-        """``/trials/<column>`` as surface names ('' → None); None for a file without it."""
-        if column not in tds:
-            return [None] * len(names)
+    def _finger_columns(self, tds: dict, names: list[str], cols: dict[str, Any]) -> None:
+        """``n_fingers`` and the per-finger columns of each trial, as tuples of its fingers.
+
+        Version 4 stores them on the fingers axis. Before, a trial has one finger where it gives
+        any finger dataset or a ``finger_surface``, and in version 3 a second one where it gives
+        ``contact2`` (``_v3_second``)."""
+        n = len(names)
+        if self.version >= 4:
+            count = np.asarray(tds["n_fingers"][:n], dtype=np.int64)
+            width = min(tds[c].shape[1] for c in FINGER_COLUMNS)
+            bad = (count < 0) | (count > width)
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise self.fail(
+                    f"/trials/n_fingers[{k}] (trial {names[k]!r}) is {count[k]}, expected "
+                    f"0..{width} (the fingers axis of /trials/{', '.join(FINGER_COLUMNS)})"
+                )
+            faces = tds["finger_surface"].asstr()[:n] if width else [()] * n
+            cols["n_fingers"] = [int(c) for c in count]
+            cols["finger_surface"] = [
+                self._faces("finger_surface", k, names[k], faces[k][: count[k]]) for k in range(n)
+            ]
+            for c in FINGER_TRIAL_FIELDS:
+                values = np.asarray(tds[c][:n], dtype=np.float64) if width else np.zeros((n, 0))
+                cols[c] = [tuple(float(v) for v in values[k, : count[k]]) for k in range(n)]
+            cols["_v3_second"] = np.zeros(n, dtype=bool)
+            return
+        first = self._old_faces(tds, names, "finger_surface")
+        gives = np.zeros(n, dtype=bool)
+        for d in FINGER_FRAMES:
+            gives |= cols[f"has_{d}"]
+        second = np.zeros(n, dtype=bool)
+        faces = [() if f is None and not g else (f,) for f, g in zip(first, gives)]
+        if self.version == 3:
+            second = v3_second_finger_flags(self, names, cols)
+            faces2 = self._old_faces(tds, names, "finger2_surface")
+            faces = [(*f, faces2[k]) if second[k] else f for k, f in enumerate(faces)]
+        cols["n_fingers"] = [len(f) for f in faces]
+        cols["finger_surface"] = faces
+        for c in FINGER_TRIAL_FIELDS:
+            cols[c] = [(math.nan,) * len(f) for f in faces]
+        cols["_v3_second"] = second
+
+    def _faces(self, column: str, k: int, name: str, row: Any) -> tuple[str | None, ...]:
+        """Surface names of one trial ('' → None), each '' or one of SURFACES."""
         out = []
-        for k, s in enumerate(tds[column].asstr()[: len(names)]):
+        for s in row:
             s = str(s)
             if s and s not in SURFACES:
                 raise self.fail(
-                    f"/trials/{column}[{k}] (trial {names[k]!r}) is {s!r}, expected '' "
+                    f"/trials/{column}[{k}] (trial {name!r}) is {s!r}, expected '' "
                     f"(none) or one of {', '.join(SURFACES)}"
                 )
             out.append(s or None)
-        return out
+        return tuple(out)
+
+    def _old_faces(self, tds: dict, names: list[str], column: str) -> list[str | None]:
+        """``/trials/<column>`` of a file before version 4 (one face per trial; '' → None);
+        None for a file without it."""
+        if column not in tds:
+            return [None] * len(names)
+        return [
+            self._faces(column, k, names[k], (s,))[0]
+            for k, s in enumerate(tds[column].asstr()[: len(names)])
+        ]
 
     def _check_starts(
         self, names: list[str], starts: np.ndarray, n_frames: int, complete: bool
@@ -333,13 +407,22 @@ class FileReader:
     def _check_optional_frames(
         self, layout: SensorLayout, fds: dict, names: list[str], cols: dict
     ) -> None:
-        for d in OPTIONAL_FRAMES:
+        second = V3_SECOND_FINGER if self.version == 3 else ()
+        for d in (*OPTIONAL_FRAMES, *second):
             has = cols[f"has_{d}"]
             if d == "markers" and not layout.n_markers:  # markers (n, 0, 3) are not stored
                 continue
             if has.any() and d not in fds:
                 k = int(np.argmax(has))
                 raise self.fail(f"missing dataset /frames/{d}: trial {names[k]!r} has has_{d}=True")
+            if self.version >= 4 and d in FINGER_FRAMES and has.any():
+                count = np.where(has, cols["n_fingers"], 0)
+                if count.max() > fds[d].shape[1]:
+                    k = int(np.argmax(count > fds[d].shape[1]))
+                    raise self.fail(
+                        f"/frames/{d} holds {fds[d].shape[1]} finger(s), but trial {names[k]!r} "
+                        f"has n_fingers={count[k]}"
+                    )
 
     def _events(self, n_events: int, complete: bool, names: list[str]) -> list[dict[str, Any]]:
         eds = {k: self.node(f"/events/{k}") for k in EVENT_FIELDS}
@@ -400,23 +483,31 @@ class FileReader:
         s, e = row["start_frame"], row["start_frame"] + row["n_frames"]
         src = f"/frames rows {s}:{e}"
         self.field = src
-        cap = self._read(fds["capacitance"], s, e, np.float64)
-        ts = self._read(fds["timestamps"], s, e, np.float64)
-        lab = self._read(fds["labels"], s, e, np.int16)
+        rows = slice(s, e)
+        cap = self._read(fds["capacitance"], rows, np.float64)
+        ts = self._read(fds["timestamps"], rows, np.float64)
+        lab = self._read(fds["labels"], rows, np.int16)
         mk = None
         if row["has_markers"]:  # a layout without markers stores none: (n, 0, 3)
             mk = (
-                self._read(fds["markers"], s, e, np.float64)
+                self._read(fds["markers"], rows, np.float64)
                 if layout.n_markers
                 else np.zeros((e - s, 0, 3))
             )
-        optional = {  # force and the finger ground truth
-            k: self._read(fds[k], s, e, np.bool_ if k in ("contact", "contact2") else np.float64)
+        # the fingers: version 4 on the axis (the trial's columns of it), before one finger
+        cut = (rows, slice(0, row["n_fingers"])) if self.version >= 4 else rows
+        fingers = {
+            k: self._read(fds[k], cut, np.bool_ if k == "contact" else np.float64)
             if row[f"has_{k}"]
             else None
-            for k in OPTIONAL_FRAMES
-            if k != "markers"
+            for k in FINGER_FRAMES
         }
+        if row["_v3_second"]:
+            second = {
+                k: self._read(fds[k], rows, np.bool_ if k == "contact2" else np.float64)
+                for k in V3_SECOND_FINGER
+            }
+            fingers = v3_second_finger(fingers, second)
         try:
             return Trial(
                 name=row["name"],
@@ -426,21 +517,75 @@ class FileReader:
                 inflation=row["inflation"],
                 region=row["region"],
                 markers=mk,
-                **optional,
+                **fingers,
                 finger_surface=row["finger_surface"],
-                finger2_surface=row["finger2_surface"],
+                **{  # all NaN (unknown): not given
+                    k: None if all(math.isnan(v) for v in row[k]) else row[k]
+                    for k in FINGER_TRIAL_FIELDS
+                },
                 meta=row["meta"],
             )
         except EctskinError as exc:
             raise self.fail(f"{src}: {exc}") from None
 
-    def _read(self, ds: h5py.Dataset, s: int, e: int, dtype: Any) -> np.ndarray:
-        a = ds[s:e]
+    def _read(self, ds: h5py.Dataset, sel: slice | tuple[slice, ...], dtype: Any) -> np.ndarray:
+        a = ds[sel]
         if a.dtype != dtype:
             b = a.astype(dtype)
             if not np.array_equal(a, b, equal_nan=a.dtype.kind == "f"):
+                rows = sel[0] if isinstance(sel, tuple) else sel
                 raise self.fail(
-                    f"{ds.name}[{s}:{e}] does not fit {np.dtype(dtype).name} losslessly"
+                    f"{ds.name}[{rows.start}:{rows.stop}] does not fit {np.dtype(dtype).name} "
+                    "losslessly"
                 )
             a = b
         return a
+
+
+# ------------------------------------------------------------------ version 3's second finger
+def v3_second_finger_flags(r: FileReader, names: list[str], cols: dict) -> np.ndarray:
+    """Which trials of a version-3 file have a second finger: all of ``has_contact2``,
+    ``has_finger2_uv_mm``, ``has_force2`` (they must agree), with the first finger's ``contact``,
+    ``finger_uv_mm`` and ``finger_height_mm`` (finger 0 of the fingers axis)."""
+    flags = np.stack([cols[f"has_{k}"] for k in V3_SECOND_FINGER], axis=1)
+    mixed = flags.any(axis=1) & ~flags.all(axis=1)
+    if mixed.any():
+        k = int(np.argmax(mixed))
+        found = ", ".join(f"has_{d}={bool(v)}" for d, v in zip(V3_SECOND_FINGER, flags[k]))
+        raise r.fail(
+            f"/trials: trial {names[k]!r} has {found}; a second finger (version 3) gives all "
+            "three or none"
+        )
+    second = flags.all(axis=1)
+    first = np.ones_like(second)
+    for d in ("contact", "finger_uv_mm", "finger_height_mm"):
+        first &= cols[f"has_{d}"]
+    orphan = second & ~first
+    if orphan.any():
+        k = int(np.argmax(orphan))
+        raise r.fail(
+            f"/trials: trial {names[k]!r} has a second finger but not the first finger's "
+            "contact, finger_uv_mm and finger_height_mm, which its place on the fingers axis "
+            "(finger 1 beside finger 0) needs"
+        )
+    return second
+
+
+def v3_second_finger(
+    first: dict[str, np.ndarray | None], second: dict[str, np.ndarray]
+) -> dict[str, np.ndarray]:
+    """The fingers axis of a version-3 trial with a second finger: the first finger's arrays
+    (F,) as finger 0, ``contact2``, ``finger2_uv_mm``, ``force2`` as finger 1. Version 3 stores
+    no height for the second finger, which existed only on the skin: 0 in contact, NaN (away)
+    elsewhere. A first finger without ``force`` has an unknown force (NaN)."""
+    n = second["contact2"].shape[0]
+    on2 = second["contact2"]
+    force0 = first["force"] if first["force"] is not None else np.full(n, np.nan)
+    return {
+        "contact": np.stack([first["contact"], on2], axis=1),
+        "finger_uv_mm": np.stack([first["finger_uv_mm"], second["finger2_uv_mm"]], axis=1),
+        "finger_height_mm": np.stack(
+            [first["finger_height_mm"], np.where(on2, 0.0, np.nan)], axis=1
+        ),
+        "force": np.stack([force0, second["force2"]], axis=1),
+    }

@@ -5,12 +5,19 @@ Both writers (:mod:`~ectskin.io.hdf5.write` and :mod:`~ectskin.io.hdf5.append`) 
 the reader (:mod:`~ectskin.io.hdf5.reader`) has one code path. The schema itself is documented in
 ``docs/recording-format.md``.
 
+The fingers: the per-frame finger datasets (:data:`FINGER_FRAMES`) and the per-finger columns of
+``/trials`` (:data:`FINGER_COLUMNS`) have a fingers axis after their row axis, as wide as the
+trial with the most fingers (at least 1); ``/trials/n_fingers`` says how many of its columns each
+trial uses. The axis is resizable, so the live writer widens it when a trial brings more fingers.
+
 JSON policy of the metadata (``meta_json``): unlike the result files of :mod:`ectskin._files`
 (strict JSON, non-finite floats written as ``null``), a recording keeps NaN and ±inf in
 ``Recording.meta`` and ``Trial.meta`` as JSON's ``NaN``/``Infinity`` extension, which Python's
 ``json`` reads back as the same floats: the format promises that metadata round-trips exactly
 (``docs/recording-format.md``, "Metadata as JSON"). NumPy scalars and arrays are stored as
-numbers and lists; anything else that is not a JSON value is refused.
+numbers and lists; anything else that is not a JSON value is refused. That is why this module does
+not use :func:`ectskin._files.to_jsonable`, which writes NaN as ``null`` and turns dataclasses,
+paths and objects with ``to_dict`` into JSON values: here they are refused, naming the key.
 """
 
 from __future__ import annotations
@@ -25,16 +32,17 @@ import numpy as np
 
 from ectskin import __version__
 from ectskin._check import EctskinError, check_type
-from ectskin.io.recording import GROUND_TRUTH_FIELDS, SECOND_FINGER_FIELDS, check_name
+from ectskin.io.recording import FINGER_FRAME_FIELDS, FINGER_TRIAL_FIELDS, check_name
 from ectskin.layout import SensorLayout
 
 FORMAT = "ectskin.recording"
 #: The version written. 1: the first; 2: adds the finger ground truth (``/frames/contact``,
 #: ``finger_uv_mm``, ``finger_height_mm`` and their ``/trials`` columns); 3: adds a second finger
-#: (``/frames/contact2``, ``finger2_uv_mm``, ``force2``, their ``has_`` columns and
-#: ``/trials/finger2_surface``): a version-2 reader would skip them and read a two-finger trial as
-#: a one-finger one, so it must refuse the file instead. Versions 1 to 3 read.
-FORMAT_VERSION = 3
+#: in suffixed datasets (:data:`V3_SECOND_FINGER`); 4: the fingers become an axis of the finger
+#: datasets (``force`` included) and of ``/trials/finger_surface``, with ``/trials/n_fingers``
+#: and the per-finger ``finger_radius_mm`` and ``finger_modulus_mpa``: an older reader would
+#: misread the re-shaped datasets, so it must refuse the file. Versions 1 to 4 read.
+FORMAT_VERSION = 4
 
 #: Key of ``Recording.meta`` that holds the events table (list of ``{"t_s", "trial", "text"}``).
 EVENTS_KEY = "events"
@@ -42,36 +50,30 @@ EVENTS_KEY = "events"
 STR = h5py.string_dtype("utf-8")
 VLEN_F8 = h5py.vlen_dtype(np.float64)
 #: Optional ``/frames`` datasets (present when some trial has them), each flagged per trial by
-#: the ``/trials`` column ``has_<name>``; the finger ground truth exists from version 2 on, the
-#: second finger's from version 3 on.
-OPTIONAL_FRAMES = ("markers", "force", *GROUND_TRUTH_FIELDS, *SECOND_FINGER_FIELDS)
+#: the ``/trials`` column ``has_<name>``; the finger ground truth exists from version 2 on.
+OPTIONAL_FRAMES = ("markers", "force", "contact", "finger_uv_mm", "finger_height_mm")
+#: The ``/frames`` datasets on the fingers axis (version 4): (n_frames, n_fingers, ...).
+FINGER_FRAMES = tuple(FINGER_FRAME_FIELDS)
+#: The ``/trials`` columns on the fingers axis (version 4): (n_trials, n_fingers).
+FINGER_COLUMNS = ("finger_surface", *FINGER_TRIAL_FIELDS)
+#: Version 3's second finger: ``/frames`` datasets (n_frames,), (n_frames, 2), (n_frames,), each
+#: flagged by ``/trials/has_<name>``, and its face in ``/trials/finger2_surface`` (read only).
+V3_SECOND_FINGER = ("contact2", "finger2_uv_mm", "force2")
+_BASE_COLUMNS = ("name", "start", "region", "inflation_ml", "has_markers", "has_force")
+_TRUTH_FLAGS = ("has_contact", "has_finger_uv_mm", "has_finger_height_mm")
 #: ``/trials`` columns of each format version.
 TRIAL_FIELDS_OF_VERSION = {
-    1: ("name", "start", "region", "inflation_ml", "has_markers", "has_force", "meta_json"),
-    2: (
-        "name",
-        "start",
-        "region",
-        "inflation_ml",
-        "has_markers",
-        "has_force",
-        *(f"has_{k}" for k in GROUND_TRUTH_FIELDS),
-        "finger_surface",
-        "meta_json",
-    ),
+    1: (*_BASE_COLUMNS, "meta_json"),
+    2: (*_BASE_COLUMNS, *_TRUTH_FLAGS, "finger_surface", "meta_json"),
     3: (
-        "name",
-        "start",
-        "region",
-        "inflation_ml",
-        "has_markers",
-        "has_force",
-        *(f"has_{k}" for k in GROUND_TRUTH_FIELDS),
+        *_BASE_COLUMNS,
+        *_TRUTH_FLAGS,
         "finger_surface",
-        *(f"has_{k}" for k in SECOND_FINGER_FIELDS),
+        *(f"has_{k}" for k in V3_SECOND_FINGER),
         "finger2_surface",
         "meta_json",
     ),
+    4: (*_BASE_COLUMNS, *_TRUTH_FLAGS, "n_fingers", *FINGER_COLUMNS, "meta_json"),
 }
 TRIAL_FIELDS = TRIAL_FIELDS_OF_VERSION[FORMAT_VERSION]
 EVENT_FIELDS = ("t_s", "trial", "text")
@@ -164,19 +166,17 @@ def frame_specs(
     layout: SensorLayout, optional: Collection[str]
 ) -> dict[str, tuple[tuple[int, ...], Any, Any, str]]:
     """``/frames`` datasets, the required ones and those of ``optional`` (of
-    :data:`OPTIONAL_FRAMES`): name → (shape of one frame, dtype, fill value, unit)."""
+    :data:`OPTIONAL_FRAMES`): name → (shape of one frame after the fingers axis for
+    :data:`FINGER_FRAMES`, else of one frame; dtype, fill value, unit)."""
     spec = {
         "capacitance": ((layout.n_pairs,), np.float64, np.nan, "pF"),
         "timestamps": ((), np.float64, np.nan, "s"),
         "labels": ((), np.int16, -1, "class (0 = no touch, 1..n_regions)"),
         "markers": ((layout.n_markers, 3), np.float64, np.nan, "mm"),
-        "force": ((), np.float64, np.nan, "N"),
+        "force": ((), np.float64, np.nan, "N (per finger)"),
         "contact": ((), np.bool_, False, "bool (True = the finger is on the skin)"),
         "finger_uv_mm": ((2,), np.float64, np.nan, "mm (surface coordinates u, v)"),
         "finger_height_mm": ((), np.float64, np.nan, "mm (above the skin)"),
-        "contact2": ((), np.bool_, False, "bool (True = a second finger is on the skin)"),
-        "finger2_uv_mm": ((2,), np.float64, np.nan, "mm (surface coordinates u, v)"),
-        "force2": ((), np.float64, np.nan, "N"),
     }
     unknown = set(optional) - set(OPTIONAL_FRAMES)
     if unknown:
@@ -191,9 +191,11 @@ def create_frames(
     chunk_frames: int,
     optional: Collection[str],
     compress: bool,
+    n_fingers: int = 1,
 ) -> dict[str, h5py.Dataset]:
     """Create the resizable ``/frames`` datasets with ``n_frames`` rows (filled by the caller):
-    the required ones and those named in ``optional`` (of :data:`OPTIONAL_FRAMES`).
+    the required ones and those named in ``optional`` (of :data:`OPTIONAL_FRAMES`); those of
+    :data:`FINGER_FRAMES` ``n_fingers`` wide (at least 1) on a resizable fingers axis.
 
     ``compress``: gzip + shuffle. The live writer does not compress: a compressed chunk that is
     flushed half full is rewritten elsewhere when it grows and its old space is not reused, so the
@@ -201,13 +203,18 @@ def create_frames(
     """
     g = f.create_group("frames")
     rows = max(1, int(chunk_frames))
+    width = max(1, int(n_fingers))
     out = {}
     for name, (tail, dtype, fill, unit) in frame_specs(layout, optional).items():
+        axis: tuple[int | None, ...] = ()
+        chunk: tuple[int, ...] = ()
+        if name in FINGER_FRAMES:
+            axis, chunk = (None,), (width,)
         ds = g.create_dataset(
             name,
-            shape=(n_frames, *tail),
-            maxshape=(None, *tail),
-            chunks=(rows, *tail),
+            shape=(n_frames, *((width,) if axis else ()), *tail),
+            maxshape=(None, *axis, *tail),
+            chunks=(rows, *chunk, *tail),
             dtype=dtype,
             fillvalue=fill,
             **(COMPRESSION if compress else {}),
@@ -220,16 +227,31 @@ def create_frames(
     return out
 
 
-def _create_table(f: h5py.File, group: str, spec: dict[str, Any], n_rows: int) -> dict:
+def _create_table(
+    f: h5py.File, group: str, spec: dict[str, Any], n_rows: int, n_fingers: int = 1
+) -> dict:
+    """Resizable columns of ``n_rows``; those of :data:`FINGER_COLUMNS` ``n_fingers`` wide."""
     g = f.create_group(group)
-    return {
-        k: g.create_dataset(k, shape=(n_rows,), maxshape=(None,), chunks=(TABLE_CHUNK,), dtype=dt)
-        for k, dt in spec.items()
-    }
+    width = max(1, int(n_fingers))
+    out = {}
+    for k, dt in spec.items():
+        axis = k in FINGER_COLUMNS
+        out[k] = g.create_dataset(
+            k,
+            shape=(n_rows, width) if axis else (n_rows,),
+            maxshape=(None, None) if axis else (None,),
+            chunks=(TABLE_CHUNK, width) if axis else (TABLE_CHUNK,),
+            dtype=dt,
+            fillvalue=np.nan if dt is np.float64 and axis else None,
+        )
+    return out
 
 
-def create_tables(f: h5py.File, n_trials: int, n_events: int) -> tuple[dict, dict]:
-    """Create the ``/trials`` and ``/events`` tables; returns their datasets by field."""
+def create_tables(
+    f: h5py.File, n_trials: int, n_events: int, n_fingers: int = 1
+) -> tuple[dict, dict]:
+    """Create the ``/trials`` and ``/events`` tables; returns their datasets by field. The
+    per-finger columns (:data:`FINGER_COLUMNS`) are ``n_fingers`` wide (at least 1)."""
     tds = _create_table(
         f,
         "trials",
@@ -239,20 +261,30 @@ def create_tables(f: h5py.File, n_trials: int, n_events: int) -> tuple[dict, dic
             "region": np.int32,
             "inflation_ml": VLEN_F8,
             **{f"has_{k}": np.bool_ for k in OPTIONAL_FRAMES},
+            "n_fingers": np.int32,
             "finger_surface": STR,
-            "finger2_surface": STR,
+            "finger_radius_mm": np.float64,
+            "finger_modulus_mpa": np.float64,
             "meta_json": STR,
         },
         n_trials,
+        n_fingers,
     )
     tds["start"].attrs["unit"] = "frame index into /frames"
-    tds["finger_surface"].attrs["unit"] = "surface name, '' = none"
-    tds["finger2_surface"].attrs["unit"] = "surface name of the second finger, '' = none"
+    tds["n_fingers"].attrs["unit"] = "fingers of the trial: its columns of the fingers axis"
+    tds["finger_surface"].attrs["unit"] = "surface name per finger, '' = none"
+    tds["finger_radius_mm"].attrs["unit"] = "mm (fingertip radius per finger, NaN = unknown)"
+    tds["finger_modulus_mpa"].attrs["unit"] = "MPa (pulp modulus per finger, NaN = unknown)"
     tds["inflation_ml"].attrs["unit"] = "ml"
     eds = _create_table(f, "events", {"t_s": np.float64, "trial": np.int32, "text": STR}, n_events)
     eds["t_s"].attrs["unit"] = "s"
     eds["trial"].attrs["unit"] = "row in /trials, -1 = before the first trial"
     return tds, eds
+
+
+def finger_row(values: Sequence[Any], width: int, fill: Any) -> list[Any]:
+    """One trial's per-finger values padded with ``fill`` to the file's fingers axis."""
+    return [*values, *([fill] * (width - len(values)))]
 
 
 # -------------------------------------------------------------------------------- events

@@ -29,10 +29,12 @@ from ectskin._check import EctskinError, check_type
 from ectskin._files import atomic_write
 from ectskin.io.hdf5.schema import (
     EVENTS_KEY,
+    FINGER_FRAMES,
     OPTIONAL_FRAMES,
     check_events,
     create_frames,
     create_tables,
+    finger_row,
     to_json,
     write_events,
     write_root,
@@ -137,16 +139,20 @@ def _write_file(f: h5py.File, rec: Recording, meta_json: str, events: list) -> N
     optional = [k for k in OPTIONAL_FRAMES if any(getattr(t, k) is not None for t in rec.trials)]
     if layout.n_markers == 0 and "markers" in optional:  # (n, 0, 3): nothing to store
         optional.remove("markers")
-    fds = create_frames(f, layout, n_frames, chunk, optional, compress=True)
-    tds, eds = create_tables(f, rec.n_trials, 0)
-    _write_trial_table(tds, rec.trials, starts)
+    width = max([1, *(t.n_fingers for t in rec.trials)])  # the fingers axis
+    fds = create_frames(f, layout, n_frames, chunk, optional, compress=True, n_fingers=width)
+    tds, eds = create_tables(f, rec.n_trials, 0, n_fingers=width)
+    _write_trial_table(tds, rec.trials, starts, width)
     _write_frames(fds, layout, rec.trials, starts)
     write_events(eds, events)
     f["committed"][:] = [n_frames, rec.n_trials, len(events)]
     f.attrs["complete"] = np.bool_(True)
 
 
-def _write_trial_table(tds: dict, trials: Sequence[Trial], starts: np.ndarray) -> None:
+def _write_trial_table(
+    tds: dict, trials: Sequence[Trial], starts: np.ndarray, width: int
+) -> None:
+    """The ``/trials`` rows; the per-finger columns padded to the fingers axis (``width``)."""
     if not trials:
         return
     tds["name"][:] = np.array([t.name for t in trials], dtype=object)
@@ -156,9 +162,18 @@ def _write_trial_table(tds: dict, trials: Sequence[Trial], starts: np.ndarray) -
         tds["inflation_ml"][k] = np.asarray(t.inflation, dtype=np.float64)
     for k in OPTIONAL_FRAMES:
         tds[f"has_{k}"][:] = np.array([getattr(t, k) is not None for t in trials])
-    tds["finger_surface"][:] = np.array([t.finger_surface or "" for t in trials], dtype=object)
-    tds["finger2_surface"][:] = np.array([t.finger2_surface or "" for t in trials], dtype=object)
+    tds["n_fingers"][:] = np.array([t.n_fingers for t in trials], dtype=np.int32)
+    tds["finger_surface"][:] = np.array(
+        [finger_row([s or "" for s in t.finger_surface], width, "") for t in trials], dtype=object
+    )
+    for k in ("finger_radius_mm", "finger_modulus_mpa"):
+        tds[k][:] = np.array([finger_row(_values(getattr(t, k)), width, np.nan) for t in trials])
     tds["meta_json"][:] = np.array([_trial_meta_json(t) for t in trials], dtype=object)
+
+
+def _values(per_finger: np.ndarray | None) -> list[float]:
+    """A trial's per-finger numbers (None: unknown for every finger, stored as NaN)."""
+    return [] if per_finger is None else [float(v) for v in per_finger]
 
 
 def _write_frames(
@@ -174,5 +189,9 @@ def _write_frames(
         fds["labels"][s:e] = t.labels
         for k in OPTIONAL_FRAMES:
             value = getattr(t, k)
-            if value is not None and k in fds:  # no /frames/markers for a layout without markers
+            if value is None or k not in fds or not value.size:  # (no markers in the layout,
+                continue  # or a trial of 0 fingers)
+            if k in FINGER_FRAMES:  # the trial's columns of the fingers axis
+                fds[k][s:e, : t.n_fingers] = value
+            else:
                 fds[k][s:e] = value

@@ -11,14 +11,15 @@ copies of its frame 0) and what the fingers do at the window's last frame:
 ``force``       (n, S) float      each finger's normal force in N (0 without a finger)
 ``hover``       (n,) float        1 when no finger is on the skin and one is above it at a
                                   height of at most ``hover_max_mm``, else 0
-``height``      (n,) float        the (first) finger's height above the skin in mm, NaN
+``height``      (n,) float        the lowest finger's height above the skin in mm, NaN
                                   without a finger (0 in contact)
 ==============  ================  ==========================================================
 
-S = :data:`MAX_FINGERS` slots. With one finger on the skin it is slot 0; with two, both slots
-hold one each in the order of the recording (the loss and the metrics match them, see
-:mod:`ectskin.learn.tasks.contact`). The second finger comes from the trial fields
-``contact2``, ``finger2_uv_mm``, ``force2`` and ``finger2_surface`` when a recording has them.
+S = :data:`MAX_FINGERS` slots, filled from the trial's fingers axis
+(:class:`~ectskin.io.recording.Trial`): the fingers on the skin in a frame take the slots in the
+order of the axis (with one finger on the skin it is slot 0; the loss and the metrics match two
+in either order, see :mod:`ectskin.learn.tasks.contact`). A frame with more than S fingers on
+the skin is an error naming the trial.
 
 Labels come from the twin (``ectskin simulate``) or from an import with contact labels
 (``docs/import-format.md``); a recording without them is one clear error
@@ -30,7 +31,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -38,6 +39,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from ectskin._check import EctskinError
 from ectskin.io import Recording, require_ground_truth
 from ectskin.io.calibration import calibrate, touch_reference
+from ectskin.io.recording import Trial
 from ectskin.learn.channels import channel_names, measured_channels
 from ectskin.learn.data.base import SampleData
 
@@ -105,27 +107,21 @@ class ContactData(SampleData):
         return int(self.x.shape[2])
 
 
-def _fingers(t: Any, faces: list[str]) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, int]]:
-    """Per finger of trial ``t``: (on (n,), uv (n, 2), force (n,), face index)."""
+def _fingers(t: Trial, faces: list[str]) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, int]]:
+    """Per finger of trial ``t`` that touches the skin: (on (n,), uv (n, 2), force (n,), face
+    index), in the order of the fingers axis."""
     out = []
-    for on, uv, force, surface in (
-        (t.contact, t.finger_uv_mm, t.force, t.finger_surface),
-        (
-            getattr(t, "contact2", None),
-            getattr(t, "finger2_uv_mm", None),
-            getattr(t, "force2", None),
-            getattr(t, "finger2_surface", None),
-        ),
-    ):
-        if on is None or not np.any(on):
+    for k in range(t.n_fingers):
+        f = t.finger(k)
+        if f.contact is None or f.uv_mm is None or not f.contact.any():
             continue
-        if surface not in faces:
+        if f.surface not in faces:
             raise EctskinError(
-                f"trial {t.name!r}: the finger touches surface {surface!r}, which holds no skin "
+                f"trial {t.name!r}: finger {k} touches surface {f.surface!r}, which holds no skin "
                 f"of the layout (skins on {', '.join(faces)})"
             )
-        f = np.zeros(len(on)) if force is None else np.where(on, np.asarray(force, float), 0.0)
-        out.append((np.asarray(on, bool), np.asarray(uv, float), f, faces.index(surface)))
+        force = np.zeros(t.n_frames) if f.force is None else np.where(f.contact, f.force, 0.0)
+        out.append((f.contact, f.uv_mm, force, faces.index(f.surface)))
     return out
 
 
@@ -199,7 +195,10 @@ def contact_dataset(
             raise EctskinError(
                 f"trial {t.name!r}: frame {i} is in contact but its finger position is not finite"
             )
-        height = np.asarray(t.finger_height_mm, float)
+        # the lowest finger's height (NaN where every finger is away)
+        height = np.full(n, np.nan)
+        if t.finger_height_mm is not None and t.n_fingers:
+            height = np.fmin.reduce(t.finger_height_mm, axis=1)
         hover = (count == 0) & np.isfinite(height) & (height <= hover_max_mm)
         cols["x"].append(np.ascontiguousarray(x))
         cols["count"].append(count)
