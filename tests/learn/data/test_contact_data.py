@@ -77,3 +77,29 @@ def test_more_fingers_on_the_skin_than_slots_is_an_error(layout, contact_recordi
     with pytest.raises(EctskinError, match=r"trial 'touch_0': finger 1 touches surface 'left', "
                        r"which holds no skin"):
         contact_dataset(_with_fingers(rec, "touch_0", **off_skin), window=1)
+
+
+def test_a_wrong_face_is_charged_around_the_recordings_body(layout, contact_recording):
+    """The distance from a predicted face to the true one is measured on the body the recording
+    was made on (``meta["manipulator"]``), not the default body: a point predicted on the back,
+    straight behind a front touch, is the body's thickness t away."""
+    from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
+    from ectskin.learn.tasks.contact import contact_report
+
+    base = contact_recording(layout, n_frames=N, n_trials=1)
+    for meta, thickness, source in (({}, 20.0, "default"),
+                                    ({"manipulator": {"thickness_mm": 30.0}}, 30.0, "recording")):
+        rec = Recording(base.layout, base.trials, base.frame_rate_hz, meta)
+        d = contact_dataset(rec, window=1)
+        assert d.body_mm == (50.0, thickness) and d.body_source == source
+        one = d.count == 1
+        test = d.take(np.flatnonzero(one))
+        pred = np.zeros((test.n_samples, len(PRED_COLUMNS) + 2 * len(SLOT_COLUMNS)), np.float32)
+        pred[:, 0] = 1  # one finger
+        front, back = test.faces.index("front"), test.faces.index("back")
+        assert np.all(test.face[:, 0] == front)
+        test.uv[:, 0] = [20.0, 60.0]
+        slot = len(PRED_COLUMNS)
+        pred[:, slot : slot + 3] = [back, 20.0, 60.0]
+        report = contact_report(test, pred, with_maps=False)
+        assert report["loc_mm_mean"] == pytest.approx(thickness)

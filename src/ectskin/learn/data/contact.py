@@ -42,6 +42,7 @@ from ectskin.io.calibration import calibrate, touch_reference
 from ectskin.io.recording import Trial
 from ectskin.learn.channels import channel_names, measured_channels
 from ectskin.learn.data.base import SampleData
+from ectskin.twin.mechanics import recording_manipulator
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +65,9 @@ class ContactData(SampleData):
     ``face_extent`` {face: ((u_lo, u_hi), (v_lo, v_hi))} mm, the skins' extents (scales the
     position targets); ``group_region`` (n_groups,) each trial's region (stratification);
     ``region_centre`` (n_regions + 1, 3) each region's (face index, u, v) (row 0: no region).
+    ``body_mm`` (width, thickness) of the body the recording was made on (its
+    ``meta["manipulator"]``, else the default body; ``body_source`` says which): the distance
+    from one face to the other over the skin goes around it.
     """
 
     SAMPLE_FIELDS: ClassVar[tuple[str, ...]] = (
@@ -95,6 +99,8 @@ class ContactData(SampleData):
     faces: list[str]
     states: list[tuple[float, ...]]
     face_extent: dict[str, tuple[tuple[float, float], tuple[float, float]]]
+    body_mm: tuple[float, float]
+    body_source: str
     group_region: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     region_centre: np.ndarray = field(default_factory=lambda: np.zeros((1, 3)))
 
@@ -212,6 +218,12 @@ def contact_dataset(
         cols["state"].append(np.full(n, states.index(t.inflation), np.int64))
     if not cols["x"]:
         raise EctskinError("contact_dataset: the selected trials hold no frames")
+    body, body_source = recording_manipulator(rec.meta)
+    if body_source == "default":
+        log.info(
+            "the recording names no manipulator: distances between faces go around the default "
+            "body (%g x %g mm)", body.width_mm, body.thickness_mm
+        )
     arrays = {k: np.concatenate(v, axis=0) for k, v in cols.items()}
     return ContactData(
         **arrays,
@@ -222,4 +234,6 @@ def contact_dataset(
         face_extent=extent,
         group_region=np.array([t.region for t in chosen], dtype=np.int64),
         region_centre=region_centre,
+        body_mm=(float(body.width_mm), float(body.thickness_mm)),
+        body_source=body_source,
     )

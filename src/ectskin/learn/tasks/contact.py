@@ -59,7 +59,6 @@ from ectskin.learn.normalizer import Normalizer
 from ectskin.learn.predict.base import forward_batches
 from ectskin.learn.profiles import TrainSettings
 from ectskin.learn.tasks.base import Criterion, EvalCase, Task, as_tensor, build_config
-from ectskin.twin.mechanics import ManipulatorConfig
 from ectskin.viz.contact import plot_error_maps, plot_force_scatter, plot_hover_curve
 
 #: windows per batch when predicting a test split
@@ -68,13 +67,6 @@ PREDICT_BATCH = 4096
 POSITION_WEIGHT = 10.0
 #: smooth-L1 transition of the position and force terms (normalised units)
 SMOOTH_BETA = 0.02
-
-
-def body_size() -> tuple[float, float]:
-    """(width, thickness) of the body in mm: the twin's default manipulator (the faces' rest
-    geometry of :func:`~ectskin.learn.metrics.contact.rest_points`)."""
-    c = ManipulatorConfig()
-    return float(c.width_mm), float(c.thickness_mm)
 
 
 def slot_columns(pred: np.ndarray, slot: int) -> dict[str, np.ndarray]:
@@ -310,7 +302,7 @@ class ContactTask(Task[ContactData]):
                     "trial(s), at least 2 are needed"
                 )
         criterion = ContactCriterion(
-            model, body_size()[1], state_means, count_weights(train_data.count).to(device)
+            model, train_data.body_mm[1], state_means, count_weights(train_data.count).to(device)
         )
         criterion.notes.extend(notes)
         return criterion
@@ -374,7 +366,7 @@ def contact_report(
 ) -> dict[str, Any]:
     """Every contact metric of predictions ``pred`` (columns of :meth:`ContactTask.predict`) on
     ``test``; the map arrays (for the figure) only ``with_maps``."""
-    width, thickness = body_size()
+    width, thickness = test.body_mm
     faces = list(test.faces)
     n = test.n_samples
     p_face = np.stack([slot_columns(pred, s)["face"] for s in range(MAX_FINGERS)], 1).astype(int)
