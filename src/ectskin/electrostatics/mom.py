@@ -32,6 +32,7 @@ Accuracy and speed
 from __future__ import annotations
 
 import logging
+from typing import Literal, overload
 
 import numpy as np
 import scipy.linalg
@@ -214,6 +215,26 @@ def potential_matrix(
 
 
 # ====================================================================== capacitance
+@overload
+def maxwell_capacitance(
+    panels: Panels,
+    eps_r: float = ...,
+    *,
+    near_factor: float = ...,
+    return_charges: Literal[False] = ...,
+) -> np.ndarray: ...
+
+
+@overload
+def maxwell_capacitance(
+    panels: Panels,
+    eps_r: float = ...,
+    *,
+    near_factor: float = ...,
+    return_charges: Literal[True],
+) -> tuple[np.ndarray, np.ndarray]: ...
+
+
 def maxwell_capacitance(
     panels: Panels,
     eps_r: float = 1.0,

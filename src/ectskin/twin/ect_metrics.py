@@ -43,6 +43,16 @@ def _state_references(rec: Recording) -> dict[tuple, np.ndarray]:
     return {s: np.nanmean(np.concatenate(c), axis=0) for s, c in by_state.items()}
 
 
+def _pixel_images(
+    builder: Reconstructor, pixel_matrix: np.ndarray | None, delta_c: np.ndarray, grid: EctGrid
+) -> np.ndarray:
+    """Images summed over layers, (n_pix,) or (F, n_pix), of ``delta_c`` (n_pairs,) or (F,
+    n_pairs): through the precomputed pixel matrix of a linear method, else reconstructed."""
+    if pixel_matrix is not None:
+        return delta_c @ pixel_matrix.T
+    return collapse_layers(builder.image(delta_c), grid.pixel, grid.n_pixels)
+
+
 def ect_image_metrics(
     rec: Recording,
     trials: Sequence[str] | None = None,
@@ -110,9 +120,9 @@ def ect_image_metrics(
     grid = grid or ect_grid(rec.layout)
     w_mm, t_mm = sensor.manipulator.config.width_mm, sensor.manipulator.config.thickness_mm
     state_ref = _state_references(rec)
-    fallback = None
-    errors = {m: [] for m in methods}
-    face_ok = {m: [] for m in methods}
+    fallback: dict[str, np.ndarray] = {}  # the touch reference, read when first needed
+    errors: dict[str, list[float]] = {m: [] for m in methods}
+    face_ok: dict[str, list[bool]] = {m: [] for m in methods}
     rec_time = {m: [0.0, 0] for m in methods}
     jac_s: dict[str, float] = {}
     examples: list[dict] = []
@@ -126,7 +136,7 @@ def ect_image_metrics(
         jac_s[",".join(f"{v:g}" for v in state)] = time.perf_counter() - t0
         ref = state_ref.get(state)
         if ref is None:
-            if fallback is None:
+            if not fallback:
                 fallback = touch_reference(rec)
             log.info("no no-contact trial at %s ml: using the recording's touch reference", state)
         builders = {
@@ -154,10 +164,7 @@ def ect_image_metrics(
             true_face = t.finger_surface[0]
             for m, r in builders.items():
                 t1 = time.perf_counter()
-                if pix_mats[m] is not None:
-                    img = dc @ pix_mats[m].T
-                else:
-                    img = collapse_layers(r.image(dc), grid.pixel, grid.n_pixels)
+                img = _pixel_images(r, pix_mats[m], dc, grid)
                 rec_time[m][0] += time.perf_counter() - t1
                 rec_time[m][1] += idx.size
                 for row, k in zip(img, idx):
@@ -172,12 +179,7 @@ def ect_image_metrics(
                 and (touch.index(t) % example_every == 0)
             ):
                 k = idx[idx.size // 2]
-                r = builders[method]
-                row = (
-                    (t.capacitance[k] - c0) @ pix_mats[method].T
-                    if pix_mats[method] is not None
-                    else collapse_layers(r.image(t.capacitance[k] - c0), grid.pixel, grid.n_pixels)
-                )
+                row = _pixel_images(builders[method], pix_mats[method], t.capacitance[k] - c0, grid)
                 f, uv, _ = locate(row, grid, localisation)
                 examples.append(
                     {

@@ -261,10 +261,10 @@ def sample_skin(
     width_scale = 1.0 + variation.width_rel * rng.uniform(-1.0, 1.0, n)
     eps = eps_r * (1.0 + variation.eps_rel * rng.uniform(-1.0, 1.0))
     thick = manipulator.thickness_mm * (1.0 + variation.thickness_rel * rng.uniform(-1.0, 1.0))
-    offsets = {
-        s.name: tuple(float(v) for v in variation.bonding_offset_mm * rng.uniform(-1.0, 1.0, 2))
-        for s in nominal_layout.skins
-    }
+    offsets: dict[str, tuple[float, float]] = {}
+    for s in nominal_layout.skins:
+        du, dv = variation.bonding_offset_mm * rng.uniform(-1.0, 1.0, 2)
+        offsets[s.name] = (float(du), float(dv))
     fault = _draw_fault(nominal_layout, variation.fault, rng)
     try:
         layout = perturb_layout(nominal_layout, shift, width_scale, offsets)

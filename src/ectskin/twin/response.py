@@ -70,12 +70,11 @@ class TouchResponse:
         if on.any():
             self.f_lo, self.f_hi = float(path.force_n[on].min()), float(path.force_n[on].max())
         self.f_nodes = chebyshev_nodes(self.f_lo, self.f_hi, k)
-        self.c_nodes = self._solve(self.f_nodes) if on.any() else None
+        c_nodes = self._solve(self.f_nodes) if on.any() else None
+        self.c_nodes = c_nodes
         f_mid = np.array([0.5 * (self.f_lo + self.f_hi)])
-        if on.any():
-            centre = self.c_nodes[k // 2]
-        else:  # the finger never lands: the stencil is taken at the lowest height
-            centre = None
+        # the finger never lands: the stencil is taken at the lowest height
+        centre = None if c_nodes is None else c_nodes[k // 2]
         off = ~on
         if off.any():
             h = np.log(path.height_mm[off])
@@ -138,6 +137,9 @@ class TouchResponse:
         out = np.empty((n, self.sensor.layout.n_pairs))
         on = path.contact
         if on.any():
+            if self.c_nodes is None:
+                raise EctskinError("TouchResponse: frames in contact, but the model was built "
+                                   "from a path that never touches the skin")
             out[on] = _cheb_fit(self.f_lo, self.f_hi, self.f_nodes, self.c_nodes, path.force_n[on])
         off = ~on
         if off.any():

@@ -312,7 +312,7 @@ class SensorModel:
         nrm = self.manipulator.surface_normal(
             one.surface, uv, inflation_ml, touch, forces, handling
         )[:, 0]
-        ring = [None] * len(pts)
+        ring: list[np.ndarray | None] | np.ndarray = [None] * len(pts)
         if rest_on_skin:  # (F, m, 3): the skin under the pad
             ring = self.manipulator.deform(
                 one.surface, self._under_pad(one), inflation_ml, touch, forces, handling
@@ -429,7 +429,9 @@ class SensorModel:
             K, q = maxwell_capacitance(panels, self.eps_r, return_charges=True)
             n = self.n_electrodes
             S = dielectric_sensitivity(panels, q[:, :n], cells[0], cells[1], self.eps_r)
-            K = K[:n, :n] + EPS0_PF_PER_MM * (self.chamber_eps_r - self.eps_r) * S
+            chamber_eps_r = self.chamber_eps_r
+            assert chamber_eps_r is not None  # (_with_cavities says so)
+            K = K[:n, :n] + EPS0_PF_PER_MM * (chamber_eps_r - self.eps_r) * S
         return -K[self._pairs[:, 0], self._pairs[:, 1]]
 
     # ------------------------------------------------------------------ readout
@@ -468,7 +470,7 @@ class SensorModel:
         if self._with_cavities:
             pts, vols = self.cavity_cells(inflation_ml, touch, forces, handling)
         else:
-            pts, vols = [None] * n_f, [None] * n_f
+            pts, vols = [None] * n_f, [None] * n_f  # type: ignore[assignment]
         electrodes = self.electrode_panels(inflation_ml, touch, forces, handling)
         out = np.empty((n_f, len(self._pairs)))
         if touch is None or not with_finger:

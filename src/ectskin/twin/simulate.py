@@ -57,10 +57,11 @@ def simulate_trial(
         "force_n": np.zeros(n),
         "finger_height_mm": np.full(n, np.nan),
     }
-    surfaces = (plan.surface,)
+    surfaces: tuple[str | None, ...] = (plan.surface,)
     labels = np.zeros(n, dtype=np.int16)
     n_solves = 1
     if plan.kind == "touch":
+        assert plan.touch_uv_mm is not None  # (plan_trials gives every touch trial its points)
         reg = sensor.layout.region(plan.region)
         lo, hi = region_bounds(reg, protocol.touch_margin)
         path = finger_path(n, fps, np.asarray(plan.touch_uv_mm), lo, hi, protocol, rng)
@@ -112,7 +113,7 @@ def simulate_trial(
         "start_s": plan.start_s,
         "mom_solves": n_solves,
     }
-    if plan.second_surface is not None:
+    if plan.second_surface is not None and plan.second_uv_mm is not None:
         meta["second_finger"] = {
             "surface": plan.second_surface,
             "region": plan.second_region,
@@ -161,12 +162,12 @@ def _touch_segment(sensor, p, plan, protocol, path, hand, path2, push_dir):
         c_true = c_true + second(path, path2)
         solves = response.n_solves
         uv2 = tuple(path2.uv_mm[path2.contact].mean(axis=0))
-        touch = (touch, Touch(plan.second_surface, uv2))
+        both = (touch, Touch(plan.second_surface, uv2))
         forces = np.column_stack([path.force_n, path2.force_n])
         handling = Handling(
             np.stack([path.shear_n, path2.shear_n], axis=1), hand.push, hand.push_force_n
         )
-        return c_true, sensor.marker_positions(p, touch, forces, handling), solves
+        return c_true, sensor.marker_positions(p, both, forces, handling), solves
     return c_true, sensor.marker_positions(p, touch, path.force_n, handling), solves
 
 
