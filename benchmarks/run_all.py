@@ -33,6 +33,11 @@ BENCHMARKS = {
     "bench_live": ("bench_live.py", [], ["--frames", "500", "--paced-seconds", "1"]),
     "bench_ect": ("bench_ect.py", [], ["--states", "1", "--frames", "200"]),
     "bench_design": ("bench_design.py", [], ["--layouts", "1", "--workers", "1"]),
+    "bench_candidates": (
+        "bench_candidates.py",
+        [],
+        ["--calls", "200", "--batch", "2000", "--max-train", "2000"],
+    ),
 }
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,41 @@ def test_non_finite_numbers_become_null_and_numpy_becomes_plain():
     assert plain == {"a": 1.5, "b": [None, None, None], "c": [0, 1, 2], "d": [1, 2]}
     assert json.loads(json_text(obj)) == plain  # strict JSON: no NaN token
     assert "NaN" not in json_text({"x": np.array([np.nan])}, compact=True)
+
+
+def test_dict_keys_are_spelled_as_json_spells_them():
+    keys = {True: 1, False: 2, None: 3, 7: 4, 2.5: 5, "s": 6}
+    assert to_jsonable(keys) == json.loads(json.dumps(keys))  # the json module: the reference
+    assert to_jsonable({np.bool_(True): 1, np.int64(7): 2}) == {"true": 1, "7": 2}
+
+
+def test_to_jsonable_is_what_the_written_file_reads_back(tmp_path: Path):
+    """What a resume compares (design scores, the search's settings): settings as a file holds
+    them, whatever containers and scalars they were built from."""
+
+    @dataclass
+    class Part:
+        size: tuple[int, int]
+        scale: np.float32
+
+    obj = {
+        "regions": (2, 1),
+        "seed": np.int64(3),
+        "part": Part((1, 2), np.float32(0.25)),
+        "path": Path("runs") / "a",
+        "nan": [math.nan, np.float64(0.5)],
+        True: None,
+    }
+    expected = {
+        "regions": [2, 1],
+        "seed": 3,
+        "part": {"size": [1, 2], "scale": 0.25},
+        "path": str(Path("runs") / "a"),
+        "nan": [None, 0.5],
+        "true": None,
+    }
+    assert to_jsonable(obj) == expected
+    assert read_json(write_json_atomic(tmp_path / "s.json", obj)) == expected
 
 
 def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path: Path):

@@ -9,9 +9,12 @@ A run that was killed leaves its temporary file behind; the next write into the 
 such stale files of the same target (:func:`remove_stale_temps`: only those whose process is gone).
 
 JSON policy (:func:`to_jsonable`): NumPy scalars and arrays become numbers and lists, tuples
-become lists, paths become strings, dataclasses and objects with ``to_dict()`` become dicts, and
-a non-finite float (NaN, ±inf) becomes ``null``: strict JSON has no NaN, and every JSON file
-ectskin writes can be read by any JSON parser. Readers treat ``null`` as "not available".
+become lists, paths become strings, dataclasses and objects with ``to_dict()`` become dicts, dict
+keys become strings as JSON spells them (``True`` → ``"true"``, ``None`` → ``"null"``), and a
+non-finite float (NaN, ±inf) becomes ``null``: strict JSON has no NaN, and every JSON file
+ectskin writes can be read by any JSON parser. Readers treat ``null`` as "not available". So
+``to_jsonable(obj)`` is what a file written from ``obj`` reads back as: compare settings with a
+stored file through it.
 """
 
 from __future__ import annotations
@@ -130,7 +133,7 @@ def to_jsonable(obj: Any) -> Any:
     if is_dataclass(obj) and not isinstance(obj, type):
         return to_jsonable(asdict(obj))
     if isinstance(obj, Mapping):
-        return {str(k): to_jsonable(v) for k, v in obj.items()}
+        return {_json_key(k): to_jsonable(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
         return [to_jsonable(v) for v in obj]
     if isinstance(obj, np.ndarray):
@@ -146,6 +149,15 @@ def to_jsonable(obj: Any) -> Any:
     if hasattr(obj, "ndim") and getattr(obj, "ndim", None) == 0 and hasattr(obj, "item"):
         return to_jsonable(obj.item())  # a 0-d tensor
     return obj
+
+
+def _json_key(key: Any) -> str:
+    """A dict key as JSON writes it: ``True`` → "true", ``None`` → "null", others ``str``."""
+    if key is None:
+        return "null"
+    if isinstance(key, bool | np.bool_):
+        return "true" if key else "false"
+    return str(key)
 
 
 def json_text(obj: Any, *, indent: int | None = 1, compact: bool = False) -> str:

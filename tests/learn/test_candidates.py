@@ -1,6 +1,7 @@
 """Touch model choice (ectskin.learn.candidates, train(model=...), evaluate_run, TouchPredictor):
-selection by validation only, the files of the run, the trusted-types load of model.skops and
-the resume / overwrite rules of a run folder."""
+selection by validation only, the classical models' answers (one frame through their ONNX export,
+batches through scikit-learn: both against scikit-learn's own), the files of the run, the
+trusted-types load of model.skops and the resume / overwrite rules of a run folder."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import pytest
 import ectskin.learn.candidates as cand
 from ectskin._check import EctskinError
 from ectskin.io import read_recording, write_recording
+from ectskin.learn import classical_onnx
 from ectskin.learn.candidates import (
     CLASSICAL,
     TOUCH_MODELS,
@@ -22,6 +24,7 @@ from ectskin.learn.candidates import (
     save_classical,
     select_candidate,
 )
+from ectskin.learn.classical_onnx import OnnxClassifier
 from ectskin.learn.data import TouchData
 from ectskin.learn.evaluate import evaluate_run
 from ectskin.learn.predict import TouchPredictor
@@ -188,26 +191,94 @@ def test_a_classical_model_alone_trains_evaluates_and_predicts(tmp_path, data_fi
     assert pred.model_name == "knn" and pred.n_classes == 19
 
 
-def test_the_boosted_trees_fast_path_equals_scikit_learn():
-    x = np.random.default_rng(0).standard_normal((64, 28))
-    three = _problem("xor", 4, 100, 3)
-    three.y[:5] = 0  # three classes: one tree per class and iteration, a softmax
-    two = _problem("xor", 4, 100, 3)  # two classes: one tree per iteration, a logit
-    for data in (three, two):
-        model, _, _ = fit_classical("gbt", data, seed=1)
-        ref = model.estimator.predict_proba(x)  # scikit-learn's own path
-        fast = model.predict_proba(x)
-        assert isinstance(model._fast, cand._BoostedTrees)  # the fast path answered
-        assert np.allclose(fast[:, model.estimator.classes_], ref, atol=1e-6)
+# --------------------------------------------------------------------------- answering frames
+def _two_and_three_classes(kind: str) -> TouchData:
+    """Training frames of classes {1, 2} of 3 (class 0 absent: its column must stay 0; boosted
+    trees: one tree per iteration and a logit) or of all three (boosted trees: a tree per class
+    and iteration and a softmax)."""
+    data = _problem("xor", 4, 100, 3)
+    if kind == "three":
+        data.y[:8] = 0
+    return data
 
 
-def test_the_forest_fast_path_equals_scikit_learn():
-    tr = _problem("xor", 4, 100, 3)
-    model, _, _ = fit_classical("random_forest", tr, seed=1)
-    x = np.random.default_rng(0).standard_normal((64, 28))
-    ref = model.estimator.predict_proba(x)  # scikit-learn's own path
-    assert np.allclose(model.predict_proba(x)[:, model.estimator.classes_], ref, atol=1e-6)
-    assert np.allclose(model.predict_proba(x)[:, 0], 0)  # class 0 never seen: probability 0
+def _unseen_frames() -> np.ndarray:
+    """Frames drawn apart from the training frames, some of them far outside their range."""
+    x = np.random.default_rng(7).standard_normal((150, 28)).astype(np.float32)
+    x[::10] *= 4
+    return x
+
+
+@pytest.mark.parametrize("classes", ["two", "three"])
+@pytest.mark.parametrize("name", CLASSICAL)
+def test_one_frame_and_batches_answer_what_scikit_learn_answers(name, classes, tmp_path):
+    model, _, _ = fit_classical(name, _two_and_three_classes(classes), seed=1)
+    x = _unseen_frames()
+    seen = model.estimator.classes_
+    want = model.estimator.predict_proba(x.astype(np.float64))  # scikit-learn: the reference
+    want_class = model.estimator.predict(x.astype(np.float64))
+    top2 = np.sort(want, axis=1)[:, -2:]
+    clear = top2[:, 1] - top2[:, 0] > 1e-5  # not a tie (a forest's 10 of 20 votes each)
+    assert clear.mean() > 0.8
+    # the live engine's path: one frame at a time (ONNX Runtime where there is an export)
+    if name == "knn":
+        assert model.single_frame() is None  # k-NN answers through scikit-learn
+    else:
+        assert isinstance(model.single_frame(), OnnxClassifier)
+    for loaded in (model, load_classical(save_classical(tmp_path / "m.skops", model))):
+        one = np.concatenate([loaded.predict_proba(f[None]) for f in x])
+        assert one.dtype == np.float32 and one.shape == (len(x), 3)
+        np.testing.assert_allclose(one[:, seen], want, rtol=0, atol=1e-5)
+        assert not one[:, [c for c in range(3) if c not in seen]].any()  # unseen class: 0
+        got_class = np.array([loaded.predict(f[None])[0] for f in x])
+        assert (got_class[clear] == want_class[clear]).all()
+    assert loaded.settings == model.settings  # model.skops keeps the settings as they were
+    # batches: scikit-learn's own predict_proba
+    np.testing.assert_allclose(model.predict_proba(x)[:, seen], want, rtol=0, atol=1e-6)
+    assert model.predict(x).tolist() == want_class.tolist()
+    assert model.predict_proba(x[:0]).shape == (0, 3)
+
+
+def test_the_predictor_exports_before_the_first_frame_and_answers_frames(tmp_path, monkeypatch):
+    made = []
+
+    class Counted(OnnxClassifier):
+        def __init__(self, *args, **kwargs):
+            made.append(args[0])
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(classical_onnx, "OnnxClassifier", Counted)
+    model, _, _ = fit_classical("gbt", _two_and_three_classes("three"), seed=1)
+    pred = TouchPredictor.from_run(save_classical(tmp_path / "model.skops", model))
+    assert len(made) == 1  # the live engine's first frame does not wait for the export
+    x = _unseen_frames()[:30]
+    got = np.stack([pred.predict(f) for f in x])  # (n_pairs,) → (n_classes,)
+    want = model.estimator.predict_proba(x.astype(np.float64))
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)  # classes 0, 1, 2 all seen
+    assert len(made) == 1
+
+
+def test_one_frame_falls_back_to_scikit_learn_saying_why(monkeypatch, caplog):
+    model, _, _ = fit_classical("random_forest", _problem("xor", 4, 100, 3), seed=1)
+    x = _unseen_frames()[:20]
+    want = model.estimator.predict_proba(x.astype(np.float64))
+    monkeypatch.setattr(classical_onnx, "available", lambda: False)
+    caplog.set_level("WARNING")
+    one = np.concatenate([model.predict_proba(f[None]) for f in x])
+    assert model.single_frame() is None
+    assert "through scikit-learn" in caplog.text and "ectskin[live]" in caplog.text
+    assert caplog.text.count("through scikit-learn") == 1  # said once per model
+    np.testing.assert_allclose(one[:, model.estimator.classes_], want, rtol=0, atol=1e-6)
+
+
+def test_an_export_that_does_not_reproduce_scikit_learn_is_refused():
+    gbt, _, _ = fit_classical("gbt", _problem("xor", 4, 100, 3), seed=1)
+    other, _, _ = fit_classical("gbt", _problem("xor", 4, 100, 4), seed=2)
+    export = OnnxClassifier(gbt.estimator, 28, name="touch model 'gbt'")
+    with pytest.raises(EctskinError, match="'gbt': the ONNX export does not reproduce"):
+        export._check(other.estimator)
+    with pytest.raises(EctskinError, match=r"frames must have shape \(B, 28\), got \(1, 27\)"):
+        export(np.zeros((1, 27), np.float32))
 
 
 # --------------------------------------------------------------------------- model.skops

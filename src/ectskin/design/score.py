@@ -22,7 +22,6 @@ regions and "no touch". Errors are comparable between layouts, not with the pape
 
 from __future__ import annotations
 
-import json
 import logging
 import shutil
 import time
@@ -34,7 +33,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ectskin._check import EctskinError
-from ectskin._files import json_text, read_json, write_json_atomic, write_text_atomic
+from ectskin._files import read_json, to_jsonable, write_json_atomic, write_text_atomic
 from ectskin.electrostatics.reconstruct import normalise_sensitivity
 from ectskin.io import write_recording
 from ectskin.layout import Region, SensorLayout
@@ -165,15 +164,10 @@ def finished_score(dir_: str | Path, layout: SensorLayout, config: ScoreConfig) 
         return None
     ok = (
         isinstance(score, dict)
-        and score.get("settings") == _plain(config.settings())
-        and score.get("layout") == _plain(layout.to_dict())
+        and score.get("settings") == to_jsonable(config.settings())
+        and score.get("layout") == to_jsonable(layout.to_dict())
     )
     return score if ok else None
-
-
-def _plain(obj: Any) -> Any:
-    """``obj`` as its JSON round trip (tuples → lists, NaN → None), as a file holds it."""
-    return json.loads(json_text(obj))
 
 
 def sensor_metrics(layout: SensorLayout, readout: ReadoutConfig | None = None) -> dict[str, Any]:
@@ -295,7 +289,7 @@ def score_layout(
         "layout": layout.to_dict(),
     }
     write_json_atomic(out / SCORE_FILE, score)
-    return _plain(score)
+    return to_jsonable(score)  # as the file holds it
 
 
 def _error_maps(contact_map: dict[str, Any]) -> dict[str, Any]:

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError, check_option
-from ectskin._files import save_figure_atomic
+from ectskin._files import save_figure_atomic, to_jsonable
 from ectskin.design.cluster import open_runner
 from ectskin.design.family import (
     MAX_PAD_MM,
@@ -39,7 +39,7 @@ from ectskin.design.family import (
     build_layout,
 )
 from ectskin.design.report import _close, pareto_front, plot_front, write_report
-from ectskin.design.score import ScoreConfig, _plain, finished_score, score_layout
+from ectskin.design.score import ScoreConfig, finished_score, score_layout
 from ectskin.design.sweep import PAPER, layout_dir, write_design
 from ectskin.layout import SensorLayout, default_layout
 
@@ -215,7 +215,7 @@ def run_search(
         "sampler": sampler,
         "seed": seed,
     }
-    settings = _plain(settings)
+    settings = to_jsonable(settings)  # as the study's storage holds it
     old = study.user_attrs.get("settings")
     if old is None:
         study.set_user_attr("settings", settings)

@@ -54,6 +54,7 @@ class TouchPredictor(Predictor):
         self.source = source
         self.device = torch.device("cpu")
         self.pair_names = list(classical.pair_names)
+        classical.single_frame()  # its single-frame export: now (seconds), not on the first frame
 
     @classmethod
     def from_run(
