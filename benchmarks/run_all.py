@@ -38,6 +38,7 @@ BENCHMARKS = {
         [],
         ["--calls", "200", "--batch", "2000", "--max-train", "2000"],
     ),
+    "bench_import": ("bench_import.py", [], ["--rows", "2000", "--repeat", "1"]),
 }
 
 
