@@ -15,7 +15,9 @@ not pull in torch. Lowest first:
                             training-set statistics; ``channels``: the measured channels)
 ``learn.models``            TouchMLP, C2DT (marker coordinates), ContactNet
 ``learn.checkpoint``        self-describing model files (config + weights + normaliser)
-``learn.candidates``        the classical touch candidates (fit, score, ``model.skops``)
+``learn.candidates``        the classical touch candidates: fit, choose, ``candidates.json``
+``learn.classical``         a classical touch model (scaler + classifier), ``model.skops``
+``learn.classical_onnx``    its single-frame ONNX Runtime export, checked against scikit-learn
 ``learn.predict``           batched inference and one predictor per task for live use
 ``learn.baselines``         trivial and classical baselines per task
 ``learn.augment``           the robust touch recipe's augmentation
