@@ -17,4 +17,5 @@ COMMANDS = (
     ("import", "import_"),
     ("design", "design"),
     ("variability", "variability"),
+    ("bound", "bound"),
 )

@@ -11,6 +11,7 @@ How callers save them is one policy too: a figure file is ``<stem>.<format>`` wi
 from __future__ import annotations
 
 from ectskin._check import EctskinError, check_option
+from ectskin.viz.bound import plot_bound_maps
 from ectskin.viz.ect import plot_ect_images
 from ectskin.viz.learning import (
     plot_confusion,
@@ -48,6 +49,7 @@ __all__ = [
     "FIGURE_FORMATS",
     "check_figure_options",
     "figure_file",
+    "plot_bound_maps",
     "plot_ect_images",
     "plot_confusion",
     "plot_learning_curves",
