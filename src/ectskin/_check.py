@@ -92,3 +92,18 @@ def parse_floats(name: str, text: str | Iterable[float], n: int | None = None) -
     if n is not None and len(values) != n:
         raise EctskinError(f"{name} must hold {n} numbers, got {len(values)} ({text!r})")
     return values
+
+
+#: Seeds are integers from 0 to MAX_SEED: what numpy's generators, torch and scikit-learn all take.
+MAX_SEED = 2**32 - 1
+
+
+def check_seed(name: str, value: Any, source: str | None = None) -> int:
+    """Return ``value`` if it is an integer from 0 to :data:`MAX_SEED`, else raise a clear error."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not (
+        0 <= value <= MAX_SEED
+    ):
+        raise EctskinError(
+            f"{where(source, name)} must be an integer from 0 to {MAX_SEED}, got {value!r}"
+        )
+    return int(value)

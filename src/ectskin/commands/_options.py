@@ -6,13 +6,18 @@
   other settings). ``--force`` is kept as an alias where users already type it. Without it
   nothing recorded or trained is replaced: the command stops with a message that names the flag.
 * Every command's ``--help`` ends with examples (the module's ``EXAMPLES``).
+* Numbers are checked by argparse against their range (:func:`integer`, :func:`number`,
+  ``--seed``: :func:`add_seed`): a value outside it is a usage error naming the option and the
+  range, never a traceback from deep inside.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+from collections.abc import Callable
 
-from ectskin._check import EctskinError
+from ectskin._check import MAX_SEED, EctskinError
 from ectskin.viz import DEFAULT_DPI, FIGURE_FORMATS
 
 OVERWRITE_HELP = "replace what an earlier run wrote at the output (default: refuse)"
@@ -60,3 +65,73 @@ def add_figure_options(p: argparse.ArgumentParser) -> None:
         help=f"resolution of the figures in dots per inch (default {DEFAULT_DPI}; in pdf and "
         "svg only raster parts use it)",
     )
+
+
+def integer(low: int | None = None, high: int | None = None) -> Callable[[str], int]:
+    """An argparse ``type``: a whole number from ``low`` to ``high`` (None: unbounded)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"must be {_range('an integer', low, high)}, got {text!r}"
+            ) from None
+        if (low is not None and value < low) or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(
+                f"must be {_range('an integer', low, high)}, got {text!r}"
+            )
+        return value
+
+    parse.__name__ = "integer"
+    return parse
+
+
+def number(
+    low: float | None = None, high: float | None = None, *, above: bool = False
+) -> Callable[[str], float]:
+    """An argparse ``type``: a finite number from ``low`` to ``high`` (None: unbounded);
+    ``above``: greater than ``low``, not equal to it. NaN and inf are refused."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        ok = math.isfinite(value)
+        if ok and low is not None:
+            ok = value > low if above else value >= low
+        if ok and high is not None:
+            ok = value <= high
+        if not ok:
+            what = (
+                f"a finite number > {_num(low)}"
+                + (f" and <= {_num(high)}" if high is not None else "")
+                if above and low is not None
+                else _range("a finite number", low, high)
+            )
+            raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}")
+        return value
+
+    parse.__name__ = "number"
+    return parse
+
+
+def _range(what: str, low: float | None, high: float | None) -> str:
+    if low is not None and high is not None:
+        return f"{what} from {_num(low)} to {_num(high)}"
+    if low is not None:
+        return f"{what} >= {_num(low)}"
+    if high is not None:
+        return f"{what} <= {_num(high)}"
+    return what
+
+
+def _num(v: float) -> str:
+    return str(v) if isinstance(v, int) else f"{v:g}"
+
+
+def add_seed(p: argparse.ArgumentParser, *, help: str = "random seed (default 0)") -> None:
+    """``--seed N`` → ``args.seed``: an integer from 0 to 2**32 − 1 (numpy, torch and
+    scikit-learn all take these); anything else is a usage error naming the range."""
+    p.add_argument("--seed", type=integer(0, MAX_SEED), default=0, help=help)

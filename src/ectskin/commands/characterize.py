@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 from pathlib import Path
 
 from ectskin._check import EctskinError, parse_floats
@@ -48,8 +49,18 @@ def run(args: argparse.Namespace) -> int:
     # imported here, not at the top: the twin (electrostatics, matplotlib) takes about a second
     # to import, which `ectskin --help` and the other commands should not wait for
     from ectskin.twin.characterize import characterize
+    from ectskin.twin.protocol import MAX_FINGER_FORCE_N
 
     out = Path(resolve_out(args, "an output folder"))
+    # before any work: Fig. 3 is drawn before the touch of Fig. 4, whose force wanders up to
+    # 1.5 x --force-n and a finger presses at most MAX_FINGER_FORCE_N
+    highest = MAX_FINGER_FORCE_N / 1.5
+    if not (math.isfinite(args.force_n) and 0 < args.force_n <= highest):
+        raise EctskinError(
+            f"--force-n must be a touch force > 0 and at most {highest:.1f} N (the press wanders "
+            f"up to 1.5 x it; a finger presses at most {MAX_FINGER_FORCE_N:g} N), got "
+            f"{args.force_n}"
+        )
     layout = load_layout(args.layout) if args.layout else default_layout()
     if args.region is not None:
         layout.region(args.region)  # clear error for an unknown region

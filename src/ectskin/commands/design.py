@@ -11,6 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ectskin._check import EctskinError, parse_floats
+from ectskin.commands._options import add_seed, integer, number
 
 HELP = "score electrode layouts in the twin, or search the layout family (Optuna on Dask)"
 EXAMPLES = """\
@@ -32,7 +33,7 @@ def _pair(text: str, name: str) -> tuple[float, float]:
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--workers",
-        type=int,
+        type=integer(0),
         default=2,
         help="Dask LocalCluster worker processes, one layout each at a time "
         "(default 2; 0: in this process, one after another)",
@@ -42,14 +43,19 @@ def _common(p: argparse.ArgumentParser) -> None:
         default=None,
         help="a running Dask scheduler, tcp://HOST:PORT (default: a local cluster)",
     )
-    p.add_argument("--seed", type=int, default=0, help="protocol, split and model seed")
+    add_seed(p, help="protocol, split and model seed (default 0)")
     p.add_argument(
         "--levels", default="0,20", help="inflation levels per chamber, ml (default 0,20: 8 states)"
     )
     p.add_argument(
-        "--touch-trials", type=int, default=2, help="touch trials per inflation state (default 2)"
+        "--touch-trials",
+        type=integer(0),
+        default=2,
+        help="touch trials per inflation state (default 2)",
     )
-    p.add_argument("--duration", type=float, default=3.0, help="seconds per trial (default 3)")
+    p.add_argument(
+        "--duration", type=number(0, above=True), default=3.0, help="seconds per trial (default 3)"
+    )
     p.add_argument(
         "--epochs",
         default="15,6,3",
@@ -89,7 +95,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     _common(s)
     q = sub.add_parser("search", help="Optuna study: localisation error vs electrode count")
     q.add_argument("out", help="folder of the study (resumed when it exists)")
-    q.add_argument("--trials", type=int, default=6, help="trials to finish (default 6)")
+    q.add_argument("--trials", type=integer(1), default=6, help="trials to finish (default 6)")
     q.add_argument("--sampler", default="tpe", help="tpe (default) or nsga2")
     q.add_argument("--min-wires", type=int, default=2, help="wires per face, at least (default 2)")
     q.add_argument("--max-wires", type=int, default=8, help="wires per face, at most (default 8)")
@@ -124,8 +130,6 @@ def run(args: argparse.Namespace) -> int:
 
     if args.design_command is None:
         raise EctskinError("design: choose a subcommand, score or search (ectskin design -h)")
-    if args.workers is not None and args.workers < 0:
-        raise EctskinError(f"--workers must be >= 0, got {args.workers}")
     rules = ManufacturingRules(args.min_width, args.min_spacing, args.edge_margin)
     config = _config(args)
     if args.design_command == "score":

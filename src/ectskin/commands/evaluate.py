@@ -6,6 +6,11 @@ and the figures (Fig. 7 for touch, Fig. 9 / Fig. 10 for tracking) and prints a s
 another recording (``--data``) it writes ``RUN_DIR/metrics_<data stem>.json`` and suffixed
 figures, so the run's own evaluation is never replaced; ``-o/--out DIR`` writes into DIR.
 Results of an earlier evaluation are replaced only with ``--overwrite``.
+
+Test data: the trials the run was not trained or validated on (recognised by their readouts):
+the run's test split on its own recording, all of another day's recording (``--test-trials``
+chooses otherwise). Calibration: ``--reference REC.h5``, else the recording's own rest state,
+else the training recording's rest state stored in the run. The summary says which were taken.
 """
 
 from __future__ import annotations
@@ -13,15 +18,24 @@ from __future__ import annotations
 import argparse
 import logging
 
-from ectskin.commands._options import add_figure_options, add_overwrite
+from ectskin.commands._options import add_figure_options, add_overwrite, add_seed
 from ectskin.learn.profiles import describe_recipe
 
-HELP = "evaluate a trained run on its test split (metrics.json, baselines, figures)"
+#: ``--test-trials`` values: ectskin.learn.evaluate.TEST_TRIALS, listed here because importing that
+#: module loads torch, which every ``ectskin`` call would pay for (a test keeps the two equal)
+TEST_TRIALS = ("auto", "split", "all")
+
+HELP = (
+    "evaluate a trained run on its test split or another recording (metrics.json, baselines, "
+    "figures)"
+)
 EXAMPLES = """\
   ectskin evaluate runs/touch                          # metrics.json + Fig. 7 in runs/touch
   ectskin evaluate runs/track --format pdf --overwrite # again, with vector figures
   ectskin evaluate runs/touch --data day2.h5           # -> runs/touch/metrics_day2.json
   ectskin evaluate runs/touch --data day2.h5 -o eval/day2 --no-baselines
+  ectskin evaluate runs/touch --data unseen.h5 --reference data.h5  # calibrated on data.h5's rest
+  ectskin evaluate runs/contact --data hand_off.h5 --test-trials split  # same trials, hand off
 """
 log = logging.getLogger(__name__)
 
@@ -35,6 +49,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "results on another recording go to RUN_DIR/metrics_<its stem>.json",
     )
     p.add_argument(
+        "--test-trials",
+        choices=TEST_TRIALS,
+        default="auto",
+        help="which trials are test data: auto (default) every trial the run was not trained "
+        "or validated on, recognised by its readouts: the run's test split on its own "
+        "recording, all of another recording; split: the run's test split by trial name (the "
+        "same trials simulated again, e.g. with --push-max 0); all: every trial",
+    )
+    p.add_argument(
+        "--reference",
+        metavar="REC.h5",
+        default=None,
+        help="a recording of the same skin whose rest state (0 ml, untouched) calibrates the "
+        "data (default: the data's own rest state, else the training recording's, stored in "
+        "the run)",
+    )
+    p.add_argument(
         "-o",
         "--out",
         default=None,
@@ -44,12 +75,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-baselines", action="store_true", help="skip the baselines")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
     add_figure_options(p)
-    p.add_argument("--seed", type=int, default=0, help="seed of the baselines' subsampling")
+    add_seed(p, help="seed of the baselines' subsampling (default 0)")
 
 
 def summary_lines(metrics: dict) -> list[str]:
     """Human-readable lines of an ``evaluate_run`` result."""
     lines = []
+    for block in metrics.values():
+        if isinstance(block, dict) and "test_data" in block:
+            lines.append(f"test data: {block['test_data']['text']}")
+        if isinstance(block, dict) and "reference" in block:
+            lines.append(f"calibration: {block['reference']['text']}")
     t = metrics.get("touch")
     if t:
         lines.append(
@@ -65,8 +101,10 @@ def summary_lines(metrics: dict) -> list[str]:
         )
         for name, c in (t.get("candidates") or {}).items():
             val = c.get("val_accuracy")
+            test = c.get("test_accuracy")
             lines.append(
-                f"  candidate {name}: test accuracy {100 * c['test_accuracy']:.2f} %"
+                f"  candidate {name}: "
+                + (f"test accuracy {100 * test:.2f} %" if test is not None else c["model"])
                 + (f", validation {100 * val:.2f} %" if val is not None else "")
                 + (" (selected)" if c.get("selected") else "")
             )
@@ -78,6 +116,8 @@ def summary_lines(metrics: dict) -> list[str]:
             )
         for name, b in (t.get("baselines") or {}).items():
             lines.append(f"  baseline {name}: accuracy {100 * b['accuracy']:.2f} %")
+        if t.get("baselines_skipped"):
+            lines.append(f"  baselines skipped: {t['baselines_skipped']}")
     k = metrics.get("track")
     if k:
         lines.append(
@@ -89,11 +129,15 @@ def summary_lines(metrics: dict) -> list[str]:
             lines.append(f"  worst trajectory {w['name']}: {w['ad_mm_mean']:.3f} mm")
         for name, b in (k.get("baselines") or {}).items():
             lines.append(f"  baseline {name}: AD {b['ad_mm_mean']:.3f} ± {b['ad_mm_std']:.3f} mm")
+        if k.get("baselines_skipped"):
+            lines.append(f"  baselines skipped: {k['baselines_skipped']}")
     c = metrics.get("contact")
     if c:
         lines.append("contact: " + _contact_line(c))
         for name, b in (c.get("baselines") or {}).items():
             lines.append(f"  baseline {name}: " + _contact_line(b))
+        if c.get("baselines_skipped"):
+            lines.append(f"  baselines skipped: {c['baselines_skipped']}")
     return lines
 
 
@@ -127,6 +171,8 @@ def run(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         figure_format=args.figure_format,
         dpi=args.dpi,
+        test_trials=args.test_trials,
+        reference=args.reference,
     )
     for line in summary_lines(metrics):
         print(line)  # the files written are logged by evaluate_run

@@ -22,7 +22,12 @@ import logging
 from pathlib import Path
 
 from ectskin._check import EctskinError, parse_floats
-from ectskin.commands._options import add_out, add_overwrite
+from ectskin.commands._options import add_out, add_overwrite, integer, number
+
+#: the fastest resampling grid and the widest delay search the import options take (a
+#: capacitance meter or a camera beyond 10 kHz, or a clock offset beyond a minute, is a typo)
+MAX_RESAMPLE_HZ = 1e4
+MAX_DELAY_SEARCH_S = 60.0
 
 HELP = "import instrument files (capacitance CSV, Motive CSV, generic NPZ/CSV) into HDF5"
 EXAMPLES = """\
@@ -78,9 +83,11 @@ def _add_capacitance_options(p: argparse.ArgumentParser) -> None:
                    help="time stamps that repeat or step back: file (default): keep the rows in "
                         "the file's order and re-derive their times; sort: sort the rows by time "
                         "stamp; strict: refuse the row (docs/instrument-import.md)")
-    g.add_argument("--resample-hz", type=float, default=None, metavar="F",
-                   help="resample the readouts onto a uniform grid of F frames/s (linear "
-                        "interpolation of each channel; default: keep the file's frames)")
+    g.add_argument("--resample-hz", type=number(0, MAX_RESAMPLE_HZ, above=True), default=None,
+                   metavar="F",
+                   help="resample the readouts onto a uniform grid of F frames/s, at most "
+                        f"{MAX_RESAMPLE_HZ:g} (linear interpolation of each channel; default: "
+                        "keep the file's frames)")
 
 
 def _add_mocap_options(p: argparse.ArgumentParser) -> None:
@@ -141,14 +148,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_out(p, help="HDF5 recording to write (required)")
     p.add_argument("--delay", default="auto",
                    help="'auto' (estimate) or the delay in s; > 0 means the markers lag")
-    p.add_argument("--max-delay", type=float, default=0.5,
-                   help="search the delay within ±this many seconds (default 0.5)")
+    p.add_argument("--max-delay", type=number(0, MAX_DELAY_SEARCH_S, above=True), default=0.5,
+                   help="search the delay within ±this many seconds (default 0.5, at most "
+                        f"{MAX_DELAY_SEARCH_S:g})")
     p.add_argument("--delay-method", choices=("regression", "energy"), default="regression",
                    help="how 'auto' finds the delay (docs/instrument-import.md)")
     p.add_argument("--clock", choices=("start", "file"), default="start",
                    help="start: both files count from their first sample; file: the files' "
                         "times share one clock")
-    p.add_argument("--max-gap-frames", type=int, default=1,
+    p.add_argument("--max-gap-frames", type=integer(0), default=1,
                    help="occluded Motive frames that interpolation may bridge (default 1)")
     _add_capacitance_options(p)
     _add_mocap_options(p)

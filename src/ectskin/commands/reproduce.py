@@ -13,7 +13,14 @@ import shlex
 import sys
 
 from ectskin._check import EctskinError
-from ectskin.commands._options import add_figure_options, add_out, add_overwrite, resolve_out
+from ectskin.commands._options import (
+    add_figure_options,
+    add_out,
+    add_overwrite,
+    add_seed,
+    integer,
+    resolve_out,
+)
 from ectskin.commands.train import MODELS as TOUCH_MODEL_CHOICES
 from ectskin.report import results_table
 
@@ -44,10 +51,12 @@ def add_common_arguments(p: argparse.ArgumentParser, *, default_profile: str) ->
         help=f"training settings (default {default_profile}; 'paper' needs a GPU to be quick)",
     )
     p.add_argument(
-        "--workers", type=int, default=None, help="simulation processes (default: all cores)"
+        "--workers", type=integer(1), default=None, help="simulation processes (default: all cores)"
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of simulation, splits and training")
-    p.add_argument("--epochs", type=int, default=None, help="override the epochs of every training")
+    add_seed(p, help="seed of simulation, splits and training (default 0)")
+    p.add_argument(
+        "--epochs", type=integer(1), default=None, help="override the epochs of every training"
+    )
     p.add_argument("--no-ablations", action="store_true", help="skip the two tracking ablations")
     p.add_argument(
         "--touch-model",

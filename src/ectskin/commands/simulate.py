@@ -2,6 +2,9 @@
 
 The twin and the HDF5 writer are imported inside :func:`run`: ``ectskin --help`` imports every
 command module, and should not load them for that.
+
+One recording is bounded (:func:`ectskin.twin.protocol.check_recording_size`: at most 100 000
+trials and 4 GiB, frames x (pairs + 3 x markers + 5) x 8 bytes), checked before any work.
 """
 
 from __future__ import annotations
@@ -12,7 +15,13 @@ import time
 from pathlib import Path
 
 from ectskin._check import EctskinError, parse_floats
-from ectskin.commands._options import add_out, add_overwrite, resolve_out
+from ectskin.commands._options import (
+    add_out,
+    add_overwrite,
+    add_seed,
+    integer,
+    resolve_out,
+)
 
 HELP = "simulate the experiment protocol in the digital twin and record it to HDF5"
 EXAMPLES = """\
@@ -31,7 +40,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--levels", default="0,10,20", help="inflation levels per chamber, ml (default 0,10,20)"
     )
-    p.add_argument("--touch-trials", type=int, default=6, help="touch trials per state (default 6)")
+    p.add_argument(
+        "--touch-trials",
+        type=integer(0),
+        default=6,
+        help="touch trials per state (default 6; a recording holds at most 100 000 trials)",
+    )
     p.add_argument("--duration", type=float, default=30.0, help="trial duration, s (default 30)")
     p.add_argument("--fps", type=float, default=30.0, help="frame rate, Hz (default 30)")
     p.add_argument(
@@ -55,7 +69,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--dwells",
-        type=int,
+        type=integer(1),
         default=1,
         help="finger placements per touch trial: it moves to a new point D-1 times (default 1)",
     )
@@ -77,9 +91,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="fraction of touch trials in which a second finger also presses (default 0)",
     )
     p.add_argument("--layout", help="layout JSON file (default: the paper's layout)")
-    p.add_argument("--seed", type=int, default=0)
+    add_seed(p, help="seed of every random draw of the experiment (default 0)")
     p.add_argument(
-        "--workers", type=int, default=None, help="parallel processes (default: all cores)"
+        "--workers", type=integer(1), default=None, help="parallel processes (default: all cores)"
     )
     p.add_argument("--no-progress", action="store_true")
 
@@ -88,10 +102,9 @@ def run(args: argparse.Namespace) -> int:
     from ectskin.io.hdf5 import write_recording
     from ectskin.layout import default_layout, load_layout
     from ectskin.twin import Manipulator, Protocol, ReadoutConfig, simulate_experiment
+    from ectskin.twin.protocol import check_recording_size
 
     out = resolve_out(args, "the HDF5 recording to write")
-    if args.workers is not None and args.workers < 1:
-        raise EctskinError(f"--workers must be >= 1, got {args.workers}")
     protocol = Protocol(
         levels_ml=tuple(parse_floats("--levels", args.levels)),
         touch_trials=args.touch_trials,
@@ -109,6 +122,10 @@ def run(args: argparse.Namespace) -> int:
         readout=ReadoutConfig(gain_snr_db=args.snr_db),
     )
     layout = load_layout(args.layout) if args.layout else default_layout()
+    try:
+        check_recording_size(protocol, layout)
+    except EctskinError as exc:
+        raise EctskinError(f"{exc} (options --touch-trials, --levels, --duration, --fps)") from None
     for v in protocol.levels_ml:  # refuse impossible levels before any work
         Manipulator().check_inflation([v] * protocol.n_chambers)
     if Path(out).exists() and not args.overwrite:

@@ -22,7 +22,7 @@ import logging
 import os
 from pathlib import Path
 
-from ectskin.commands._options import add_out, add_overwrite, resolve_out
+from ectskin.commands._options import add_out, add_overwrite, add_seed, integer, resolve_out
 from ectskin.learn.profiles import PROFILE_TASKS, PROFILES
 
 #: ``--model`` values: ectskin.learn.candidates.TOUCH_MODELS, listed here because importing that
@@ -66,10 +66,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "classical candidates (gbt, random_forest, logreg, knn), the best validation accuracy "
         "selected (candidates.json); or one classical model alone (model.skops)",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the split and training (default 0)")
-    p.add_argument("--epochs", type=int, default=None, help="override the profile's epochs")
-    p.add_argument("--batch-size", type=int, default=None, help="override the profile's batch size")
-    p.add_argument("--window", type=int, default=10, help="track: frames per window (default 10)")
+    add_seed(p, help="seed of the split and training (default 0)")
+    p.add_argument(
+        "--epochs", type=integer(1), default=None, help="override the profile's epochs"
+    )
+    p.add_argument(
+        "--batch-size", type=integer(1), default=None, help="override the profile's batch size"
+    )
+    p.add_argument(
+        "--window", type=integer(1), default=10, help="track: frames per window (default 10)"
+    )
     p.add_argument(
         "--no-prior",
         action="store_true",
@@ -78,7 +84,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: CUDA if available)")
     p.add_argument(
         "--threads",
-        type=int,
+        type=integer(1),
         default=None,
         help="torch CPU threads (default 1: results depend on the thread count)",
     )

@@ -11,6 +11,7 @@ import argparse
 import logging
 
 from ectskin._check import EctskinError, parse_floats
+from ectskin.commands._options import add_seed, integer
 
 HELP = "degradation of the touch and contact models on fabricated skins, and their recoveries"
 EXAMPLES = """\
@@ -23,10 +24,12 @@ log = logging.getLogger(__name__)
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("out", metavar="OUT", help="folder for the data, runs and results (resumed)")
-    p.add_argument("--skins", type=int, default=4, help="fabricated skins on the curve (default 4)")
+    p.add_argument(
+        "--skins", type=integer(1), default=4, help="fabricated skins on the curve (default 4)"
+    )
     p.add_argument(
         "--dr-skins",
-        type=int,
+        type=integer(0),
         default=2,
         help="extra skins for domain-randomisation training (default 2)",
     )
@@ -44,9 +47,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-faults", action="store_true", help="skip the dead and shorted cases")
     p.add_argument("--layout", help="layout JSON file (default: the paper's layout)")
-    p.add_argument("--seed", type=int, default=0)
+    add_seed(p, help="seed of the skins, simulations and training (default 0)")
     p.add_argument(
-        "--workers", type=int, default=None, help="simulation processes (default: all cores)"
+        "--workers", type=integer(1), default=None, help="simulation processes (default: all cores)"
     )
     p.add_argument("--threads", default=None, help="torch threads (an integer or 'auto')")
     p.add_argument("--no-progress", action="store_true")
@@ -56,8 +59,6 @@ def run(args: argparse.Namespace) -> int:
     from ectskin.design.variability import VariabilityConfig, run_variability
     from ectskin.layout import load_layout
 
-    if args.workers is not None and args.workers < 1:
-        raise EctskinError(f"--workers must be >= 1, got {args.workers}")
     scales = parse_floats("--scales", args.scales)
     if len(scales) != 2:
         raise EctskinError(f"--scales must be LOW,HIGH, got {args.scales!r}")
@@ -69,7 +70,11 @@ def run(args: argparse.Namespace) -> int:
         try:
             threads = int(threads)
         except ValueError:
-            raise EctskinError(f"--threads must be an integer or 'auto', got {threads!r}") from None
+            threads = 0
+        if threads < 1:
+            raise EctskinError(
+                f"--threads must be an integer >= 1 or 'auto', got {args.threads!r}"
+            )
     config = VariabilityConfig(
         skins=args.skins,
         seed=args.seed,

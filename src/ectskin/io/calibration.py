@@ -23,13 +23,21 @@ Where references come from (``reference`` argument of :func:`touch_reference`):
              recording with no inflation information at all (every ``trial.inflation == ()``, a
              non-inflatable skin) uses its no-contact trials. Error if there is none.
 ``"meta"``   ``trial.meta["reference"]`` of every trial (error if one lacks it).
-array        an explicit (n_pairs,) reference in the recording's units (pF).
+array        an explicit (n_pairs,) reference in the recording's units (pF); only the measured
+             channels are used (an unmeasured one may be NaN).
+
+:func:`own_reference` says which of these a recording carries itself ("meta", "rest" or None);
+:func:`rest_reference` is the rest-state mean alone (what a trained run stores, so that it can
+calibrate a recording without a rest state of its own); :func:`choose_reference` picks among a
+reference recording given, the recording's own and a stored one, and says which it took.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -250,29 +258,51 @@ def touch_reference(
     keep = np.arange(rec.n_pairs) if channels is None else np.asarray(channels)
     names = [rec.layout.pair_names[j] for j in keep]
     if not isinstance(reference, str):
-        ref = check_reference(
-            reference, rec.n_pairs, source="reference", pair_names=rec.layout.pair_names
-        )
-        if ref.ndim != 1:
-            raise EctskinError(f"reference must have shape ({rec.n_pairs},), got {ref.shape}")
-        return {t.name: ref[keep] for t in rec.trials}
+        try:
+            full = np.asarray(reference, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise EctskinError(f"reference: reference must be numeric; {exc}") from None
+        if full.shape != (rec.n_pairs,):
+            raise EctskinError(f"reference must have shape ({rec.n_pairs},), got {full.shape}")
+        ref = check_reference(full[keep], keep.size, source="reference", pair_names=names)
+        return {t.name: ref for t in rec.trials}
     if reference not in REFERENCE_OPTIONS:
         raise EctskinError(
             f"Invalid value for 'reference': allowed values are "
             f"{', '.join(repr(o) for o in REFERENCE_OPTIONS)} or an array of {rec.n_pairs} "
             f"readouts; got {reference!r}"
         )
-    if reference == "meta" or (
-        reference == "auto" and rec.trials and all("reference" in t.meta for t in rec.trials)
-    ):
+    if reference == "meta" or (reference == "auto" and own_reference(rec) == "meta"):
         return {t.name: meta_reference(t, rec.n_pairs, keep) for t in rec.trials}
+    ref, _ = rest_reference(rec, channels=keep)
+    return {t.name: ref for t in rec.trials}
+
+
+def own_reference(rec: Recording) -> str | None:
+    """The reference ``rec`` carries itself: "meta" (every trial has ``meta["reference"]``),
+    "rest" (a rest-state trial, :func:`rest_trials`) or None (neither: it needs one from
+    elsewhere, e.g. the rest state of another recording of the same skin)."""
+    if rec.trials and all("reference" in t.meta for t in rec.trials):
+        return "meta"
+    return "rest" if rest_trials(rec) else None
+
+
+def rest_reference(
+    rec: Recording, *, channels: np.ndarray | None = None
+) -> tuple[np.ndarray, list[str]]:
+    """The rest-state reference of ``rec``: the mean readout of its rest-state trials
+    (:func:`rest_trials`; per channel over the finite readouts), restricted to ``channels``;
+    with the names of the trials averaged. An error when there is none."""
+    keep = np.arange(rec.n_pairs) if channels is None else np.asarray(channels)
+    names = [rec.layout.pair_names[j] for j in keep]
     rest = rest_trials(rec)
     if not rest:
+        where_ = f"{rec.source}: " if getattr(rec, "source", None) else ""
         raise EctskinError(
-            "recording has no rest-state trial (inflation all 0 ml and no contact) to calibrate "
-            "against (paper Eq. 2); record one (inflation 0 ml, no touch), import the file with "
-            "a reference field (docs/import-format.md) or, in Python, pass reference=<array of "
-            f"{rec.n_pairs} readouts>"
+            f"{where_}recording has no rest-state trial (inflation all 0 ml and no contact) to "
+            "calibrate against (paper Eq. 2); record one (inflation 0 ml, no touch), import the "
+            "file with a reference field (docs/import-format.md) or, in Python, pass "
+            f"reference=<array of {rec.n_pairs} readouts>"
         )
     frames = np.concatenate([t.capacitance[:, keep] for t in rest], axis=0)
     if not np.all(np.isfinite(frames)):
@@ -293,4 +323,73 @@ def touch_reference(
         ", ".join(t.name for t in rest),
     )
     ref = check_reference(ref, keep.size, source="rest-state reference", pair_names=names)
-    return {t.name: ref for t in rec.trials}
+    return ref, [t.name for t in rest]
+
+
+@dataclass(frozen=True)
+class ReferenceChoice:
+    """The reference chosen by :func:`choose_reference`: ``value`` as the data sets take it
+    (``reference=``: "auto", or an (n_pairs,) array, NaN on unmeasured pairs), its ``source``
+    ("recording": the recording's own; "file": another recording given; "run": one stored with
+    a trained model; "trajectory": each trajectory's first frame), the rest-state ``trials``
+    averaged, the ``file`` it came from and a sentence saying so."""
+
+    value: Any
+    source: str
+    text: str
+    trials: list[str] = field(default_factory=list)
+    file: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"source": self.source, "text": self.text, "trials": self.trials}
+        if self.file is not None:
+            out["file"] = self.file
+        return out
+
+
+def choose_reference(
+    rec: Recording,
+    *,
+    given: Recording | None = None,
+    given_name: str | None = None,
+    stored: tuple[np.ndarray, list[str]] | None = None,
+    stored_from: str = "the training recording",
+    channels: np.ndarray | None = None,
+    source: str = "data",
+) -> ReferenceChoice:
+    """The touch reference to calibrate ``rec`` (called ``source`` in messages) with: the rest
+    state of ``given`` (another recording of the same skin) if given; else ``rec``'s own
+    (:func:`own_reference`: per-trial references or its rest-state trials); else ``stored``
+    ((n_pairs,) pF with its rest-state trials, kept from ``stored_from``); else an error.
+    ``channels``: the measured channels of ``rec`` (the others are NaN in an array value)."""
+    keep = np.arange(rec.n_pairs) if channels is None else np.asarray(channels)
+    if given is not None:
+        name = given_name or "the given recording"
+        if list(given.layout.pair_names) != list(rec.layout.pair_names):
+            raise EctskinError(
+                f"reference {name}: its pairs {list(given.layout.pair_names)[:3]}... are not "
+                f"those of {source} {list(rec.layout.pair_names)[:3]}..."
+            )
+        ref, trials = rest_reference(given, channels=keep)
+        full = np.full(rec.n_pairs, np.nan)
+        full[keep] = ref
+        text = f"the rest state of {name} (--reference; trial(s) {', '.join(trials[:5])})"
+        return ReferenceChoice(full, "file", text, trials, name)
+    own = own_reference(rec)
+    if own == "meta":
+        return ReferenceChoice("auto", "recording", f"the per-trial references of {source}")
+    if own == "rest":
+        trials = [t.name for t in rest_trials(rec)]
+        text = f"the rest state of {source} itself (trial(s) {', '.join(trials[:5])})"
+        return ReferenceChoice("auto", "recording", text, trials)
+    if stored is None:
+        raise EctskinError(
+            f"{source}: has no rest-state trial (inflation all 0 ml and no contact) to calibrate "
+            "against (paper Eq. 2)"
+        )
+    values, trials = stored
+    text = (
+        f"the rest state of the training recording, stored in the run ({stored_from}, trial(s) "
+        f"{', '.join(trials[:5])}): {source} has no rest-state trial of its own"
+    )
+    return ReferenceChoice(values, "run", text, list(trials), stored_from)

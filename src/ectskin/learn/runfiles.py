@@ -4,7 +4,8 @@
     out_dir/last.pt       the same plus optimizer, scheduler and epoch, to resume
     out_dir/metrics.csv   epoch, train_loss, val_loss, val_metric, lr, seconds
     out_dir/config.json   task, profile, training settings, recipe, model config, data sizes
-    out_dir/split.json    trial (group) names per split (+ task, data file, counts, split seed)
+    out_dir/split.json    trial (group) names per split (+ task, data file, counts, split seed,
+                          the recording's trial digests and rest reference: :func:`data_identity`)
     out_dir/metrics.json  test-set metrics (written by ``ectskin evaluate``; on other data
                           metrics_<data stem>.json), with the figures (.png, .pdf or .svg)
 
@@ -20,6 +21,7 @@ import hashlib
 import io
 import logging
 import math
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
@@ -29,9 +31,13 @@ import numpy as np
 
 from ectskin._check import EctskinError
 from ectskin._files import atomic_write, read_json_object, to_jsonable, write_json_atomic
+from ectskin.io.calibration import own_reference, rest_reference
+from ectskin.io.recording import Recording
+from ectskin.learn.channels import measured_channels
 from ectskin.learn.checkpoint import config_from_dict, read_checkpoint
 from ectskin.learn.distributed import Dist
 from ectskin.learn.profiles import TrainSettings
+from ectskin.learn.splits import trial_digests
 
 log = logging.getLogger(__name__)
 
@@ -119,6 +125,56 @@ def read_split(run_dir: str | Path) -> dict[str, Any]:
     return info
 
 
+def data_identity(rec: Recording) -> dict[str, Any]:
+    """What ``split.json`` stores about the training recording beside the split:
+    ``trial_digests`` (:func:`trial_digests`) and, when the recording calibrates against a rest
+    state (:func:`ectskin.io.calibration.own_reference`), ``rest_reference``: that reference
+    (pF per pair of the layout, null for an unmeasured one), the pair names and the rest-state
+    trials it averages, so that evaluation can calibrate a recording without a rest state of its
+    own (:func:`stored_rest_reference`)."""
+    out: dict[str, Any] = {"trial_digests": trial_digests(rec)}
+    if own_reference(rec) == "rest":
+        keep = measured_channels(rec)
+        try:
+            ref, trials = rest_reference(rec, channels=keep)
+        except EctskinError as exc:  # a task that does not calibrate against it (tracking)
+            log.info("no rest reference stored in the run: %s", exc)
+            return out
+        full = np.full(rec.n_pairs, np.nan)
+        full[keep] = ref
+        out["rest_reference"] = {
+            "pF": [float(v) if np.isfinite(v) else None for v in full],
+            "pair_names": list(rec.layout.pair_names),
+            "trials": trials,
+        }
+    return out
+
+
+def stored_rest_reference(
+    split: Mapping[str, Any], pair_names: Sequence[str], source: str
+) -> tuple[np.ndarray, list[str]] | None:
+    """``split.json``'s ``rest_reference`` as an (n_pairs,) float64 array in the order of
+    ``pair_names`` (NaN for an unmeasured pair) with its rest-state trials; None when the run
+    stores none. A reference of other pairs is an error naming the file."""
+    doc = split.get("rest_reference")
+    if doc is None:
+        return None
+    try:
+        values = np.array([np.nan if v is None else v for v in doc["pF"]], dtype=np.float64)
+        names = [str(n) for n in doc["pair_names"]]
+        trials = [str(t) for t in doc.get("trials", [])]
+    except (KeyError, TypeError, ValueError):
+        raise EctskinError(
+            f"{source}: field 'rest_reference' must hold 'pF' (numbers) and 'pair_names'"
+        ) from None
+    if values.shape != (len(names),) or names != list(pair_names):
+        raise EctskinError(
+            f"{source}: the stored rest reference is of pairs {names[:3]}... ({len(names)}), "
+            f"the recording has {list(pair_names)[:3]}... ({len(pair_names)})"
+        )
+    return values, trials
+
+
 def split_names_of(data: Any) -> list[str]:
     """The names of the trials (groups) present in ``data``, in group order."""
     names = list(getattr(data, "group_names", []) or [])
@@ -148,6 +204,63 @@ def check_run_folder(out: str | Path, *, resume: bool) -> None:
             f"output folder {out} holds a model.pt without last.pt (cannot resume); start over "
             "with --overwrite to train again"
         )
+
+
+def check_run_dir(run: Path) -> None:
+    """A run directory to read that is a file (a recording, say) or is missing: one clear
+    error saying what ``evaluate`` expects."""
+    if run.exists() and not run.is_dir():
+        raise EctskinError(
+            f"{run} is a file, not a run directory: evaluate expects the folder 'ectskin train' "
+            f"wrote (model.pt, split.json, ...); a recording goes with --data (ectskin evaluate "
+            f"RUN_DIR --data {run})"
+        )
+    if not run.is_dir():
+        raise EctskinError(f"run directory {run} does not exist")
+
+
+def evaluation_inputs(run_dir: Any, data: Any, reference: Any, out: Any) -> dict[Path, str]:
+    """Check an evaluation's paths before any work: the run directory is a folder
+    (:func:`check_run_dir`), the recordings given (``data``, ``reference``: paths; anything
+    else is taken as in memory) are files, and ``out`` is a folder that is none of the inputs.
+    Returns {input file (resolved): what it is}."""
+    run = Path(run_dir)
+    check_run_dir(run)
+    inputs: dict[Path, str] = {}
+    for name in sorted(RUN_FILES - {"metrics.json"}):  # metrics.json is evaluate's own output
+        if (run / name).exists():
+            inputs[(run / name).resolve()] = f"the run's {name}"
+    for option, value in (("--data", data), ("--reference", reference)):
+        if not isinstance(value, str | os.PathLike):
+            continue
+        path = Path(value)
+        if not path.is_file():
+            what = "is a folder" if path.is_dir() else "does not exist"
+            raise EctskinError(f"{option} {path} {what}; expected a recording file")
+        inputs[path.resolve()] = f"the recording given with {option}"
+    if out is not None:
+        folder = Path(out)
+        if folder.resolve() in inputs:
+            raise EctskinError(
+                f"-o/--out {folder} is {inputs[folder.resolve()]}; expected a folder for the "
+                "metrics JSON and the figures (nothing that is read is written over)"
+            )
+        if folder.exists() and not folder.is_dir():
+            raise EctskinError(
+                f"-o/--out {folder} is a file; expected a folder for the metrics JSON and the "
+                "figures"
+            )
+    return inputs
+
+
+def check_outputs(outputs: Sequence[Path], inputs: Mapping[Path, str]) -> None:
+    """Refuse an output file that is one of the inputs (:func:`evaluation_inputs`)."""
+    for path in outputs:
+        if path.resolve() in inputs:
+            raise EctskinError(
+                f"{path} is {inputs[path.resolve()]} and would be written over by the "
+                "evaluation; choose another folder with -o/--out"
+            )
 
 
 def _belongs_to_a_run(name: str) -> bool:

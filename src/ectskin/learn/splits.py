@@ -5,16 +5,22 @@
   optionally stratified by a label per group.
 * :func:`split_names` / :func:`split_from_names`: group ids ↔ the trial names that
   ``split.json`` stores.
+* :func:`choose_test_trials`: the test trials of a trained run in any recording: the trials it
+  was not trained or validated on, recognised by their readouts (:func:`trial_digests`, which
+  ``split.json`` stores) or, for runs without digests, by name.
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from ectskin._check import EctskinError
+from ectskin._check import EctskinError, check_option
 
 log = logging.getLogger(__name__)
 
@@ -23,14 +29,21 @@ TOUCH_SPLIT = (125, 32, 32)
 #: Paper §3: tracking data 146 trials split 108 / 18 / 20.
 TRACK_SPLIT = (108, 18, 20)
 SPLITS = ("train", "val", "test")
+#: ``choose_test_trials`` modes (``evaluate --test-trials``): which trials are test data
+TEST_TRIALS = ("auto", "split", "all")
 
 __all__ = [
     "SPLITS",
+    "TEST_TRIALS",
     "TOUCH_SPLIT",
     "TRACK_SPLIT",
+    "EvaluatedTrials",
+    "choose_test_trials",
     "split_from_names",
     "split_groups",
     "split_names",
+    "stored_trial_digests",
+    "trial_digests",
 ]
 
 
@@ -201,3 +214,146 @@ def split_from_names(
             ids.append(index[name])
         out[k] = np.sort(np.asarray(ids, dtype=np.int64))
     return out
+
+
+# --------------------------------------------------------------------------- trial digests
+def trial_digests(rec: Any) -> dict[str, str]:
+    """{trial name: a short hash of its readouts} of a recording: how a run recognises the
+    trials it was trained on in any recording, whatever the file or the trials are called."""
+    out = {}
+    for t in rec.trials:
+        a = np.ascontiguousarray(t.capacitance)
+        h = hashlib.blake2b(digest_size=12)
+        h.update(f"{a.dtype}{a.shape}".encode())
+        h.update(a.tobytes())
+        out[t.name] = h.hexdigest()
+    return out
+
+
+def stored_trial_digests(split: Mapping[str, Any], source: str) -> dict[str, str] | None:
+    """``split.json``'s ``trial_digests`` ({name: digest}), checked; None for a run that stores
+    none (trained before runs stored them)."""
+    digests = split.get("trial_digests")
+    if digests is None:
+        return None
+    if not isinstance(digests, dict) or not all(
+        isinstance(k, str) and isinstance(v, str) for k, v in digests.items()
+    ):
+        raise EctskinError(f"{source}: field 'trial_digests' must map trial names to digests")
+    return digests
+
+
+# --------------------------------------------------------------------------- test trials
+@dataclass(frozen=True)
+class EvaluatedTrials:
+    """The test trials of an evaluation (:func:`choose_test_trials`): their ``names`` (recording
+    order), the trials ``left_out`` as the run's training or validation trials, the ``reading``
+    ("test_split": the run's test split of its own recording; "whole": every trial; "partial":
+    the trials other than training ones; "run_split": the run's test split by name), how
+    training trials were recognised (``by``: "digests" or "names") and a sentence saying so."""
+
+    names: list[str]
+    left_out: list[str]
+    reading: str
+    by: str
+    text: str
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "reading": self.reading,
+            "by": self.by,
+            "n_trials": len(self.names),
+            "n_left_out": len(self.left_out),
+            "text": self.text,
+        }
+
+
+def choose_test_trials(
+    split: Mapping[str, Any],
+    rec: Any,
+    mode: str = "auto",
+    *,
+    source: str = "data",
+    split_file: str = "split.json",
+    trials: Sequence[str] | None = None,
+) -> EvaluatedTrials:
+    """Which trials of the recording ``rec`` are test data for a run whose ``split.json`` is
+    ``split``, among ``trials`` (the names of the trials the task's data set holds; default all).
+
+    ``mode`` (:data:`TEST_TRIALS`): "auto" leaves out every trial the run was trained or
+    validated on: recognised by its readouts where ``split`` stores trial digests
+    (:func:`trial_digests`, whatever the trial is called), else by its name; the rest are test
+    data: on the training recording the run's test split, on another recording all of it.
+    "split": the run's test split by name (every name must be there). "all": every trial
+    (refused when some are recognised as training trials). An empty rest is an error naming
+    ``source``.
+    """
+    check_option("test_trials", mode, TEST_TRIALS)
+    names = [t.name for t in rec.trials] if trials is None else [str(n) for n in trials]
+    seen = split["train"] + split["val"]
+    digests = stored_trial_digests(split, split_file)
+    if digests is not None:
+        by = "digests"
+        trained = {digests[n] for n in seen if n in digests}
+        mine = trial_digests(rec)
+        left_out = [n for n in names if mine[n] in trained]
+    else:
+        by = "names"
+        trained_names = set(seen)
+        left_out = [n for n in names if n in trained_names]
+    how = (
+        "recognised by their readouts"
+        if by == "digests"
+        else "recognised by name: the run stores no trial digests"
+    )
+    if mode == "split":
+        split_from_names(split, names, source=split_file)  # every name must be there
+        test = [n for n in names if n in set(split["test"])]
+        text = (
+            f"the run's test split by trial name (--test-trials split): {len(test)} of "
+            f"{len(names)} trials of {source}"
+        )
+        others = [n for n in names if n not in set(test)]
+        return EvaluatedTrials(test, others, "run_split", by, text)
+    if mode == "all":
+        if left_out and by == "digests":
+            raise EctskinError(
+                f"{source}: holds {len(left_out)} trial(s) the run was trained or validated on "
+                f"(e.g. {left_out[:3]}, {how}); as test data they would report training "
+                "accuracy: use --test-trials auto (they are left out) or split"
+            )
+        return EvaluatedTrials(
+            names, [], "whole", by, f"the whole recording (--test-trials all): {len(names)} trials"
+        )
+    left = set(left_out)
+    if left == set(seen):  # the training recording: its split must name its trials
+        split_from_names(split, names, source=split_file)
+    test = [n for n in names if n not in left]
+    if not test:
+        raise EctskinError(
+            f"{source}: every trial ({len(names)}) is one the run was trained or validated on "
+            f"({how}); nothing to evaluate"
+        )
+    if not left_out:
+        reading = "whole"
+        text = (
+            f"the whole recording: all {len(names)} trials of {source} (none is one the run "
+            f"was trained or validated on, {how})"
+        )
+        if set(names) == set(seen) | set(split["test"]):
+            log.warning(
+                "%s holds trials named like the run's, all of them, but with other readouts: it "
+                "is evaluated whole, as another recording; if it simulates the same trials again "
+                "(e.g. with --push-max 0), --test-trials split evaluates the run's test split",
+                source,
+            )
+    else:
+        own = set(test) == set(split["test"])
+        reading = "test_split" if own else "partial"
+        text = (
+            f"{len(test)} of {len(names)} trials of {source} (the {len(left_out)} the run was "
+            f"trained or validated on left out, {how})"
+        )
+        if own:
+            text = "the run's test split: " + text
+    return EvaluatedTrials(test, left_out, reading, by, text)

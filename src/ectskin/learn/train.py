@@ -40,7 +40,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from ectskin._check import EctskinError
+from ectskin._check import EctskinError, check_seed
 from ectskin._files import to_jsonable
 from ectskin.io import read_recording
 from ectskin.learn.candidates import CLASSICAL
@@ -61,6 +61,7 @@ from ectskin.learn.profiles import RECIPE_FIELDS, TrainConfig, TrainSettings
 from ectskin.learn.runfiles import (
     RunState,
     check_run_folder,
+    data_identity,
     fingerprint,
     resume_run,
     split_names_of,
@@ -83,6 +84,9 @@ __all__ = ["TrainConfig", "train", "train_from_recording"]
 
 #: profiles meant for a GPU: training with one on a CPU warns at the start
 GPU_PROFILES = ("paper",)
+#: the largest data set of windows (track, contact) a training builds: frames x window x pairs
+#: x 4 bytes (the paper's tracking data with its 10-frame windows: about 0.2 GiB)
+MAX_WINDOW_BYTES = 8 * 2**30
 
 
 def train_from_recording(
@@ -94,21 +98,28 @@ def train_from_recording(
     builds the task's data set, splits the trials with
     :func:`~ectskin.learn.splits.split_groups` (``config.counts``, default the task's; touch
     stratified by region; seed ``config.split_seed``, default ``config.seed``), records the split
-    in ``split.json`` (train/val/test trial names, task, data file, counts, split seed) and calls
-    :func:`train`. An existing ``out`` must be a run directory (resumed) unless
-    ``config.resume`` is False. Runs unchanged under ``torchrun`` (every rank reads the data;
+    in ``split.json`` (train/val/test trial names, task, data file, counts, split seed, and the
+    recording's trial digests and rest reference: :func:`~ectskin.learn.runfiles.data_identity`)
+    and calls :func:`train`. A touch recording of one class, or windows too large for memory
+    (:data:`MAX_WINDOW_BYTES`), are refused before the data set is split. An existing ``out``
+    must be a run directory (resumed) unless ``config.resume`` is False. Runs unchanged under ``torchrun`` (every rank reads the data;
     only rank 0 writes). Returns train's summary plus ``n_train``/``n_val``/``n_test`` samples.
     ``config`` None: ``TrainConfig()``.
     """
     config = TrainConfig() if config is None else config
     t = get_task(task)
     config.settings_for(task)  # a bad profile or setting fails before the data is read
+    _check_seeds(config)
     t.check_options(window=config.window, prior=config.prior)
     resolve_threads(config.threads)
     check_run_folder(out, resume=config.resume)
     check_model_choice(t, config.model, out, resume=config.resume)
     data_path = Path(data_path)
-    data = t.dataset(read_recording(data_path), window=config.window, prior=config.prior)
+    rec = read_recording(data_path)
+    if t.windowed:
+        _check_window_size(rec, config.window, data_path)
+    data = t.dataset(rec, window=config.window, prior=config.prior)
+    t.check_trainable(data, str(data_path))
     counts = config.counts or t.split_counts
     split_seed = config.seed if config.split_seed is None else config.split_seed
     split_ids = split_groups(data.group_names, counts, seed=split_seed, stratify=t.stratify(data))
@@ -119,6 +130,7 @@ def train_from_recording(
         "data": str(data_path.resolve()),
         "counts": [float(c) for c in counts],
         "split_seed": split_seed,
+        **data_identity(rec),
     }
     summary = train(task, parts["train"], parts["val"], out, config, split=split)
     summary.update({f"n_{k}": int(p.n_samples) for k, p in parts.items()})
@@ -161,10 +173,12 @@ def train(
     """
     config = TrainConfig() if config is None else config
     t = get_task(task)
+    _check_seeds(config)
     check_model_choice(t, config.model, out_dir, resume=config.resume)
     s = config.settings_for(task)
     t.check_data(train_data, "train_data")
     t.check_data(val_data, "val_data")
+    t.check_trainable(train_data, "train_data")
     tr_shape, va_shape = train_data.x.shape[1:], val_data.x.shape[1:]
     if tr_shape != va_shape:
         raise EctskinError(
@@ -185,6 +199,26 @@ def train(
         if config.model == "auto" and d.main:
             summary.update(choose_after_mlp(t, config, out, train_data, val_data, summary, native))
         return summary
+
+
+def _check_window_size(rec: Any, window: int, source: Path) -> None:
+    """Refuse windows whose data set would not fit in memory (one window of ``window`` frames
+    per frame, float32), naming the size, before it is built."""
+    frames = sum(t.n_frames for t in rec.trials)
+    nbytes = frames * int(window) * rec.n_pairs * 4
+    if nbytes > MAX_WINDOW_BYTES:
+        raise EctskinError(
+            f"{source}: --window {window}: {frames} frames x {window} frames per window x "
+            f"{rec.n_pairs} pairs x 4 bytes = {nbytes / 2**30:.1f} GiB of windows; at most "
+            f"{MAX_WINDOW_BYTES / 2**30:.0f} GiB (ectskin.learn.train.MAX_WINDOW_BYTES): choose a "
+            "shorter window (the paper's: 10 frames)"
+        )
+
+
+def _check_seeds(config: TrainConfig) -> None:
+    check_seed("seed", config.seed, source="TrainConfig")
+    if config.split_seed is not None:
+        check_seed("split_seed", config.split_seed, source="TrainConfig")
 
 
 # ============================================================================ the run

@@ -18,6 +18,13 @@ it lands after a random delay and leaves before the end (:func:`ectskin.twin.hum
 so a two-finger trial holds frames with one and with two contacts. The second finger is drawn
 from its own random stream, so the option never changes the first finger, the hand or the
 trials without a second finger: at 0 every result is what it was without the option.
+
+**Size.** The twin holds a whole recording in memory, so one simulated experiment is bounded
+(:func:`check_recording_size`, called by :func:`plan_trials` and by ``ectskin simulate`` before
+any work): at most :data:`MAX_TRIALS` trials and :data:`MAX_RECORDING_BYTES` of recording,
+estimated as frames × (pairs + 3 × markers + 5 per-frame values) × 8 bytes
+(:func:`recording_nbytes`; the paper's protocol: 189 trials, 170 100 frames, about 65 MB).
+A larger data set is several recordings (other seeds).
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from ectskin._check import EctskinError, check_option
+from ectskin._check import EctskinError, check_option, check_seed
 from ectskin.layout import SensorLayout
 from ectskin.twin.readout import MocapConfig, ReadoutConfig
 
@@ -36,6 +43,14 @@ from ectskin.twin.readout import MocapConfig, ReadoutConfig
 MAX_FINGER_FORCE_N = 20.0
 #: The strongest push of the handling hand (N).
 MAX_HAND_PUSH_N = 10.0
+#: The most trials one simulated experiment plans (the paper's protocol: 189).
+MAX_TRIALS = 100_000
+#: The largest recording one simulated experiment makes, as estimated by
+#: :func:`recording_nbytes` (about 60 times the paper's protocol; it is held in memory).
+MAX_RECORDING_BYTES = 4 * 2**30
+#: Per-frame values of a recording besides the readout and the markers (time, force, contact
+#: point (u, v), finger height), each 8 bytes, in :func:`recording_nbytes`.
+FRAME_VALUES = 5
 
 
 @dataclass(frozen=True)
@@ -85,13 +100,30 @@ class Protocol:
     def __post_init__(self) -> None:
         if not self.levels_ml:
             raise EctskinError("protocol: levels_ml must hold at least one inflation level")
-        if self.touch_trials < 0:
-            raise EctskinError(f"protocol: touch_trials must be >= 0, got {self.touch_trials}")
+        levels = np.asarray(self.levels_ml, dtype=np.float64)
+        if not np.all(np.isfinite(levels)):
+            raise EctskinError(
+                f"protocol: levels_ml must be finite volumes (ml), got {self.levels_ml}"
+            )
+        if np.unique(levels).size != levels.size:
+            raise EctskinError(
+                f"protocol: levels_ml must be distinct inflation levels, got {self.levels_ml} "
+                "(a level given twice repeats every state it is in)"
+            )
+        _check_whole("n_chambers", self.n_chambers, 1)
+        check_seed("seed", self.seed, source="protocol")
+        _check_whole("touch_trials", self.touch_trials, 0)
         if not (0 < self.duration_s < 1e5 and 0 < self.frame_rate_hz <= 1e4):
             raise EctskinError(
                 f"protocol: duration_s and frame_rate_hz must be finite and > 0 (at most 1e5 s "
                 f"and 1e4 Hz), got {self.duration_s}, "
                 f"{self.frame_rate_hz}"
+            )
+        if self.n_frames < 1:
+            raise EctskinError(
+                f"protocol: a trial of duration_s {self.duration_s} at frame_rate_hz "
+                f"{self.frame_rate_hz} holds {self.duration_s * self.frame_rate_hz:.3g} frames; "
+                "it needs at least one"
             )
         lo, hi = self.force_range_n
         if not (0 < lo < hi <= MAX_FINGER_FORCE_N):
@@ -104,8 +136,7 @@ class Protocol:
             raise EctskinError(f"protocol: touch_scatter_mm must be >= 0, got {self.touch_scatter_mm}")
         if not 0 <= self.touch_margin < 0.5:
             raise EctskinError(f"protocol: touch_margin must be in [0, 0.5), got {self.touch_margin}")
-        if self.touch_dwells < 1:
-            raise EctskinError(f"protocol: touch_dwells must be >= 1, got {self.touch_dwells}")
+        _check_whole("touch_dwells", self.touch_dwells, 1, self.n_frames, "the frames of a trial")
         lo_hz, hi_hz = self.tremor_hz
         if not 0 < lo_hz <= hi_hz < self.frame_rate_hz / 2:
             raise EctskinError(
@@ -154,8 +185,13 @@ class Protocol:
         return [tuple(s) for s in itertools.product(self.levels_ml, repeat=self.n_chambers)]
 
     @property
+    def n_states(self) -> int:
+        """Inflation states: every combination of the levels (counted, not listed)."""
+        return len(self.levels_ml) ** self.n_chambers
+
+    @property
     def n_trials(self) -> int:
-        return len(self.states()) * (self.touch_trials + int(self.no_contact_trial))
+        return self.n_states * (self.touch_trials + int(self.no_contact_trial))
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -179,6 +215,55 @@ class Protocol:
             if k in d:
                 d[k] = tuple(d[k])
         return cls(**d)
+
+
+def _check_whole(
+    name: str, value: Any, low: int, high: int | None = None, high_is: str = ""
+) -> None:
+    """Refuse a protocol count that is not a whole number from ``low`` (to ``high``)."""
+    ok = not isinstance(value, bool) and isinstance(value, int | np.integer)
+    if ok and (value < low or (high is not None and value > high)):
+        ok = False
+    if not ok:
+        upto = f" to {high_is} ({high})" if high is not None else " or more"
+        raise EctskinError(
+            f"protocol: {name} must be a whole number from {low}{upto}, got {value!r}"
+        )
+
+
+def recording_nbytes(protocol: Protocol, layout: SensorLayout) -> int:
+    """The estimated size (bytes) of the recording of ``protocol`` on ``layout``: frames × (pairs
+    + 3 × markers + :data:`FRAME_VALUES`) × 8 bytes (float64 readouts, marker coordinates and
+    per-frame ground truth)."""
+    per_frame = layout.n_pairs + 3 * layout.n_markers + FRAME_VALUES
+    return protocol.n_trials * protocol.n_frames * per_frame * 8
+
+
+def check_recording_size(protocol: Protocol, layout: SensorLayout) -> None:
+    """Refuse an experiment over :data:`MAX_TRIALS` trials or :data:`MAX_RECORDING_BYTES` of
+    recording (:func:`recording_nbytes`), naming the size it would have. Cheap: nothing is
+    planned or allocated."""
+    n_trials, n_frames = protocol.n_trials, protocol.n_frames
+    nbytes = recording_nbytes(protocol, layout)
+    if n_trials <= MAX_TRIALS and nbytes <= MAX_RECORDING_BYTES:
+        return
+    frames = n_trials * n_frames
+    raise EctskinError(
+        f"protocol: {n_trials} trials ({protocol.n_states} inflation state(s) x "
+        f"{protocol.touch_trials + int(protocol.no_contact_trial)}) x {n_frames} frames = "
+        f"{frames} frames x ({layout.n_pairs} pairs + 3 x {layout.n_markers} marker coordinates + "
+        f"{FRAME_VALUES} per-frame values) x 8 bytes = {_size(nbytes)}, held in memory; one "
+        f"simulated recording holds at most {MAX_TRIALS} trials and {_size(MAX_RECORDING_BYTES)} "
+        "(ectskin.twin.protocol.MAX_TRIALS, MAX_RECORDING_BYTES): simulate fewer or shorter "
+        "trials (touch_trials, levels_ml, duration_s, frame_rate_hz), or several recordings"
+    )
+
+
+def _size(nbytes: int) -> str:
+    """``4.0 GiB``, ``70 MiB``: a size for a message."""
+    if nbytes >= 2**30:
+        return f"{nbytes / 2**30:.1f} GiB"
+    return f"{nbytes / 2**20:.0f} MiB"
 
 
 @dataclass(frozen=True)
@@ -259,7 +344,9 @@ def second_placement(
 
 
 def plan_trials(protocol: Protocol, layout: SensorLayout) -> list[TrialPlan]:
-    """The ordered trial plan of an experiment (deterministic for ``protocol.seed``)."""
+    """The ordered trial plan of an experiment (deterministic for ``protocol.seed``); an
+    experiment over the size bounds is refused first (:func:`check_recording_size`)."""
+    check_recording_size(protocol, layout)
     rng = np.random.default_rng([protocol.seed, 0xE5])
     states = protocol.states()
     faces = ("front", "back")

@@ -108,6 +108,8 @@ class Task(ABC, Generic[DataT]):
     #: figure file stem → caption, of the figures :meth:`figures` draws (the caller saves them
     #: as ``<stem>.<format>``)
     figure_captions: ClassVar[dict[str, str]]
+    #: whether a sample is a window of frames (``window`` frames per frame of the recording)
+    windowed: ClassVar[bool] = True
 
     # ------------------------------------------------------------------ data
     def check_options(self, *, window: int, prior: bool) -> None:  # noqa: B027 - optional hook
@@ -122,6 +124,11 @@ class Task(ABC, Generic[DataT]):
     def dataset_options(self, config: Any) -> dict[str, Any]:
         """The :meth:`dataset` options a trained model (its config) was trained with."""
         return {}
+
+    def uses_rest_reference(self, config: Any) -> bool:
+        """Whether a model (its config) reads frames calibrated against the recording's rest
+        state (:func:`ectskin.io.calibration.touch_reference`; default yes)."""
+        return True
 
     def stratify(self, data: DataT) -> np.ndarray | None:
         """Per-trial labels to stratify the trial split by, or None."""
@@ -150,6 +157,10 @@ class Task(ABC, Generic[DataT]):
                         f"{what}: {name} of {sample_name(data, i)} is not finite (NaN/inf); "
                         f"check calibration and occluded markers"
                     )
+
+    def check_trainable(self, data: DataT, what: str) -> None:  # noqa: B027 - optional hook
+        """Refuse training data no model of the task can learn from (default: any goes); one
+        check for every model of the task, before any is built."""
 
     @abstractmethod
     def _check_shapes(self, data: DataT, what: str) -> None:

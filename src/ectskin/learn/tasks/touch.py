@@ -100,6 +100,7 @@ class TouchTask(Task[TouchData]):
     metric_name = "accuracy"
     lower_is_better_metric = False
     split_counts = TOUCH_SPLIT
+    windowed = False
     figure_captions: ClassVar[dict[str, str]] = {
         "fig7_confusion": "Fig. 7: confusion map of the test set"
     }
@@ -134,6 +135,20 @@ class TouchTask(Task[TouchData]):
             i = int(np.argmax(bad))
             raise EctskinError(
                 f"{what}: {sample_name(data, i)} has label {y[i]}, expected 0..{n_classes - 1}"
+            )
+
+    def check_trainable(self, data: TouchData, what: str) -> None:
+        """A classifier needs two classes: training frames of one class (a recording without
+        touch trials) are refused, the same for the TouchMLP and every classical model."""
+        classes = np.unique(data.y)
+        if classes.size < 2:
+            found = f"class {int(classes[0])}" if classes.size else "no class"
+            if classes.size and classes[0] == 0:
+                found += ", no touch"
+            raise EctskinError(
+                f"{what}: the training frames hold one touch class ({found}); a touch model "
+                "(any --model: mlp, auto or a classical one) needs at least two: record touch "
+                "trials (ectskin simulate --touch-trials 1 or more)"
             )
 
     def tensors(self, data: TouchData, device: torch.device) -> Tensors:

@@ -98,6 +98,11 @@ class TrackTask(Task[TrackData]):
     def dataset_options(self, config: C2DTConfig) -> dict[str, Any]:
         return {"window": int(config.window), "prior": bool(config.prior)}
 
+    def uses_rest_reference(self, config: C2DTConfig) -> bool:
+        """Only the ablation without prior knowledge: the paper's C2DT calibrates each
+        trajectory against its own first frame."""
+        return not bool(config.prior)
+
     def _check_shapes(self, data: TrackData, what: str) -> None:
         x, y = data.x, data.y
         n = x.shape[0]
