@@ -80,9 +80,11 @@ def test_more_fingers_on_the_skin_than_slots_is_an_error(layout, contact_recordi
 
 
 def test_a_wrong_face_is_charged_around_the_recordings_body(layout, contact_recording):
-    """The distance from a predicted face to the true one is measured on the body the recording
-    was made on (``meta["manipulator"]``), not the default body: a point predicted on the back,
-    straight behind a front touch, is the body's thickness t away."""
+    """The distance from a predicted face to the true one goes around the body the recording was
+    made on (``meta["manipulator"]``), not the default body: a point predicted on the back,
+    straight behind a front touch at u = 20 mm on a 50 mm wide body, is 5 + t + 5 mm away over
+    the skin for a body t mm thick (the metric ignored its over-the-skin distances once and
+    charged the straight line through the body, t)."""
     from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
     from ectskin.learn.tasks.contact import contact_report
 
@@ -102,4 +104,4 @@ def test_a_wrong_face_is_charged_around_the_recordings_body(layout, contact_reco
         slot = len(PRED_COLUMNS)
         pred[:, slot : slot + 3] = [back, 20.0, 60.0]
         report = contact_report(test, pred, with_maps=False)
-        assert report["loc_mm_mean"] == pytest.approx(thickness)
+        assert report["loc_mm_mean"] == pytest.approx(5.0 + thickness + 5.0)

@@ -1,9 +1,10 @@
 """Contact metrics, pure functions on plain arrays (numpy, and scipy's Hungarian matching).
 
 Positions are points on the faces of the body, (face, u, v) in mm. The distance between two
-points is the straight line between them on the body at rest (:func:`rest_points`): on one face
-the distance in (u, v), across faces it goes through the body. A model that names the wrong face
-is thus charged at least the body's thickness.
+points is by default the straight line between them on the body at rest (:func:`rest_points`):
+on one face the distance in (u, v), across faces through the body; a caller may pass its own
+distances (the contact task measures a single finger's error over the skin, around the body's
+side edge). A model that names the wrong face is thus charged at least the body's thickness.
 
 * :func:`localisation_metrics`: the error of one finger's point (mean / median / p90, per face,
   per inflation state, and a map over each face);
@@ -117,8 +118,13 @@ def localisation_metrics(
     """Error of one finger's predicted point over frames (rest points (n, 3), see
     :func:`rest_points`): ``loc_mm_mean`` / ``_median`` / ``_p90``, ``face_accuracy``,
     ``per_face``, ``per_state`` (with ``state``) and ``map`` (per face, with ``true_uv`` and
-    ``face_extent``; arrays, for the figure)."""
+    ``face_extent``; arrays, for the figure). ``distance`` (n,) mm: the errors to use instead of
+    the straight line between the rest points (e.g. over the skin, around the body's edge)."""
     d = point_distance(true_pts, pred_pts)
+    if distance is not None:
+        d = np.asarray(distance, dtype=np.float64)
+        if d.shape != (len(true_pts),):
+            raise ValueError(f"distance must be ({len(true_pts)},), got {d.shape}")
     out: dict[str, Any] = dict(_summary(d))
     out["face_accuracy"] = float(np.mean(true_face == pred_face)) if d.size else None
     out["per_face"] = {f: _summary(d[true_face == k]) for k, f in enumerate(faces)}
