@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
+from ectskin.learn.runtime import single_thread_session
 
 __all__ = ["ONNX_KINDS", "OnnxClassifier", "available"]
 
@@ -90,7 +91,6 @@ class OnnxClassifier:
                 "pip install 'ectskin[live]'"
             )
         # optional packages (the live extra): imported on use
-        import onnxruntime as ort
         from skl2onnx import convert_sklearn
         from skl2onnx.common.data_types import FloatTensorType
         from sklearn.ensemble import HistGradientBoostingClassifier
@@ -109,15 +109,7 @@ class OnnxClassifier:
             ).SerializeToString()
         except Exception as exc:  # the exporter raises many types; name the model
             raise EctskinError(f"{name}: export to ONNX failed: {exc}") from exc
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = 1
-        options.inter_op_num_threads = 1
-        options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-        options.log_severity_level = 3  # errors only
-        try:
-            self._session = ort.InferenceSession(proto, options, providers=["CPUExecutionProvider"])
-        except Exception as exc:  # an ONNX Runtime too old for the opset, ...; name the model
-            raise EctskinError(f"{name}: ONNX Runtime cannot load the export: {exc}") from exc
+        self._session = single_thread_session(proto, name)
         outputs = [o.name for o in self._session.get_outputs()]
         self._output = "probabilities" if "probabilities" in outputs else outputs[-1]
         self._check(estimator)

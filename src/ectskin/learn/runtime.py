@@ -44,6 +44,23 @@ def available() -> bool:
 _EXPORT_LOGGERS = ("torch.onnx", "onnxscript", "onnx_ir")
 
 
+def single_thread_session(proto: bytes, name: str = "model"):
+    """An ONNX Runtime session of the serialised model ``proto`` on one thread, sequential, CPU,
+    logging errors only: one frame at a time, beside the engine's other work. A model the
+    runtime cannot load (an opset too new, ...) is an error naming ``name``."""
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1
+    options.inter_op_num_threads = 1
+    options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    options.log_severity_level = 3  # errors only
+    try:
+        return ort.InferenceSession(proto, options, providers=["CPUExecutionProvider"])
+    except Exception as exc:  # the runtime raises many types; name the model
+        raise EctskinError(f"{name}: ONNX Runtime cannot load the export: {exc}") from exc
+
+
 @contextlib.contextmanager
 def _quiet_export():
     """Keep the exporter's progress lines, warnings and log records out of the user's terminal
@@ -101,7 +118,6 @@ class OnnxModel:
                 "the ONNX runtime needs onnxruntime and onnxscript: pip install 'ectskin[live]' "
                 "(or answer with --runtime torch)"
             )
-        import onnxruntime as ort
 
         t0 = time.perf_counter()
         self.name = name
@@ -118,12 +134,7 @@ class OnnxModel:
             proto = program.model_proto.SerializeToString()
         except Exception as exc:  # the exporter raises many types; name the model
             raise EctskinError(f"{name}: export to ONNX failed: {exc}") from exc
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = 1
-        options.inter_op_num_threads = 1
-        options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-        options.log_severity_level = 3  # errors only
-        self._session = ort.InferenceSession(proto, options, providers=["CPUExecutionProvider"])
+        self._session = single_thread_session(proto, name)
         with torch.inference_mode():
             want = wrapped(*examples).numpy()
         got = self(*(e.numpy() for e in examples))

@@ -102,9 +102,9 @@ def train_from_recording(
     recording's trial digests and rest reference: :func:`~ectskin.learn.runfiles.data_identity`)
     and calls :func:`train`. A touch recording of one class, or windows too large for memory
     (:data:`MAX_WINDOW_BYTES`), are refused before the data set is split. An existing ``out``
-    must be a run directory (resumed) unless ``config.resume`` is False. Runs unchanged under ``torchrun`` (every rank reads the data;
-    only rank 0 writes). Returns train's summary plus ``n_train``/``n_val``/``n_test`` samples.
-    ``config`` None: ``TrainConfig()``.
+    must be a run directory (resumed) unless ``config.resume`` is False. Runs unchanged under
+    ``torchrun`` (every rank reads the data; only rank 0 writes). Returns train's summary plus
+    ``n_train``/``n_val``/``n_test`` samples. ``config`` None: ``TrainConfig()``.
     """
     config = TrainConfig() if config is None else config
     t = get_task(task)
