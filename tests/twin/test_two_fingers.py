@@ -2,8 +2,12 @@
 tuple of touches, the second finger's readout model and the simulated trials' ground truth.
 
 ``tests/data/twin_single_finger_baseline.npz`` holds the capacitance and markers of a small
-simulation (see :func:`_small`) written by the code before the second finger existed: with the
-option at 0 the twin must give the same numbers.
+simulation (see :func:`_small`) on the default path (no second finger, the hand on): with the
+option at 0 the twin must give the same numbers. It was written by the code before the second
+finger existed, and written again when the fingertips began to rest on the skin, with a cover
+that compresses, and each trial began to draw its person's finger: those change every touch
+frame on purpose. The trial without contact (no finger) and every trial's markers (the finger's
+placement moves no marker) stayed bit for bit what they were.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import numpy as np
 import pytest
 
 from ectskin import EctskinError
+from ectskin.electrostatics import Panels, maxwell_capacitance
 from ectskin.layout import default_layout
 from ectskin.twin import Protocol, SensorModel, Touch, plan_trials, simulate_experiment
 from ectskin.twin.human import finger_path, hand_push, second_finger_path
@@ -54,7 +59,8 @@ def two_finger_rec():
 
 # ------------------------------------------------------------------------------ protocol
 def test_second_finger_at_zero_gives_the_earlier_numbers(one_finger_rec):
-    """The option at 0 (default) reproduces the simulation of the code before it existed."""
+    """The option at 0 (default) reproduces the stored simulation (the module docstring says
+    when it was written and what changed it)."""
     rec = one_finger_rec
     base = np.load(BASELINE)
     cap = np.stack([t.capacitance for t in rec.trials])
@@ -91,9 +97,9 @@ def test_second_fingers_follow_the_placement_rule(layout):
         faces.add(same)
         if same:
             gap = np.linalg.norm(np.asarray(p.touch_uv_mm) - p.second_uv_mm, axis=1).min()
-            assert (
-                gap >= finger_separation_mm(base) == 2 * base.finger_radius_mm + 4 * base.slide_mm
-            )
+            # the widest finger drawn (people differ: radii up to 10 mm) never overlaps
+            hi = base.finger_radius_range_mm[1]
+            assert gap >= finger_separation_mm(base) == 2 * hi + 4 * base.slide_mm
     assert faces == {True, False}  # both the same and the other face occur
     strip = {"second_surface": None, "second_region": 0, "second_uv_mm": None}
     assert [dataclasses.replace(p, **strip) for p in plans] == plans0
@@ -115,6 +121,11 @@ def test_the_second_finger_lands_late_and_leaves_early():
     assert np.all(path.force_n[off] == 0) and np.isnan(path.uv_mm[off]).all()
     assert np.all(np.abs(path.uv_mm[on] - [0.0, 60.0]) <= [5.0, 10.0])
     assert np.all(path.height_mm[on] == 0) and np.isnan(path.height_mm[off]).all()
+
+
+def test_the_placement_rule_keeps_the_protocols_own_finger_apart_without_variability():
+    same = Protocol(finger_variability=False, finger_radius_mm=9.0)
+    assert finger_separation_mm(same) == 2 * 9.0 + 4 * same.slide_mm
 
 
 # ----------------------------------------------------------------------------- mechanics
@@ -314,31 +325,13 @@ def test_the_option_leaves_the_first_finger_alone(one_finger_rec, two_finger_rec
 
 
 # ------------------------------------------------------------------------------ resting on skin
-def test_clearance_lift_by_hand(sensor):
-    """A fingertip (R 8 mm, cover 1 mm) pressed flat by 1 mm over skin at its point: flat skin
-    leaves the whole cover (no lift); skin raised 0.8 mm under the pad leaves 0.2 mm, 0.3 mm less
-    than half the cover (lift 0.3); the same rise beyond the fingertip's radius is no concern."""
-    fg = sensor.finger
-    assert (fg.radius_mm, fg.skin_cover_mm) == (8.0, 1.0)
-    p, n = np.zeros(3), np.array([0.0, 0.0, 1.0])
-    height = fg.radius_mm + fg.skin_cover_mm - 1.0  # the centre above p, pad flat by 1 mm
-    flat = np.array([[2.0, 0.0, 0.0], [0.0, -6.0, 0.0]])
-    assert sensor._clearance_lift(p, n, flat, height, 1.0) == 0.0
-    bump = np.array([[2.0, 0.0, 0.8], [0.0, -6.0, 0.0]])
-    assert sensor._clearance_lift(p, n, bump, height, 1.0) == pytest.approx(0.3)
-    # on the sphere beyond the pad: r = 7 mm, lower surface at height - sqrt(64 - 49) above p
-    beside = np.array([[7.0, 0.0, 3.8]])
-    clearance = height - np.sqrt(64 - 49) - 3.8  # 0.327 mm
-    assert sensor._clearance_lift(p, n, beside, height, 1.0) == pytest.approx(0.5 - clearance)
-    assert sensor._clearance_lift(p, n, np.array([[9.0, 0.0, 5.0]]), height, 1.0) == 0.0
-
-
 def test_a_fingertip_the_skin_reaches_into_rests_on_it(sensor):
     """A frame of a simulated two-finger trial at 20/20/20 ml (seed 0's contact experiment with
     the hand off) where a chamber's bulge under the back finger's pad came within 0.07 mm of a
-    wire: the method of moments failed, with the fingertip refined too. Resting the finger on
-    the skin solves it, and the readout stays near the frames around it (a lift of a fraction of
-    a millimetre)."""
+    wire while the fingertips were placed along the normal at their points: the method of
+    moments failed, with the fingertip refined too. Resting on the skin (every frame now), it
+    solves with the default fingertip, the skin keeps the cover under both pads, and the readout
+    stays near the same fingers 10 % lighter."""
     infl = (20.0, 20.0, 20.0)
     touch = (
         Touch("back", (15.243184552839152, 49.63840443854273)),
@@ -350,14 +343,71 @@ def test_a_fingertip_the_skin_reaches_into_rests_on_it(sensor):
     )
     handling = Handling(shear_n=shear)
     pe = sensor.electrode_panels(infl, touch, forces, handling)[0]
-    from ectskin.electrostatics import Panels
-
-    fine = 2 * sensor.discretisation.finger_sphere_n
-    placed = sensor.finger_panels(infl, touch, forces, handling, sphere_n=fine)[0]
-    with pytest.raises(EctskinError, match="not positive definite"):
-        sensor._readout(Panels.concatenate([pe, placed]), (None, None))
+    placed = sensor.finger_panels(infl, touch, forces, handling)[0]
+    # the default fingertip and the wires: the collocation matrix is positive definite
+    maxwell_capacitance(Panels.concatenate([pe, placed]), sensor.eps_r)
+    # every wire panel keeps most of the cover to the fingers' panels (0.07 mm before)
+    gap = np.min(np.linalg.norm(pe.centres[:, None] - placed.centres[None], axis=2))
+    assert gap > 0.5 * sensor.finger.skin_cover_mm, gap
     c = sensor.capacitance(infl, touch, forces, handling)[0]
     assert np.isfinite(c).all() and (c > 0).all()
-    # beside it: the same fingers 10 % lighter, placed as usual (no failure there)
     near = sensor.capacitance(infl, touch, 0.9 * forces, handling)[0]
     assert np.abs(c - near).max() < 0.1 * np.abs(near).max()
+
+
+# ------------------------------------------------------------------------------ people differ
+def test_each_trial_is_touched_by_its_own_finger(one_finger_rec, two_finger_rec, sensor):
+    """Per touch trial a fingertip radius and pulp modulus drawn in the protocol's ranges, on the
+    fingers axis; none for a trial without contact; the second finger draws its own and leaves
+    the first finger's alone."""
+    proto = _small()
+    lo_r, hi_r = proto.finger_radius_range_mm
+    lo_e, hi_e = proto.finger_modulus_range_mpa
+    touch = [t for t in one_finger_rec.trials if t.meta["kind"] == "touch"]
+    for t in touch:
+        assert t.finger_radius_mm.shape == t.finger_modulus_mpa.shape == (1,)
+        assert lo_r <= t.finger(0).radius_mm <= hi_r and lo_e <= t.finger(0).modulus_mpa <= hi_e
+    assert touch[0].finger_radius_mm[0] != touch[1].finger_radius_mm[0]  # people differ
+    rest = one_finger_rec.trials[0]
+    assert rest.meta["kind"] == "no_contact" and rest.finger_radius_mm is None
+    for a, b in zip(one_finger_rec.trials, two_finger_rec.trials):
+        if b.n_fingers == 2:
+            assert np.array_equal(b.finger_radius_mm[:1], a.finger_radius_mm)
+            assert np.array_equal(b.finger_modulus_mpa[:1], a.finger_modulus_mpa)
+            assert lo_r <= b.finger(1).radius_mm <= hi_r and lo_e <= b.finger(1).modulus_mpa <= hi_e
+            assert b.finger_radius_mm[1] != b.finger_radius_mm[0]
+
+
+def test_a_trial_solves_with_its_drawn_finger_and_nothing_else_changes(one_finger_rec, sensor):
+    """The trial simulated with the option off on a sensor whose finger is the one the trial drew
+    is the same trial bit for bit: the draw goes into the solves, and it comes from a stream of
+    its own (every other draw of the trial stays)."""
+    from ectskin.twin.finger import Finger
+    from ectskin.twin.simulate import simulate_trial
+
+    proto = _small()
+    plan = next(p for p in plan_trials(proto, sensor.layout) if p.kind == "touch")
+    on = next(t for t in one_finger_rec.trials if t.name == plan.name)
+    drawn = Finger(radius_mm=on.finger(0).radius_mm, pulp_modulus_mpa=on.finger(0).modulus_mpa)
+    off = dataclasses.replace(proto, finger_variability=False, finger_radius_mm=drawn.radius_mm)
+    drift = np.random.default_rng([proto.seed, 2]).uniform(0, 2 * np.pi, sensor.layout.n_pairs)
+    again = simulate_trial(plan, off, sensor.with_fingers(drawn), drift)
+    assert np.array_equal(again.capacitance, on.capacitance)
+    assert np.array_equal(again.markers, on.markers, equal_nan=True)
+    assert np.array_equal(again.force, on.force)
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("finger_radius_range_mm", (10.0, 7.0)),
+        ("finger_radius_range_mm", (1.0, 7.0)),
+        ("finger_radius_range_mm", (7.0,)),
+        ("finger_modulus_range_mpa", (0.0, 0.2)),
+        ("finger_modulus_range_mpa", (0.05, float("nan"))),
+        ("finger_variability", "yes"),
+    ],
+)
+def test_protocol_refuses_finger_ranges_that_are_not_ranges(field, value):
+    with pytest.raises(EctskinError, match=f"protocol: {field} must be"):
+        Protocol(**{field: value})

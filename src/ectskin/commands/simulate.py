@@ -49,7 +49,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, default=30.0, help="trial duration, s (default 30)")
     p.add_argument("--fps", type=float, default=30.0, help="frame rate, Hz (default 30)")
     p.add_argument(
-        "--finger-radius", type=float, default=8.0, help="fingertip radius, mm (default 8)"
+        "--finger-radius",
+        type=float,
+        default=None,
+        help="one fingertip radius for every finger, mm (default: each trial draws its fingers' "
+        "radius, 7-10 mm, and pulp modulus)",
     )
     p.add_argument(
         "--snr-db",
@@ -110,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
         touch_trials=args.touch_trials,
         duration_s=args.duration,
         frame_rate_hz=args.fps,
-        finger_radius_mm=args.finger_radius,
+        finger_radius_mm=8.0 if args.finger_radius is None else args.finger_radius,
+        finger_variability=args.finger_radius is None,
         lifts=args.lifts,
         touch_placement=args.placement,
         touch_dwells=args.dwells,

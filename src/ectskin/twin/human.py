@@ -15,7 +15,7 @@ as in the paper. Its
   the region (assumed: 0.5 mm, 3 s: the pressed pad rolls and creeps, it does not wander);
 * pushes a little off-axis: a tangential force ``shear_ratio`` × the normal force in a direction
   drawn per trial (assumed: up to 0.3, inside skin-on-silicone friction of μ ≈ 0.5-1);
-* contact patch grows with the force (Hertz; :class:`~ectskin.twin.sensor.Finger`).
+* contact patch grows with the force (Hertz; :class:`~ectskin.twin.finger.Finger`).
 
 **A second finger** (``Protocol.second_finger``, :func:`second_finger_path`) presses at one
 point of another region with the same force model (smooth walk, tremor), roll and slide and
@@ -29,6 +29,12 @@ down from ``approach_height_mm`` and ends with it retreating), ``hover`` (period
 at 1 to ``hover_max_mm`` instead of contact) and ``lifts`` (lift off to a few centimetres and
 press again). Frames not in contact carry force 0 and their finger height.
 
+**The fingers differ** (:func:`trial_fingers`, ``Protocol.finger_variability``, on by default):
+each trial is touched by a person's finger whose fingertip radius and pulp modulus are drawn
+uniformly from ``finger_radius_range_mm`` and ``finger_modulus_range_mpa`` (assumed: adult
+fingertips of 7-10 mm radius; pulp of 0.05-0.2 MPa under light touch); a second finger draws its
+own. Off, every finger is the protocol's (``finger_radius_mm``, the default pulp).
+
 **The hand** (manual handling, "external (manual handling) forces"): per trial it pushes at a
 random point of the body's distal half, on a face or a side, in a fixed direction across the
 body's axis (off-centre and off-axis: it bends the body both ways and twists it), with a force
@@ -37,11 +43,12 @@ that wanders smoothly between 0 and ``push_max_n``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
+from ectskin.twin.finger import Finger
 from ectskin.twin.mechanics import Handling, Touch
 
 
@@ -196,3 +203,19 @@ def hand_push(n: int, fps: float, protocol, rng, manipulator_config) -> Handling
     force = np.zeros((n, 3))
     force[:, :2] = magnitude[:, None] * direction[None, :]
     return Handling(push=point, push_force_n=force)
+
+
+def trial_fingers(protocol, base: Finger, rng) -> tuple[Finger, Finger]:
+    """The trial's first and second finger: ``base`` with a radius and a pulp modulus drawn
+    uniformly from the protocol's ranges, each finger its own (``finger_variability``); off,
+    ``base`` with the protocol's ``finger_radius_mm`` for both (nothing is drawn)."""
+    if not protocol.finger_variability:
+        same = replace(base, radius_mm=float(protocol.finger_radius_mm))
+        return same, same
+    radius = rng.uniform(*protocol.finger_radius_range_mm, 2)
+    modulus = rng.uniform(*protocol.finger_modulus_range_mpa, 2)
+    first, second = (
+        replace(base, radius_mm=float(r), pulp_modulus_mpa=float(m))
+        for r, m in zip(radius, modulus)
+    )
+    return first, second

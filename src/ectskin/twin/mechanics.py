@@ -32,6 +32,11 @@ The deformation is composed of four parts (each documented where it is computed)
    it both ways, with large rotations. A face point at section offset (x, y') moves to
    r(s) + R(s)·(x, y', 0).
 
+A finger presses its face along the face's normal as the body carries it
+(:meth:`Manipulator.face_frame`: the section frame at the point; the bulges and dimples do not
+turn the finger); :meth:`Manipulator.deform` also maps one set of points per frame, which the
+sensor uses to find the skin under a fingertip whose pad grows with the force.
+
 Several fingers: wherever a ``touch`` is taken, it may be one :class:`Touch` (the forces are then
 one per frame, shape (F,)) or a tuple of them (forces (F, T), one column per touch, or (T,) for
 one frame). Each finger dents its face and loads the rod with its own normal force (and shear,
@@ -431,7 +436,8 @@ class Manipulator:
         Parameters
         ----------
         surface : "front" | "back" | "right" | "left"
-        uv_mm : (n, 2) rest surface coordinates.
+        uv_mm : (n, 2) rest surface coordinates, the same points in every frame; or (F, n, 2),
+            a set of points per frame (a fingertip's skin under its pad moves with its force).
         inflation_ml : (n_chambers,) chamber volumes.
         touch : the finger's contact, a tuple of fingers' contacts, or None.
         force_n : scalar or (F,) touch force per frame; (F, T) for a tuple of T touches.
@@ -443,28 +449,38 @@ class Manipulator:
         """
         c = self.config
         p = self.check_inflation(inflation_ml)
-        uv = np.asarray(uv_mm, dtype=np.float64).reshape(-1, 2)
         touches, forces = touch_loads(force_n, touch)
         n_f = forces.shape[0]
+        uv = np.asarray(uv_mm, dtype=np.float64)
+        per_frame = uv.ndim == 3  # (F, n, 2): x, z below are (F, n), else (n,)
+        if per_frame and (uv.shape[0] != n_f or uv.shape[2] != 2):
+            raise EctskinError(
+                f"deform: per-frame points must be (F, n, 2) with F = {n_f} frames, got shape "
+                f"{uv.shape}"
+            )
+        if not per_frame:
+            uv = uv.reshape(-1, 2)
+        n_pts = uv.shape[-2]
         heights = self.bulge_height_mm(p)
         if surface in SIDE:
             side = SIDE[surface]
-            x = uv[:, 0]
-            z = uv[:, 1] - self._face_pull_in(x, uv[:, 1], heights)
-            offset = c.thickness_mm / 2 + self.bulge_mm(x, z, heights)  # (n,)
-            offset = np.broadcast_to(offset, (n_f, x.size)).copy()
+            x = uv[..., 0]
+            z = uv[..., 1] - self._face_pull_in(x, uv[..., 1], heights)
+            offset = c.thickness_mm / 2 + self.bulge_mm(x, z, heights)  # (n,) or (F, n)
+            offset = np.broadcast_to(offset, (n_f, n_pts)).copy()
             for k, t in enumerate(touches):  # each finger's dimple on this face
                 if t.surface != surface:
                     continue
                 depth = self.dimple_depth_mm(forces[:, k], t, p)  # (F,)
                 r2 = (x - t.uv_mm[0]) ** 2 + (z - t.uv_mm[1]) ** 2
-                offset -= depth[:, None] * np.exp(-r2 / (2 * c.dimple_sigma_mm**2))[None, :]
+                bump = np.exp(-r2 / (2 * c.dimple_sigma_mm**2))
+                offset -= depth[:, None] * (bump if per_frame else bump[None, :])
             yprime = side * offset
             xs = np.broadcast_to(x, yprime.shape)
         elif surface in ("right", "left"):
             x0 = c.width_mm / 2 * (1.0 if surface == "right" else -1.0)
-            yprime = np.broadcast_to(uv[:, 0], (n_f, uv.shape[0]))
-            z = uv[:, 1]
+            yprime = np.broadcast_to(uv[..., 0], (n_f, n_pts))
+            z = uv[..., 1]
             xs = np.full(yprime.shape, x0)
         else:
             raise EctskinError(
@@ -474,11 +490,54 @@ class Manipulator:
         zq = self.axial_position(z, p)
         # the axis and the section frame at each point's stretched axial position (per frame)
         j = np.clip(np.searchsorted(zs, zq) - 1, 0, zs.size - 2)
-        w = ((zq - zs[j]) / (zs[j + 1] - zs[j]))[None, :, None]
-        axis = (1 - w) * r[:, j] + w * r[:, j + 1]  # (F, n, 3)
-        frames = (1 - w[..., None]) * rot[:, j] + w[..., None] * rot[:, j + 1]  # (F, n, 3, 3)
+        w = (zq - zs[j]) / (zs[j + 1] - zs[j])
+        if per_frame:  # frame f's points on frame f's axis
+            w = w[..., None]
+            rows = np.arange(n_f)[:, None]
+            axis = (1 - w) * r[rows, j] + w * r[rows, j + 1]  # (F, n, 3)
+            frames = (1 - w[..., None]) * rot[rows, j] + w[..., None] * rot[rows, j + 1]
+        else:
+            w = w[None, :, None]
+            axis = (1 - w) * r[:, j] + w * r[:, j + 1]  # (F, n, 3)
+            frames = (1 - w[..., None]) * rot[:, j] + w[..., None] * rot[:, j + 1]  # (F, n, 3, 3)
         local = np.stack([xs, yprime, np.zeros_like(yprime)], axis=-1)  # (F, n, 3)
         return axis + np.einsum("fnij,fnj->fni", frames, local)
+
+    def face_frame(
+        self,
+        surface: str,
+        uv_mm,
+        inflation_ml,
+        touch: Touch | tuple[Touch, ...] | None = None,
+        force_n=0.0,
+        handling: Handling | None = None,
+    ) -> np.ndarray:
+        """(F, n, 3, 3) the face's axes at rest carried by the body's bending and twist: columns
+        the u axis, the v axis and the outward normal (front +y, back −y, right +x, left −x) at
+        each point, orthonormal. The section frame at the point's axial position; the bulges and
+        dimples are left out: the normal is the direction a finger presses the face along,
+        whatever the skin's local slope under it (:mod:`ectskin.twin.sensor`)."""
+        p = self.check_inflation(inflation_ml)
+        uv = np.asarray(uv_mm, dtype=np.float64).reshape(-1, 2)
+        if surface in SIDE:  # u along x, v along the axis
+            z = uv[:, 1] - self._face_pull_in(uv[:, 0], uv[:, 1], self.bulge_height_mm(p))
+            rest = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, SIDE[surface], 0.0]]).T
+        elif surface in ("right", "left"):  # u along y', v along the axis
+            z = uv[:, 1]
+            side = 1.0 if surface == "right" else -1.0
+            rest = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [side, 0.0, 0.0]]).T
+        else:
+            raise EctskinError(
+                f"unknown surface {surface!r}: expected front, back, right or left"
+            )
+        zs, _, rot = self.pose(force_n, touch, p, handling)
+        zq = self.axial_position(z, p)
+        j = np.clip(np.searchsorted(zs, zq) - 1, 0, zs.size - 2)
+        w = ((zq - zs[j]) / (zs[j + 1] - zs[j]))[None, :, None, None]
+        # (F, n, 3, 3) orthonormal again (interpolated rotations are not quite), columns kept
+        q, r_ = np.linalg.qr((1 - w) * rot[:, j] + w * rot[:, j + 1])
+        frames = q * np.sign(np.einsum("...ii->...i", r_))[..., None, :]
+        return frames @ rest
 
     def surface_normal(
         self, surface: str, uv_mm, inflation_ml, touch=None, force_n=0.0, handling=None, h=0.05

@@ -10,14 +10,20 @@ Every level, count, duration, noise figure and the seed is a parameter, so unsee
 in which it also presses; default 0, none). Where to: a region other than the first finger's,
 on the same face or the other one (either, 50/50, then the other if the first choice has no
 room), placed like the first finger (``touch_placement``). On the same face its aimed point is at
-least :func:`finger_separation_mm` from each of the first finger's aimed points: a finger's width
-(2 × ``finger_radius_mm``, so the two fingertips never overlap) plus 4 × ``slide_mm`` for the
-pads' roll and slide (assumed); on the other face the body lies between them and any point
-goes. It presses at one point (no dwells) and, unlike the first finger, not for the whole trial:
-it lands after a random delay and leaves before the end (:func:`ectskin.twin.human.second_finger_path`),
-so a two-finger trial holds frames with one and with two contacts. The second finger is drawn
-from its own random stream, so the option never changes the first finger, the hand or the
-trials without a second finger: at 0 every result is what it was without the option.
+least :func:`finger_separation_mm` from each of the first finger's aimed points: the widest
+finger's width (2 × the largest radius drawn, so the two fingertips never overlap) plus
+4 × ``slide_mm`` for the pads' roll and slide (assumed); on the other face the body lies between
+them and any point goes. It presses at one point (no dwells) and, unlike the first finger, not
+for the whole trial: it lands after a random delay and leaves before the end
+(:func:`ectskin.twin.human.second_finger_path`), so a two-finger trial holds frames with one and
+with two contacts. The second finger is drawn from its own random stream, so the option never
+changes the first finger, the hand or the trials without a second finger: at 0 every result is
+what it was without the option.
+
+**People differ** (``finger_variability``, on by default): each touch trial's fingers draw
+their fingertip radius and pulp modulus from ``finger_radius_range_mm`` and
+``finger_modulus_range_mpa`` (:func:`ectskin.twin.human.trial_fingers`), from the trial's own
+stream, so switching it off changes nothing else of the trial.
 
 **Size.** The twin holds a whole recording in memory, so one simulated experiment is bounded
 (:func:`check_recording_size`, called by :func:`plan_trials` and by ``ectskin simulate`` before
@@ -89,7 +95,13 @@ class Protocol:
     touch_margin: float = 0.15  # keep touches this fraction of the region size inside each edge
     touch_dwells: int = 1  # finger placements per touch trial: it slides to a new point D-1 times
     lifts: bool = False  # lift the finger now and then (lift and re-press), per-frame labels
-    finger_radius_mm: float = 8.0  # (assumed)
+    finger_radius_mm: float = 8.0  # (assumed) every fingertip's radius without finger_variability
+    # people differ (ectskin.twin.human.trial_fingers): each trial's fingers (the second its own)
+    # draw their fingertip radius and pulp modulus uniformly from these ranges (assumed: adult
+    # fingertips; pulp under light touch); off: finger_radius_mm and the default pulp (0.1 MPa)
+    finger_variability: bool = True
+    finger_radius_range_mm: tuple[float, float] = (7.0, 10.0)
+    finger_modulus_range_mpa: tuple[float, float] = (0.05, 0.2)
     force_nodes: int = 5  # MoM solves per touch trial (Chebyshev nodes in force)
     # fraction of touch trials (drawn from the seed) in which a second finger also presses a
     # different region for part of the trial (see the module docstring); 0 = never
@@ -165,6 +177,15 @@ class Protocol:
                 f"protocol: finger_radius_mm must be a fingertip's radius, 2 to 30 mm, got "
                 f"{self.finger_radius_mm!r}"
             )
+        if not isinstance(self.finger_variability, bool):
+            raise EctskinError(
+                f"protocol: finger_variability must be True or False, got "
+                f"{self.finger_variability!r}"
+            )
+        _check_range("finger_radius_range_mm", self.finger_radius_range_mm, 2.0, 30.0,
+                     "fingertip radii (mm)")
+        _check_range("finger_modulus_range_mpa", self.finger_modulus_range_mpa, 0.0, 10.0,
+                     "pulp moduli (MPa)", low_open=True)
         x = self.second_finger
         if isinstance(x, bool) or not isinstance(x, int | float) or not 0.0 <= x <= 1.0:
             raise EctskinError(
@@ -211,7 +232,8 @@ class Protocol:
                 if k in m:
                     m[k] = tuple(m[k])
             d["mocap"] = MocapConfig(**m)
-        for k in ("levels_ml", "force_range_n", "tremor_hz"):
+        for k in ("levels_ml", "force_range_n", "tremor_hz", "finger_radius_range_mm",
+                  "finger_modulus_range_mpa"):
             if k in d:
                 d[k] = tuple(d[k])
         return cls(**d)
@@ -228,6 +250,24 @@ def _check_whole(
         upto = f" to {high_is} ({high})" if high is not None else " or more"
         raise EctskinError(
             f"protocol: {name} must be a whole number from {low}{upto}, got {value!r}"
+        )
+
+
+def _check_range(
+    name: str, value: Any, low: float, high: float, what: str, low_open: bool = False
+) -> None:
+    """Refuse a protocol range that is not two numbers ``low`` <= a <= b <= ``high`` (a > low
+    with ``low_open``)."""
+    ok = isinstance(value, tuple | list) and len(value) == 2
+    if ok:
+        a, b = value
+        ok = all(isinstance(x, int | float) and not isinstance(x, bool) for x in (a, b))
+        ok = ok and bool(np.isfinite([a, b]).all()) and (a > low if low_open else a >= low)
+        ok = ok and a <= b <= high
+    if not ok:
+        bound = f"{low} < low" if low_open else f"{low} <= low"
+        raise EctskinError(
+            f"protocol: {name} must be two {what}, {bound} <= high <= {high}, got {value!r}"
         )
 
 
@@ -297,9 +337,16 @@ def region_bounds(region, margin: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def finger_separation_mm(protocol: Protocol) -> float:
-    """Least distance (mm) between the two fingers' aimed points on one face: a finger's width
-    plus room for both pads' roll and slide (4 × ``slide_mm``, assumed)."""
-    return 2.0 * protocol.finger_radius_mm + 4.0 * protocol.slide_mm
+    """Least distance (mm) between the two fingers' aimed points on one face: the width of the
+    widest finger the protocol draws (``finger_radius_range_mm``'s high end with
+    ``finger_variability``, else ``finger_radius_mm``) plus room for both pads' roll and slide
+    (4 × ``slide_mm``, assumed)."""
+    radius = (
+        protocol.finger_radius_range_mm[1]
+        if protocol.finger_variability
+        else protocol.finger_radius_mm
+    )
+    return 2.0 * radius + 4.0 * protocol.slide_mm
 
 
 def _placements(reg, protocol: Protocol, rng, n: int) -> np.ndarray:

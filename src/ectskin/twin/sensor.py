@@ -15,19 +15,15 @@ body's resistance is negligible at the readout's frequencies, and its capacitanc
 surroundings is far larger than the sensor's), so they share one potential (0 V, like the other
 electrodes) and one conductor index (``n_electrodes``).
 
-The fingertip is placed at its point along the surface normal; the skin beside that point is
-not consulted, and the chambers' bulges under a wide pad can reach into the fingertip (the
-clearances measured in one simulation are in BENCHMARKS.md). Usually the method of moments still
-solves; where a wire panel comes within a fraction of a panel of the finger's it does not, even
-with a refined fingertip. There, and only there, the finger rests on the skin instead: it is
-lifted until the skin under its pad keeps half the sealing cover (:data:`MIN_COVER_FRACTION` of
-``Finger.skin_cover_mm``: the cover compresses, it does not vanish) below it
-(:meth:`SensorModel.finger_panels`, ``rest_on_skin``). Placing every finger so would be the
-consistent model; it changes every touch frame and is left for a later change of the twin.
+Every fingertip rests on the deformed skin (:mod:`ectskin.twin.finger`: the contact law, the
+cover under the pad and the fingertip's shape); :meth:`SensorModel.fingertips` says where, and
+its panels follow it (:meth:`SensorModel.finger_panels`). :meth:`SensorModel.with_fingers` gives
+a sensor with other fingers (people's differ) cheaply.
 """
 
 from __future__ import annotations
 
+import copy
 import logging
 from dataclasses import dataclass
 
@@ -44,17 +40,10 @@ from ectskin.electrostatics import (
 )
 from ectskin.electrostatics.meshing import orthonormal_frame, rectangle_quads, strip_quads
 from ectskin.layout import SensorLayout
+from ectskin.twin.finger import Finger, Fingertip, flatten_cap, rest_fingertips
 from ectskin.twin.mechanics import Handling, Manipulator, Touch, touch_loads
 
 log = logging.getLogger(__name__)
-
-#: the least clearance between the fingertip and the skin under it, as a fraction of the sealing
-#: cover (``Finger.skin_cover_mm``) (assumed: the silicone compresses at most to half)
-MIN_COVER_FRACTION = 0.5
-#: where the skin under a fingertip is sampled: rings at these fractions of its radius ...
-_UNDER_PAD_RINGS = (0.25, 0.5, 0.75, 0.95)
-#: ... with this many points each
-_UNDER_PAD_POINTS = 12
 
 
 @dataclass(frozen=True)
@@ -91,36 +80,6 @@ class Discretisation:
             self.cavity_cell_mm / factor,
             self.cavity_layers * factor,
         )
-
-
-@dataclass(frozen=True)
-class Finger:
-    """The grounded finger: a fingertip (hemisphere) on a shaft (cylinder), both radius R."""
-
-    radius_mm: float = 8.0  # (assumed) adult fingertip
-    shaft_length_mm: float = 50.0
-    skin_cover_mm: float = 1.0  # (assumed) sealing layer between the wires and the finger
-    # (assumed) effective contact modulus E* of the fingertip pulp: soft tissue of ~0.05-0.2 MPa
-    # under light touch; with R = 8 mm a 2 N press flattens a disc of ~4 mm radius
-    pulp_modulus_mpa: float = 0.1
-
-    def __post_init__(self) -> None:
-        for name in ("radius_mm", "shaft_length_mm", "pulp_modulus_mpa"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
-                raise EctskinError(f"finger: {name} must be a positive number, got {v!r}")
-        if not (np.isfinite(self.skin_cover_mm) and self.skin_cover_mm >= 0):
-            raise EctskinError(f"finger: skin_cover_mm must be >= 0, got {self.skin_cover_mm!r}")
-
-    def indentation_mm(self, force_n: float) -> float:
-        """Hertz indentation δ = (9F² / (16 R E*²))^(1/3) of the pulp (mm), capped at R/2."""
-        f = max(float(force_n), 0.0)
-        d = (9 * f**2 / (16 * self.radius_mm * self.pulp_modulus_mpa**2)) ** (1 / 3)
-        return min(d, self.radius_mm / 2)
-
-    def contact_radius_mm(self, force_n: float) -> float:
-        """Hertz contact radius a = √(R δ) (mm)."""
-        return float(np.sqrt(self.radius_mm * self.indentation_mm(force_n)))
 
 
 def _planar(quads3: np.ndarray) -> np.ndarray:
@@ -190,6 +149,7 @@ class SensorModel:
         self.discretisation = discretisation or Discretisation()
         self.eps_r = float(eps_r)
         self.finger = finger or Finger()
+        self._more_fingers: tuple[Finger, ...] = ()  # the other touches' (with_fingers)
         if chamber_eps_r is not None and not (np.isfinite(chamber_eps_r) and chamber_eps_r >= 1.0):
             raise EctskinError(
                 f"chamber_eps_r must be None (one homogeneous medium) or a relative permittivity "
@@ -246,6 +206,45 @@ class SensorModel:
             for parts in per_force
         ]
 
+    def with_fingers(self, *fingers: Finger) -> SensorModel:
+        """This sensor with other fingers, cheaply: a shallow copy sharing the rest-state panels
+        and the manipulator (its pose cache too). Touch k of a tuple of touches is
+        ``fingers[k]`` (the last one for any beyond); one finger for every touch by default."""
+        if not fingers or not all(isinstance(f, Finger) for f in fingers):
+            raise EctskinError(
+                f"with_fingers: expected one or more Finger, got {fingers!r:.80}"
+            )
+        out = copy.copy(self)
+        out.finger, out._more_fingers = fingers[0], tuple(fingers[1:])
+        return out
+
+    def finger_of(self, k: int) -> Finger:
+        """The finger of touch ``k`` (:meth:`with_fingers`)."""
+        more = self._more_fingers
+        return self.finger if k == 0 or not more else more[min(k, len(more)) - 1]
+
+    def fingertips(
+        self,
+        inflation_ml,
+        touch: Touch | tuple[Touch, ...],
+        forces,
+        handling: Handling | None = None,
+        *,
+        heights_mm=None,
+    ) -> list[Fingertip]:
+        """Where each fingertip rests in each frame (one :class:`Fingertip` per touch).
+
+        Every fingertip rests on the skin under its whole pad, as deformed by all the loads
+        (:mod:`ectskin.twin.finger`: the contact law); ``heights_mm`` > 0 lifts it that far above.
+        """
+        forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
+        touches, per_touch = touch_loads(forces, touch)
+        heights = _heights(heights_mm, per_touch.shape)
+        fingers = [self.finger_of(k) for k in range(len(touches))]
+        return rest_fingertips(
+            self.manipulator, fingers, inflation_ml, touch, forces, per_touch, heights, handling
+        )
+
     def finger_panels(
         self,
         inflation_ml,
@@ -255,68 +254,30 @@ class SensorModel:
         *,
         heights_mm=None,
         sphere_n: int | None = None,
-        rest_on_skin: bool = False,
     ) -> list[Panels]:
-        """The grounded finger on (or above) the deformed skin at each force (conductor n_el).
-
-        ``rest_on_skin``: lift each fingertip clear of the skin under its pad (module docstring).
+        """The grounded finger resting on (or above) the deformed skin at each force (conductor
+        n_el), placed by :meth:`fingertips`.
 
         In contact (height 0) the fingertip's pulp flattens against the skin: the sphere's cap
-        beyond the contact plane is pressed flat, a disc of the Hertz radius a = √(R δ) with the
-        indentation δ = (9F² / (16 R E*²))^(1/3) (:attr:`Finger.pulp_modulus_mpa`), so the
-        contact patch grows with force. Above the skin (``heights_mm`` > 0, force 0) the round
-        fingertip hovers that far above the skin's surface.
+        beyond the plane R − δ below its centre is pressed onto that plane (a disc of radius
+        √(δ (2R − δ)); :func:`~ectskin.twin.finger.flatten_cap`), δ the Hertz indentation
+        (9F² / (16 R E*²))^(1/3) (:attr:`Finger.pulp_modulus_mpa`), so the contact patch grows
+        with force. Above the skin (``heights_mm`` > 0, force 0) the round fingertip hovers that
+        far above the skin under it.
 
         With a tuple of T touches (``forces`` and ``heights_mm`` (F, T)) each frame's panels are
         every finger's, all on the one finger conductor (see the module docstring), each placed
         on the skin as deformed by all of them.
         """
-        forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
-        touches, per_touch = touch_loads(forces, touch)
-        heights = _heights(heights_mm, per_touch.shape)
-        fingers = [
-            self._one_finger(
-                inflation_ml,
-                touch,
-                t,
-                forces,
-                per_touch[:, k],
-                heights[:, k],
-                handling,
-                sphere_n,
-                rest_on_skin,
-            )
-            for k, t in enumerate(touches)
-        ]
+        tips = self.fingertips(inflation_ml, touch, forces, handling, heights_mm=heights_mm)
+        fingers = [self._tip_panels(tip, sphere_n) for tip in tips]
         if len(fingers) == 1:
             return fingers[0]
         return [Panels.concatenate(parts) for parts in zip(*fingers)]
 
-    def _one_finger(
-        self,
-        inflation_ml,
-        touch,
-        one: Touch,
-        forces,
-        force_one,
-        heights_one,
-        handling,
-        sphere_n,
-        rest_on_skin,
-    ) -> list[Panels]:
-        """Panels of the finger at ``one`` (forces ``force_one`` (F,), heights (F,)) per frame,
-        on the skin deformed by all of ``touch`` (forces ``forces``)."""
-        fg, d = self.finger, self.discretisation
-        uv = np.asarray([one.uv_mm])
-        pts = self.manipulator.deform(one.surface, uv, inflation_ml, touch, forces, handling)[:, 0]
-        nrm = self.manipulator.surface_normal(
-            one.surface, uv, inflation_ml, touch, forces, handling
-        )[:, 0]
-        ring: list[np.ndarray | None] | np.ndarray = [None] * len(pts)
-        if rest_on_skin:  # (F, m, 3): the skin under the pad
-            ring = self.manipulator.deform(
-                one.surface, self._under_pad(one), inflation_ml, touch, forces, handling
-            )
+    def _tip_panels(self, tip: Fingertip, sphere_n: int | None) -> list[Panels]:
+        """Panels of one fingertip and its shaft, per frame."""
+        fg, d = tip.finger, self.discretisation
         out = []
         cond = self.n_electrodes
         # the fingertip: the half of a cubed sphere facing the skin, chosen once in the sphere's
@@ -326,18 +287,13 @@ class SensorModel:
         # of ~0.1 % in the readout)
         unit = sphere_panels(np.zeros(3), fg.radius_mm, sphere_n or d.finger_sphere_n, cond)
         keep = unit.centres[:, 2] < -1e-6 * fg.radius_mm
-        for p, n, force, height, skin in zip(pts, nrm, force_one, heights_one, ring):
-            depth = fg.indentation_mm(force) if height <= 0 else 0.0
-            above = fg.radius_mm + fg.skin_cover_mm + max(height, 0.0) - depth  # centre over p
-            if skin is not None:
-                above += self._clearance_lift(p, n, skin, above, depth)
-            centre = p + n * above
+        for n, centre, depth in zip(tip.axis, tip.centre_mm, tip.pad_depth_mm):
             e1, e2 = orthonormal_frame(n)
             rot = np.stack([e1, e2, n], axis=1)  # local (x, y, z) -> world, z onto n
-            c_loc, u_loc, v_loc = _flatten_cap(
+            c_loc, u_loc, v_loc = flatten_cap(
                 unit.centres[keep], unit.u[keep], unit.v[keep], fg.radius_mm - depth
             )
-            tip = Panels(
+            panels = Panels(
                 centre + c_loc @ rot.T, u_loc @ rot.T, v_loc @ rot.T, unit.conductor[keep], cond + 1
             )
             shaft = cylinder_panels(
@@ -349,42 +305,8 @@ class SensorModel:
                 cond,
                 caps=False,
             )
-            out.append(Panels.concatenate([tip, shaft]))
+            out.append(Panels.concatenate([panels, shaft]))
         return out
-
-    def _under_pad(self, one: Touch) -> np.ndarray:
-        """(m, 2) rest surface points under the fingertip of ``one`` (rings around its point,
-        kept on the face)."""
-        c = self.manipulator.config
-        r = self.finger.radius_mm * np.repeat(_UNDER_PAD_RINGS, _UNDER_PAD_POINTS)
-        ang = np.tile(
-            np.linspace(0, 2 * np.pi, _UNDER_PAD_POINTS, endpoint=False), len(_UNDER_PAD_RINGS)
-        )
-        uv = np.asarray(one.uv_mm) + r[:, None] * np.c_[np.cos(ang), np.sin(ang)]
-        half = (c.width_mm if one.surface in ("front", "back") else c.thickness_mm) / 2
-        uv[:, 0] = np.clip(uv[:, 0], -half, half)
-        uv[:, 1] = np.clip(uv[:, 1], 0.0, c.length_mm)
-        return uv
-
-    def _clearance_lift(
-        self, p: np.ndarray, n: np.ndarray, skin: np.ndarray, height: float, depth: float
-    ) -> float:
-        """How far (mm, >= 0) to lift a fingertip centred ``height`` above ``p`` along ``n`` (its
-        pad pressed flat by ``depth``) so that the skin points ``skin`` (m, 3) under it stay at
-        least :data:`MIN_COVER_FRACTION` of the cover below its surface."""
-        fg = self.finger
-        rel = skin - p
-        up = rel @ n  # how far each skin point rises toward the finger
-        lateral = np.linalg.norm(rel - up[:, None] * n, axis=1)
-        inside = lateral < fg.radius_mm
-        if not inside.any():
-            return 0.0
-        r = lateral[inside]
-        # the tip's lower surface above p at lateral distance r: the flat pad, then the sphere
-        below = np.minimum(fg.radius_mm - depth, np.sqrt(fg.radius_mm**2 - r**2))
-        clearance = height - below - up[inside]
-        need = MIN_COVER_FRACTION * fg.skin_cover_mm - clearance.min()
-        return float(need) if need > 0 else 0.0
 
     def cavity_cells(
         self, inflation_ml, touch: Touch | tuple[Touch, ...] | None, forces,
@@ -483,32 +405,19 @@ class SensorModel:
                 out[f] = self._readout(Panels.concatenate([pe, pf]), (pts[f], vols[f]))
             except EctskinError:
                 # a coarse fingertip panel very close to a fine wire-end panel can make the
-                # collocation matrix indefinite: refine the fingertip and solve again; where
-                # that fails too the skin reaches into the fingertip: rest it on the skin
+                # collocation matrix indefinite: refine the fingertip and solve again
+                log.debug("refining the fingertip at %s, %s N", touch, forces[f])
                 one = None if handling is None else _handling_rows(handling, f)
                 h = None if heights_mm is None else np.atleast_1d(heights_mm)[f : f + 1]
-                for rest in (False, True):
-                    log.debug(
-                        "refining the fingertip at %s, %s N (rest on skin: %s)",
-                        touch,
-                        forces[f],
-                        rest,
-                    )
-                    pf = self.finger_panels(
-                        inflation_ml,
-                        touch,
-                        forces[f : f + 1],
-                        one,
-                        heights_mm=h,
-                        sphere_n=2 * self.discretisation.finger_sphere_n,
-                        rest_on_skin=rest,
-                    )[0]
-                    try:
-                        out[f] = self._readout(Panels.concatenate([pe, pf]), (pts[f], vols[f]))
-                        break
-                    except EctskinError:
-                        if rest:
-                            raise
+                pf = self.finger_panels(
+                    inflation_ml,
+                    touch,
+                    forces[f : f + 1],
+                    one,
+                    heights_mm=h,
+                    sphere_n=2 * self.discretisation.finger_sphere_n,
+                )[0]
+                out[f] = self._readout(Panels.concatenate([pe, pf]), (pts[f], vols[f]))
         return out
 
     def marker_positions(
@@ -526,19 +435,6 @@ class SensorModel:
             uv = np.asarray([self.layout.markers[k].uv_mm for k in idx])
             out[:, idx] = self.manipulator.deform(surface, uv, inflation_ml, touch, forces, handling)
         return out
-
-
-def _flatten_cap(centres, u, v, plane: float):
-    """Press the part of a fingertip below z = −``plane`` (its own frame, pole at −z) flat onto
-    that plane: centres are projected and the panels' edge vectors lose their z component."""
-    below = centres[:, 2] < -plane
-    if not below.any():
-        return centres, u, v
-    centres, u, v = centres.copy(), u.copy(), v.copy()
-    centres[below, 2] = -plane
-    u[below, 2] = 0.0
-    v[below, 2] = 0.0
-    return centres, u, v
 
 
 def _cavity_grid(c, cell_mm: float) -> tuple[np.ndarray, np.ndarray]:

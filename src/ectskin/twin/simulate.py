@@ -10,10 +10,15 @@ What is computed once, per trial and per frame:
 * per frame: the readout from the response model of the frame's state, the rod's equilibrium for
   the markers (vectorised over frames), and the readout and motion-capture noise models.
 
-Each trial draws from its own random stream ``(seed, index)``, so the result does not depend on
-the number of workers (:mod:`ectskin.twin.pool` runs the trials); a second finger
-(``Protocol.second_finger``) from its own, ``(seed, index, 2)``, and
-:class:`~ectskin.twin.response.SecondFingerResponse` adds its effect.
+Each trial draws from its own random stream ``(seed, 1, index)``, so the result does not depend
+on the number of workers (:mod:`ectskin.twin.pool` runs the trials); a second finger
+(``Protocol.second_finger``) from its own, ``(seed, 1, index, 2)``, and
+:class:`~ectskin.twin.response.SecondFingerResponse` adds its effect. The fingers' sizes and pulps
+(``Protocol.finger_variability``, :func:`~ectskin.twin.human.trial_fingers`) come from another,
+``(seed, 1, index, 3)``, so that switching them off leaves every other draw of the trial as it
+was; a touch trial solves with its own fingers (a shallow copy of the worker's sensor,
+:meth:`~ectskin.twin.sensor.SensorModel.with_fingers`) and records each finger's radius and
+modulus on the fingers axis (``Trial.finger_radius_mm``, ``Trial.finger_modulus_mpa``).
 """
 
 from __future__ import annotations
@@ -30,13 +35,14 @@ from ectskin import __version__
 from ectskin._check import EctskinError
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import SensorLayout, default_layout
-from ectskin.twin.human import finger_path, hand_push, second_finger_path
+from ectskin.twin.finger import Finger
+from ectskin.twin.human import finger_path, hand_push, second_finger_path, trial_fingers
 from ectskin.twin.mechanics import Handling, Manipulator, ManipulatorConfig, Touch
 from ectskin.twin.pool import run_in_workers
 from ectskin.twin.protocol import Protocol, TrialPlan, plan_trials, region_bounds
 from ectskin.twin.readout import mocap, readout
 from ectskin.twin.response import SecondFingerResponse, TouchResponse
-from ectskin.twin.sensor import Discretisation, Finger, SensorModel
+from ectskin.twin.sensor import Discretisation, SensorModel
 
 log = logging.getLogger(__name__)
 
@@ -60,8 +66,13 @@ def simulate_trial(
     surfaces: tuple[str | None, ...] = (plan.surface,)
     labels = np.zeros(n, dtype=np.int16)
     n_solves = 1
+    sizes: dict[str, np.ndarray | None] = {"finger_radius_mm": None, "finger_modulus_mpa": None}
     if plan.kind == "touch":
         assert plan.touch_uv_mm is not None  # (plan_trials gives every touch trial its points)
+        fingers = trial_fingers(
+            protocol, sensor.finger, np.random.default_rng([protocol.seed, 1, plan.index, 3])
+        )
+        trial_sensor = sensor.with_fingers(*fingers)
         reg = sensor.layout.region(plan.region)
         lo, hi = region_bounds(reg, protocol.touch_margin)
         path = finger_path(n, fps, np.asarray(plan.touch_uv_mm), lo, hi, protocol, rng)
@@ -83,7 +94,7 @@ def simulate_trial(
             seg_hand = _rows(hand, rows)
             seg2 = _rows(path2, rows) if path2 is not None else None
             c_true[rows], markers_true[rows], solves = _touch_segment(
-                sensor, p, plan, protocol, seg, seg_hand, seg2, push_dir
+                trial_sensor, p, plan, protocol, seg, seg_hand, seg2, push_dir
             )
             n_solves += solves
         # the fingers axis: finger 0, and the second finger as finger 1 (a trial of a few
@@ -91,6 +102,10 @@ def simulate_trial(
         paths = (path,) if path2 is None else (path, path2)
         surfaces = (plan.surface,) if path2 is None else (plan.surface, plan.second_surface)
         labels[path.contact] = plan.region
+        sizes = {
+            "finger_radius_mm": np.array([f.radius_mm for f in fingers[: len(paths)]]),
+            "finger_modulus_mpa": np.array([f.pulp_modulus_mpa for f in fingers[: len(paths)]]),
+        }
         truth.update(
             contact=np.stack([q.contact for q in paths], axis=1),
             finger_uv_mm=np.stack([q.uv_mm for q in paths], axis=1),
@@ -132,6 +147,7 @@ def simulate_trial(
         finger_uv_mm=truth["finger_uv_mm"],
         finger_height_mm=truth["finger_height_mm"],
         finger_surface=surfaces,
+        **sizes,
         meta=meta,
     )
 

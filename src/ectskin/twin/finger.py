@@ -1,0 +1,320 @@
+"""The finger and how it rests on the skin: the fingertip's shape, its pulp and the cover under
+it (:class:`Finger`), and where it sits in each frame (:func:`rest_fingertips`, a
+:class:`Fingertip`), which :class:`~ectskin.twin.sensor.SensorModel` turns into panels.
+
+**The contact: every fingertip rests on the skin** (:func:`rest_fingertips`), in every frame,
+state and force, and above the skin (hover) too:
+
+* *Axis.* A finger presses its face along the face's normal as the body carries it (the rod's
+  section frame at the finger's point, :meth:`~ectskin.twin.mechanics.Manipulator.face_frame`):
+  the chambers' bulges and the dimple under the pad do not turn the finger (the skin's local
+  normal tilts by up to 60° on a bulge's side wall, and a finger placed along it leaned off the
+  face).
+* *Shape.* The fingertip is a sphere of radius R whose pad is pressed flat by the Hertz
+  indentation δ (:meth:`Finger.indentation_mm`): its lower surface lies R − δ below the centre
+  out to the pad's rim ρ = √(δ (2R − δ)), then follows the sphere. Its panels are the lower half
+  of a cubed sphere with the corners beyond the pad's plane moved onto it (:func:`flatten_cap`),
+  so they follow the indentation continuously.
+* *Rest height.* The skin under the fingertip is sampled on rings about its axis (on the pad up
+  to its rim, and on the rounded rest out to 1.25 R), at lateral distances that move with the
+  pad, taken back to rest surface coordinates by Newton steps through the deformation (the
+  skin stretches, and rises steeply beside a bulge). For a sample at lateral distance r that
+  rises w along the axis above the finger's point p, the centre must be at least
+  g = w + (the lower surface's depth below the centre at r) above p, plus the cover under the
+  pad. The centre rests at τ ln Σ exp(g_i / τ) (τ = :data:`CONTACT_SMOOTHING_MM`) plus the cover
+  (and the hover height): the rest height of an exponential contact law, never below the
+  highest sample's need and smooth in force and point (a lift that switches on at a threshold
+  made steps of tens of fF in the readout).
+* *Cover.* The sealing cover (``Finger.skin_cover_mm``) under the pressed pad is a bonded thin
+  soft layer, a Winkler foundation: it compresses by the mean pressure F / (π a²) over the
+  Hertz contact disc divided by the bonded layer's compression modulus E_c = E (1 + 2 S²), S =
+  a / (2h) (:meth:`Finger.cover_mm`; E of Ecoflex 00-30, assumed).
+
+The samples are finite, so between them the skin may rise a hair into the cover; the tests
+bound that on a dense independent grid over points, inflation states and forces
+(``tests/twin/test_contact_geometry.py``).
+
+**Fingers differ.** A :class:`Finger` has its radius and pulp modulus;
+:meth:`~ectskin.twin.sensor.SensorModel.with_fingers` gives a sensor with other fingers (one per
+touch) cheaply, sharing the rest-state panels: the simulation draws each trial's
+(:func:`ectskin.twin.human.trial_fingers`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ectskin._check import EctskinError
+from ectskin.twin.mechanics import Handling, Manipulator, Touch
+
+#: the length scale (mm) of the smooth contact law that rests a fingertip on the skin under its
+#: pad (module docstring): its rest height exceeds the hard contact's by at most
+#: CONTACT_SMOOTHING_MM · ln(number of skin samples + 1) (< 0.08 mm), and is smooth in force and
+#: point
+CONTACT_SMOOTHING_MM = 0.01
+#: where the skin under a fingertip is sampled: rings about its axis on the pressed pad, at these
+#: fractions of the flat pad's radius ρ ...
+_PAD_RINGS = tuple(np.arange(1, 7) / 6)
+#: ... and rings beyond it, at ρ + t (_REACH · R − ρ) for these t ...
+_TIP_RINGS = tuple(np.arange(1, 17) / 16)
+#: ... out to this many fingertip radii (the samples beyond R keep a sample's need continuous as
+#: it leaves from under the fingertip) ...
+_REACH = 1.25
+#: ... where the sampled skin is held below a cone of this slope
+_CONE_SLOPE = 10.0
+#: ... each with this many points
+_RING_POINTS = 64
+#: Newton steps that find the rest coordinates of the skin samples, the first of them with a new
+#: Jacobian each, the rest with the last one (converged to < 1e-4 mm over the faces, inflation
+#: states and forces of the tests)
+_PLACE_STEPS = 6
+_JACOBIAN_STEPS = 2
+#: the smooth bound of the pad's indentation at R / 2 (:meth:`Finger.indentation_mm`)
+_CAP_POWER = 12
+
+
+@dataclass(frozen=True)
+class Finger:
+    """The grounded finger: a fingertip (hemisphere) on a shaft (cylinder), both radius R, and
+    the skin's sealing cover it rests on (module docstring: the contact)."""
+
+    radius_mm: float = 8.0  # (assumed) adult fingertip; people differ: 7-10 mm (Protocol)
+    shaft_length_mm: float = 50.0
+    skin_cover_mm: float = 1.0  # (assumed) sealing layer between the wires and the finger
+    # (assumed) effective contact modulus E* of the fingertip pulp: soft tissue of ~0.05-0.2 MPa
+    # under light touch; with R = 8 mm a 2 N press flattens a disc of ~5 mm radius
+    pulp_modulus_mpa: float = 0.1
+    # (assumed) Young's modulus of the cover: Ecoflex 00-30, whose 100 % modulus is about 10 psi
+    # (Smooth-On's datasheet), E ≈ 0.07 MPa; math.inf: a cover that does not compress
+    cover_modulus_mpa: float = 0.07
+    # (assumed) the cover compresses at most to (1 - this) of its thickness (a smooth bound)
+    cover_max_strain: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("radius_mm", "shaft_length_mm", "pulp_modulus_mpa"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+                raise EctskinError(f"finger: {name} must be a positive number, got {v!r}")
+        if not (np.isfinite(self.skin_cover_mm) and self.skin_cover_mm >= 0):
+            raise EctskinError(f"finger: skin_cover_mm must be >= 0, got {self.skin_cover_mm!r}")
+        v = self.cover_modulus_mpa
+        if not (isinstance(v, int | float) and v > 0 and not np.isnan(v)):
+            raise EctskinError(
+                f"finger: cover_modulus_mpa must be a positive number (MPa; inf = a cover that "
+                f"does not compress), got {v!r}"
+            )
+        if not (isinstance(self.cover_max_strain, int | float) and 0 < self.cover_max_strain < 1):
+            raise EctskinError(
+                f"finger: cover_max_strain must be a fraction in (0, 1), got "
+                f"{self.cover_max_strain!r}"
+            )
+
+    def indentation_mm(self, force_n):
+        """Hertz indentation δ = (9F² / (16 R E*²))^(1/3) of the pulp (mm), bounded by R/2.
+
+        The bound is a smooth minimum, (δ⁻¹² + (R/2)⁻¹²)^(−1/12): it changes δ by < 0.3 % below
+        three quarters of the bound and has no kink where a soft, small fingertip reaches it
+        within the force range (a hard ``min`` made a step in ∂C/∂F there). ``force_n``: a
+        number or an array (float or array back)."""
+        f = np.maximum(np.asarray(force_n, dtype=np.float64), 0.0)
+        d = (9 * f**2 / (16 * self.radius_mm * self.pulp_modulus_mpa**2)) ** (1 / 3)
+        cap = self.radius_mm / 2
+        with np.errstate(divide="ignore"):
+            out = np.where(d > 0, (d ** -_CAP_POWER + cap**-_CAP_POWER) ** (-1 / _CAP_POWER), 0.0)
+        return out if out.ndim else float(out)
+
+    def contact_radius_mm(self, force_n):
+        """Hertz contact radius a = √(R δ) (mm)."""
+        out = np.sqrt(self.radius_mm * np.asarray(self.indentation_mm(force_n)))
+        return out if out.ndim else float(out)
+
+    def cover_mm(self, force_n):
+        """The cover's thickness under the pressed pad (mm): a bonded thin layer (Winkler).
+
+        The mean pressure P = F / (π a²) over the Hertz contact disc compresses a layer of
+        thickness h bonded to the wires and pressed by the pad by the strain ε = P / E_c, with the
+        compression modulus of a bonded layer E_c = E (1 + 2 S²) and the shape factor
+        S = loaded area / free side area = π a² / (2π a h) = a / (2h) (Gent and Lindley's thin
+        bonded block). ε is bounded smoothly by ``cover_max_strain`` (ε_max tanh(ε / ε_max)).
+        Above the skin (force 0) the cover keeps its thickness."""
+        f = np.maximum(np.asarray(force_n, dtype=np.float64), 0.0)
+        h = self.skin_cover_mm
+        a2 = self.radius_mm * np.asarray(self.indentation_mm(f))  # a²
+        if h <= 0 or np.isinf(self.cover_modulus_mpa):
+            out = np.full(f.shape, h)
+        else:
+            e_c = self.cover_modulus_mpa * (1.0 + 2.0 * a2 / (4.0 * h * h))  # 1 + 2 S²
+            with np.errstate(divide="ignore", invalid="ignore"):
+                strain = np.where(a2 > 0, f / (np.pi * a2 * e_c), 0.0)
+            m = self.cover_max_strain
+            out = h * (1.0 - m * np.tanh(strain / m))
+        return out if out.ndim else float(out)
+
+
+@dataclass(frozen=True)
+class Fingertip:
+    """Where one fingertip rests in each of F frames (:func:`rest_fingertips`,
+    :meth:`~ectskin.twin.sensor.SensorModel.fingertips`).
+
+    Its solid is the sphere of ``finger.radius_mm`` about ``centre_mm`` cut flat by the plane
+    ``pad_depth_mm`` inside the sphere's lowest point, normal to ``axis`` (the pressed pad),
+    on a shaft along ``axis``; ``cover_mm`` is the cover's thickness under the pad, the least gap
+    the fingertip keeps to the skin under it along ``axis`` (plus ``height_mm`` above the skin).
+    """
+
+    finger: Finger
+    point_mm: np.ndarray  # (F, 3) the finger's point on the deformed skin
+    axis: np.ndarray  # (F, 3) unit: the face's outward normal as the body carries it there
+    centre_mm: np.ndarray  # (F, 3) the fingertip sphere's centre
+    pad_depth_mm: np.ndarray  # (F,) δ: the pad pressed flat this far (0 above the skin)
+    cover_mm: np.ndarray  # (F,) the cover's thickness under the pad
+    height_mm: np.ndarray  # (F,) above the skin (0 in contact)
+
+
+def rest_fingertips(
+    manipulator: Manipulator,
+    fingers,
+    inflation_ml,
+    touch: Touch | tuple[Touch, ...],
+    forces: np.ndarray,
+    per_touch: np.ndarray,
+    heights: np.ndarray,
+    handling: Handling | None = None,
+) -> list[Fingertip]:
+    """One :class:`Fingertip` per touch of ``touch``: ``fingers`` (one :class:`Finger` per touch),
+    ``forces`` as given to the mechanics, ``per_touch`` and ``heights`` (F, T) each finger's force
+    and height above the skin per frame; every fingertip on the skin deformed by all of them."""
+    touches = (touch,) if isinstance(touch, Touch) else tuple(touch)
+    return [
+        _rest_one(
+            manipulator, fingers[k], t, inflation_ml, touch, forces, per_touch[:, k],
+            heights[:, k], handling,
+        )
+        for k, t in enumerate(touches)
+    ]
+
+
+def _rest_one(
+    m: Manipulator, fg: Finger, one: Touch, inflation_ml, touch, forces, force_one, heights_one,
+    handling,
+) -> Fingertip:
+    """The :class:`Fingertip` of ``one`` (force (F,), height (F,) per frame) on the skin deformed
+    by all of ``touch`` (forces ``forces``)."""
+    uv = np.asarray([one.uv_mm])
+    pts = m.deform(one.surface, uv, inflation_ml, touch, forces, handling)[:, 0]  # (F, 3)
+    frame = m.face_frame(one.surface, uv, inflation_ml, touch, forces, handling)[:, 0]
+    contact = heights_one <= 0
+    depth = np.where(contact, fg.indentation_mm(force_one), 0.0)  # (F,)
+    cover = np.where(contact, fg.cover_mm(force_one), fg.skin_cover_mm)
+    rho = np.sqrt(depth * (2 * fg.radius_mm - depth))  # the flat pad's radius
+    # the skin under the fingertip: rings about its axis at lateral distances that move with the
+    # pad (each sample's need is then smooth in force; one ring on the pad's rim, where the
+    # fingertip's lower surface has its edge)
+    radii = np.concatenate(
+        [rho[:, None] * np.asarray(_PAD_RINGS)[None],
+         rho[:, None] + (_REACH * fg.radius_mm - rho)[:, None] * np.asarray(_TIP_RINGS)[None]],
+        axis=1,
+    )  # (F, rings)
+    ang = np.linspace(0, 2 * np.pi, _RING_POINTS, endpoint=False)
+    target = (radii[:, :, None, None] * np.c_[np.cos(ang), np.sin(ang)][None, None]).reshape(
+        len(pts), -1, 2
+    )  # (F, m, 2) lateral offsets along the face's axes
+    skin = _skin_at(m, one, target, pts, frame, inflation_ml, touch, forces, handling)
+    nrm = frame[..., 2]
+    above = rest_height(skin - pts[:, None], nrm, fg.radius_mm, depth)
+    lift = np.maximum(heights_one, 0.0)
+    centre = pts + nrm * (above + cover + lift)[:, None]
+    return Fingertip(fg, pts, nrm, centre, depth, cover, lift)
+
+
+def _skin_at(
+    m: Manipulator, one: Touch, target, pts, frame, inflation_ml, touch, forces, handling
+) -> np.ndarray:
+    """(F, m, 3) the deformed skin at the lateral offsets ``target`` (F, m, 2) from the points
+    ``pts`` (F, 3) along the face's carried axes ``frame`` (F, 3, 3) (u, v, normal): rest
+    coordinates found by Newton steps through the deformation (the skin stretches and rises
+    steeply beside a bulge; the flat face's map is the first guess), kept on the face."""
+    n_f, n_m = target.shape[:2]
+    e12 = frame[..., :2].transpose(0, 2, 1)  # (F, 2, 3)
+    uv0 = np.asarray(one.uv_mm)
+    h = 0.05  # the Jacobian's forward differences, mm
+    stencil = np.array([[0.0, 0.0], [h, 0.0], [0.0, h]])
+    offset = target
+    inv = np.broadcast_to(np.eye(2), (n_f, n_m, 2, 2))
+    for step in range(_PLACE_STEPS):
+        fresh = step < _JACOBIAN_STEPS  # a new Jacobian, or the last one (chord steps)
+        at = stencil if fresh else stencil[:1]
+        trial = (uv0 + offset)[:, None] + at[None, :, None]  # (F, 3 or 1, m, 2)
+        x = m.deform(
+            one.surface, trial.reshape(n_f, -1, 2), inflation_ml, touch, forces, handling
+        ).reshape(n_f, len(at), n_m, 3)
+        lat = np.einsum("fki,fsmi->fsmk", e12, x - pts[:, None, None])  # (F, 3 or 1, m, 2)
+        if fresh:
+            jac = np.stack([lat[:, 1] - lat[:, 0], lat[:, 2] - lat[:, 0]], axis=-1) / h
+            # beyond the body's ends the map stops (such points are kept on the face at the
+            # end): there a step takes the flat face's map
+            flat = np.abs(np.linalg.det(jac)) < 0.1
+            inv = np.linalg.inv(np.where(flat[..., None, None], np.eye(2), jac))
+        offset = offset + np.einsum("fmij,fmj->fmi", inv, target - lat[:, 0])
+    uv = _on_face(m, one.surface, uv0 + offset)
+    return m.deform(one.surface, uv, inflation_ml, touch, forces, handling)
+
+
+def _on_face(m: Manipulator, surface: str, uv: np.ndarray) -> np.ndarray:
+    """``uv`` (..., 2) kept on the face ``surface``."""
+    c = m.config
+    half = (c.width_mm if surface in ("front", "back") else c.thickness_mm) / 2
+    out = uv.copy()
+    out[..., 0] = np.clip(out[..., 0], -half, half)
+    out[..., 1] = np.clip(out[..., 1], 0.0, c.length_mm)
+    return out
+
+
+def flatten_cap(centres, u, v, plane: float):
+    """Press the part of a fingertip below z = −``plane`` (its own frame, pole at −z) flat onto
+    that plane: each panel's corners below it are moved up onto it, and the panel is rebuilt
+    from its corners (:meth:`~ectskin.electrostatics.Panels.from_quads`'s rule). A panel wholly
+    below lies flat on the plane; one the plane cuts bends with it, so the panels follow the
+    indentation continuously (moving whole panels by their centres made steps of ~0.5 fF in the
+    readout as the force grew)."""
+    corners = centres[:, None] + 0.5 * np.stack([-u - v, u - v, u + v, v - u], axis=1)  # (n, 4, 3)
+    if not (corners[..., 2] < -plane).any():
+        return centres, u, v
+    corners[..., 2] = np.maximum(corners[..., 2], -plane)
+    c0, c1, c2, c3 = corners.transpose(1, 0, 2)
+    cut = (corners[..., 2] == -plane).any(axis=1)  # panels the plane reaches: rebuilt
+    new_c = np.where(cut[:, None], corners.mean(axis=1), centres)
+    new_u = np.where(cut[:, None], 0.5 * ((c1 - c0) + (c2 - c3)), u)
+    new_v = np.where(cut[:, None], 0.5 * ((c3 - c0) + (c2 - c1)), v)
+    return new_c, new_u, new_v
+
+
+def rest_height(rel: np.ndarray, axis: np.ndarray, radius: float, depth: np.ndarray):
+    """(F,) how far above the finger's point a fingertip's centre rests, less the cover: the
+    smooth contact law (module docstring).
+
+    ``rel`` (F, m, 3): skin samples under the fingertip relative to its point; ``axis`` (F, 3)
+    the fingertip's unit axis; ``depth`` (F,) how far its pad is pressed flat. A sample at lateral
+    distance r that rises u along the axis needs the centre u + d(r) above the point, d(r) the
+    lower surface's depth below the centre: the flat pad's R − δ, then the sphere's √(R² − r²)
+    (their smooth minimum, never above either), and beyond R a steep cone (the skin there is no
+    concern; the cone keeps a sample's need continuous as it leaves from under the fingertip).
+    The point itself needs R − δ."""
+    up = np.einsum("fmi,fi->fm", rel, axis)  # (F, m): how far each sample rises toward the finger
+    r = np.linalg.norm(rel - up[..., None] * axis[:, None], axis=2)
+    sphere = np.sqrt(np.maximum(radius**2 - r**2, 0.0)) - _CONE_SLOPE * np.maximum(r - radius, 0)
+    pad = np.broadcast_to((radius - depth)[:, None], sphere.shape)
+    lower = -_soft_max(np.stack([-pad, -sphere]), axis=0)
+    need = np.concatenate([pad[:, :1], lower + up], axis=1)  # (F, 1 + m)
+    return _soft_max(need, axis=1)
+
+
+def _soft_max(values: np.ndarray, axis: int) -> np.ndarray:
+    """τ ln Σ exp(x / τ) along ``axis`` (τ = :data:`CONTACT_SMOOTHING_MM`): at least the
+    maximum, at most τ ln(count) above it, and smooth."""
+    tau = CONTACT_SMOOTHING_MM
+    top = values.max(axis=axis, keepdims=True)
+    out = top + tau * np.log(np.exp((values - top) / tau).sum(axis=axis, keepdims=True))
+    return np.squeeze(out, axis=axis)
