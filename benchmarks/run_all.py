@@ -39,6 +39,12 @@ BENCHMARKS = {
         ["--calls", "200", "--batch", "2000", "--max-train", "2000"],
     ),
     "bench_import": ("bench_import.py", [], ["--rows", "2000", "--repeat", "1"]),
+    "bench_field": (
+        "bench_field.py",
+        [],
+        ["--levels", "0", "--spacing", "4,4", "--window=-2,6,50,58", "--checks", "4",
+         "--workers", "1", "--rigid-checks", "1"],
+    ),
 }
 
 

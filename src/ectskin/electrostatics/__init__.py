@@ -6,6 +6,8 @@
 * :mod:`~ectskin.electrostatics.mom` — potential coefficients with exact near-field integrals,
   the Maxwell capacitance matrix by Cholesky, the ECT pair readout ``C_ij = −K_ij``, and the
   first-order sensitivity of K to a permittivity change in a volume (``dielectric_sensitivity``).
+* :mod:`~ectskin.electrostatics.schur` — build once, solve many: conductors that stay put
+  factored once (:class:`FixedConductors`), panels added to them through the Schur complement.
 * :mod:`~ectskin.electrostatics.dielectric` — conductors with dielectric bodies (boundary
   elements), near-exact panel fields, and per-voxel ECT Jacobians.
 * :mod:`~ectskin.electrostatics.reconstruct` — ECT images: LBP, Tikhonov, projected Landweber.
@@ -58,6 +60,7 @@ from ectskin.electrostatics.reconstruct import (
     normalise_sensitivity,
     peak_location,
 )
+from ectskin.electrostatics.schur import FixedConductors, potential_block
 
 __all__ = [
     "METHODS",
@@ -74,6 +77,7 @@ __all__ = [
     "peak_location",
     "permittivity_jacobian",
     "EPS0_PF_PER_MM",
+    "FixedConductors",
     "NEAR_FACTOR",
     "STRIP_PANELS_ACROSS",
     "STRIP_PANEL_LENGTH_MM",
@@ -89,6 +93,7 @@ __all__ = [
     "grid_quads",
     "maxwell_capacitance",
     "potential_integral",
+    "potential_block",
     "potential_matrix",
     "rectangle_panels",
     "rectangle_quads",

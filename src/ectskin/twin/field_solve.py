@@ -1,0 +1,170 @@
+"""The node solves of a response field (:mod:`ectskin.twin.field`), one grid row at a time.
+
+* **Contact** (the finger pressing with force F): the twin's direct solve,
+  :meth:`SensorModel.capacitance`. The finger dents the skin under it and bends the body, so
+  the electrode panels move with the point and the force and nothing of the electrode block can
+  be factored once: each node is a full method-of-moments solve. (Keeping the electrodes where
+  the untouched state has them and moving only the finger would allow the Schur path below for
+  contact too; it is off by up to a quarter of the finger's signal near the tip at 2 N, see
+  ``docs/field.md``.)
+* **Hover** (force 0, height h): a finger that does not press leaves the body as it is, so the
+  electrode panels (and the chamber cavities) are the untouched state's. They are factored once
+  per row (:class:`~ectskin.electrostatics.schur.FixedConductors`) and every finger position and
+  height adds only its own panels: the same readout as the direct solve, to round-off. That the
+  finger at force 0 moves no electrode panel is checked on every row.
+* **Untouched**: the state without a finger.
+
+Every function here is deterministic: its result depends only on its arguments (the per-row
+factor is not shared between rows), so a field is the same whichever worker solves which row.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from ectskin._check import EctskinError
+from ectskin.electrostatics import EPS0_PF_PER_MM, Panels
+from ectskin.electrostatics.schur import FixedConductors
+from ectskin.twin.field_spec import FieldSpec, physics_digest
+from ectskin.twin.mechanics import Touch
+from ectskin.twin.sensor import SensorModel
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """One unit of work: ``kind`` "untouched", or "contact" / "hover" nodes of grid column
+    ``iu`` on ``face``."""
+
+    kind: str
+    face: str = ""
+    iu: int = -1
+
+    @property
+    def name(self) -> str:
+        return "untouched" if self.kind == "untouched" else f"{self.kind}-{self.face}-u{self.iu:03d}"
+
+
+def chunks_of(spec: FieldSpec) -> list[Chunk]:
+    """The chunks of ``spec``'s field, in a fixed order."""
+    out = [Chunk("untouched")]
+    for face in spec.face_names:
+        n_u = spec.grid(face)[0].size
+        kinds = ("contact", "hover") if spec.height_nodes else ("contact",)
+        out += [Chunk(kind, face, iu) for iu in range(n_u) for kind in kinds]
+    return out
+
+
+_SENSORS: dict[str, SensorModel] = {}  # per worker process: the sensor of a spec, by key
+
+
+def solve_chunk(spec: FieldSpec, chunk: Chunk, physics: str | None = None) -> np.ndarray:
+    """The node values of one chunk (BLAS on one thread, so the result is the same anywhere).
+
+    ``physics``: the :func:`~ectskin.twin.field_spec.physics_digest` of the process that keys the
+    cache; a worker whose ectskin computes other physics refuses the chunk.
+    """
+    if physics is not None and physics != physics_digest():
+        raise EctskinError(
+            "this Dask worker's ectskin differs from the building process's (physics digest "
+            f"{physics_digest()[:12]} here, {physics[:12]} there); install the same ectskin on "
+            "the workers"
+        )
+    key = spec.key()
+    sensor = _SENSORS.get(key)
+    if sensor is None:
+        if len(_SENSORS) >= 4:
+            _SENSORS.pop(next(iter(_SENSORS)))
+        sensor = _SENSORS[key] = spec.sensor()
+    with threadpool_limits(limits=1):
+        if chunk.kind == "untouched":
+            return untouched_readout(sensor, spec.inflation_ml)
+        u = float(spec.grid(chunk.face)[0][chunk.iu])
+        v = spec.grid(chunk.face)[1]
+        if chunk.kind == "contact":
+            return contact_row(sensor, spec.inflation_ml, chunk.face, u, v, spec.forces())
+        return hover_row(sensor, spec.inflation_ml, chunk.face, u, v, spec.heights())
+
+
+# ---------------------------------------------------------------------- the rows
+def untouched_readout(sensor: SensorModel, inflation_ml) -> np.ndarray:
+    """(n_pairs,) pF: the state's readout without a finger."""
+    return sensor.capacitance(inflation_ml)[0]
+
+
+def contact_row(
+    sensor: SensorModel, inflation_ml, face: str, u_mm: float, v_mm: np.ndarray, forces_n
+) -> np.ndarray:
+    """(n_v, n_forces, n_pairs) pF: the finger pressing at (u, v_k) with each force (direct)."""
+    forces = np.asarray(forces_n, dtype=np.float64)
+    return np.stack(
+        [sensor.capacitance(inflation_ml, Touch(face, (float(u_mm), float(v))), forces) for v in v_mm]
+    )
+
+
+def hover_row(
+    sensor: SensorModel, inflation_ml, face: str, u_mm: float, v_mm: np.ndarray, heights_mm
+) -> np.ndarray:
+    """(n_v, n_heights, n_pairs) pF: the finger hovering over (u, v_k) at each height, force 0,
+    by the Schur path over the untouched electrodes (module docstring)."""
+    heights = np.asarray(heights_mm, dtype=np.float64)
+    zeros = np.zeros(heights.size)
+    base = sensor.electrode_panels(inflation_ml, None, [0.0])[0]
+    _check_unmoved(sensor, inflation_ml, Touch(face, (float(u_mm), float(v_mm[0]))), base)
+    cavities = sensor.chamber_eps_r is not None and sensor.chamber_eps_r != sensor.eps_r
+    cells = None
+    if cavities:
+        pts, vols = sensor.cavity_cells(inflation_ml, None, [0.0])
+        cells = (pts[0], vols[0])
+    solver = FixedConductors(base, sensor.eps_r, cells=cells)
+    touches = [Touch(face, (float(u_mm), float(v))) for v in v_mm]
+    fingers = [
+        sensor.finger_panels(inflation_ml, t, zeros, heights_mm=heights) for t in touches
+    ]  # n_v lists of n_heights
+    try:  # the whole row in one batch
+        flat = _readouts(sensor, solver, [p for per_v in fingers for p in per_v], cavities)
+        return flat.reshape(len(v_mm), heights.size, -1)
+    except EctskinError:
+        pass
+    out = np.empty((len(v_mm), heights.size, sensor.layout.n_pairs))
+    for k, (touch, per_v) in enumerate(zip(touches, fingers)):
+        try:
+            out[k] = _readouts(sensor, solver, per_v, cavities)
+        except EctskinError as exc:
+            # a fingertip panel too close to a wire panel: the twin's own solve refines it
+            log.debug("hover at %s: %s; solving directly", touch, exc)
+            out[k] = sensor.capacitance(inflation_ml, touch, zeros, heights_mm=heights)
+    return out
+
+
+def _readouts(
+    sensor: SensorModel, solver: FixedConductors, fingers: list[Panels], cavities: bool
+) -> np.ndarray:
+    """(len(fingers), n_pairs) C_ij = −K_ij, with the cavities' first-order term as the twin
+    adds it (:class:`SensorModel`, ``chamber_eps_r``)."""
+    n = sensor.n_electrodes
+    K, S = solver.capacitance(fingers, sensitivity_columns=n if cavities else None)
+    Kn = K[:, :n, :n]
+    if S is not None:
+        assert sensor.chamber_eps_r is not None  # (cavities says so)
+        Kn = Kn + EPS0_PF_PER_MM * (sensor.chamber_eps_r - sensor.eps_r) * S
+    pairs = sensor.layout.pairs
+    return -Kn[:, pairs[:, 0], pairs[:, 1]]
+
+
+def _check_unmoved(sensor: SensorModel, inflation_ml, touch: Touch, base: Panels) -> None:
+    """Refuse the hover path if a finger at force 0 moves the electrode panels."""
+    moved = sensor.electrode_panels(inflation_ml, touch, [0.0])[0]
+    shift = np.inf
+    if moved.n_panels == base.n_panels:
+        shift = float(np.max(np.abs(moved.centres - base.centres), initial=0.0))
+    if shift > 0.0:
+        raise EctskinError(
+            f"response field: a finger hovering at {touch} (force 0) moves the electrode panels "
+            f"(by up to {shift:.3g} mm); the hover nodes assume it leaves the body as it is"
+        )

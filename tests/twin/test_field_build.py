@@ -1,0 +1,245 @@
+"""Building response fields: the cache key, the chunk cache (resume after a kill), Dask workers.
+
+The fields here are tiny (a 2 × 2 grid, two forces, two heights): what is checked is the
+bookkeeping, not the physics (``test_field.py``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_limits
+
+from ectskin._check import EctskinError
+from ectskin.twin import (
+    Discretisation,
+    Finger,
+    ManipulatorConfig,
+    field_build,
+    field_solve,
+    field_spec,
+)
+from ectskin.twin.field_build import (
+    FIELD_FILE,
+    MANIFEST,
+    build_chunks,
+    build_field,
+    field_dir,
+    load_field,
+)
+from ectskin.twin.field_solve import chunks_of
+from ectskin.twin.field_spec import FieldSpec, physics_modules
+
+COARSE = Discretisation(
+    wire_panel_length_mm=4.0, wire_panels_across=1, pad_panels=2, finger_sphere_n=3,
+    finger_shaft_around=8, finger_shaft_along=3, cavity_cell_mm=8.0, cavity_layers=2,
+)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _blas_one_thread():
+    with threadpool_limits(limits=1):
+        yield
+
+
+@pytest.fixture(scope="module")
+def spec(layout):
+    return FieldSpec(
+        layout, (0.0, 20.0, 0.0), discretisation=COARSE, spacing_mm=(2.0, 2.0),
+        window_mm=((0.0, 2.0), (54.0, 56.0)), force_nodes=2, height_nodes=2,
+    )
+
+
+@pytest.fixture(scope="module")
+def one_go(spec, tmp_path_factory):
+    """The reference: the whole field in one build, here (no cluster)."""
+    return build_field(spec, tmp_path_factory.mktemp("one_go"), workers=0, progress=False)
+
+
+def _same(a, b) -> None:
+    np.testing.assert_array_equal(a.untouched, b.untouched)
+    for face in a.faces:
+        np.testing.assert_array_equal(a.node_values(face), b.node_values(face))
+        np.testing.assert_array_equal(a.node_values(face, "hover"), b.node_values(face, "hover"))
+
+
+# ---------------------------------------------------------------------- the spec and its key
+def test_the_key_is_stable_and_follows_every_input(spec):
+    assert spec.key() == FieldSpec.from_dict(json.loads(json.dumps(spec.to_dict()))).key()
+    assert len(spec.key()) == 64
+    changes = {
+        "inflation_ml": (0.0, 20.0, 1.0),
+        "manipulator": ManipulatorConfig(modulus_mpa=1.5),
+        "discretisation": dataclasses.replace(COARSE, finger_sphere_n=4),
+        "eps_r": 2.1,
+        "chamber_eps_r": None,
+        "finger": Finger(radius_mm=9.0),
+        "spacing_mm": (1.0, 2.0),
+        "force_range_n": (0.3, 2.5),
+        "force_nodes": 3,
+        "height_range_mm": (0.5, 10.0),
+        "height_nodes": 0,
+        "faces": ("back", "front"),
+        "window_mm": ((0.0, 2.0), (54.0, 57.0)),
+    }
+    keys = {spec.key()}
+    for name, value in changes.items():
+        keys.add(dataclasses.replace(spec, **{name: value}).key())
+    assert len(keys) == len(changes) + 1
+
+
+def test_the_key_follows_the_physics_code(spec, monkeypatch):
+    """An edit of the physics (a new digest) is a new key; the digest covers the sensor, the
+    mechanics, the rod, the electrostatics and the field's solver."""
+    mods = physics_modules()
+    for name in ("ectskin.twin.sensor", "ectskin.twin.mechanics", "ectskin.twin.rod",
+                 "ectskin.electrostatics.mom", "ectskin.electrostatics.schur",
+                 "ectskin.twin.field_solve", "ectskin.layout.layout"):
+        assert name in mods
+    assert "ectskin.twin.field" not in mods  # the interpolation is rebuilt at load
+    before = spec.key()
+    monkeypatch.setattr(field_spec, "physics_digest", lambda: "0" * 64)
+    assert spec.key() != before
+
+
+def test_a_non_finite_setting_round_trips(spec):
+    stiff = dataclasses.replace(spec, finger=Finger(cover_modulus_mpa=float("inf")))
+    again = FieldSpec.from_dict(json.loads(json.dumps(stiff.to_dict())))
+    assert again.finger.cover_modulus_mpa == float("inf") and again.key() == stiff.key()
+
+
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        ({"inflation_ml": (0.0, 20.0)}, "inflation|chamber"),
+        ({"spacing_mm": (0.0, 1.0)}, "spacing_mm"),
+        ({"force_range_n": (2.0, 1.0)}, "force_range_n"),
+        ({"force_nodes": 1}, "force_nodes"),
+        ({"height_nodes": 1}, "height_nodes"),
+        ({"height_range_mm": (0.0, 5.0)}, "height_range_mm"),
+        ({"faces": ("top",)}, "faces"),
+        ({"window_mm": ((30.0, 40.0), (54.0, 56.0))}, "leaves nothing"),
+        ({"eps_r": 0.5}, "eps_r"),
+    ],
+)
+def test_bad_specs_are_refused(spec, change, match):
+    with pytest.raises(EctskinError, match=match):
+        dataclasses.replace(spec, **change)
+
+
+# ---------------------------------------------------------------------- the cache
+def test_a_killed_build_resumes_to_the_same_field(spec, one_go, tmp_path):
+    total = len(chunks_of(spec))
+    part = build_chunks([spec], tmp_path, workers=0, progress=False, max_chunks=3)
+    assert (part.solved, part.complete) == (3, False)
+    with pytest.raises(EctskinError, match="no complete response field"):
+        load_field(spec, tmp_path)
+    rest = build_chunks([spec], tmp_path, workers=0, progress=False)
+    assert (rest.cached, rest.solved, rest.complete) == (3, total - 3, True)
+    _same(load_field(spec, tmp_path), one_go)
+    # complete: loading solves nothing
+    again = build_chunks([spec], tmp_path, workers=0, progress=False)
+    assert (again.cached, again.solved) == (total, 0)
+
+
+def test_a_lost_completion_is_rebuilt_from_the_chunks(spec, one_go, tmp_path):
+    build_field(spec, tmp_path, workers=0, progress=False)
+    folder = field_dir(spec, tmp_path)
+    (folder / FIELD_FILE).unlink()
+    man = json.loads((folder / MANIFEST).read_text())
+    man["complete"] = False
+    (folder / MANIFEST).write_text(json.dumps(man))
+    report = build_chunks([spec], tmp_path, workers=0, progress=False)
+    assert report.solved == 0 and report.complete
+    _same(load_field(spec, tmp_path), one_go)
+
+
+def test_a_damaged_chunk_is_solved_again(spec, one_go, tmp_path):
+    build_field(spec, tmp_path, workers=0, progress=False)
+    folder = field_dir(spec, tmp_path)
+    (folder / FIELD_FILE).unlink()
+    chunk = sorted((folder / "chunks").iterdir())[0]
+    chunk.write_bytes(b"not an array")
+    report = build_chunks([spec], tmp_path, workers=0, progress=False)
+    assert report.solved == 1
+    _same(load_field(spec, tmp_path), one_go)
+
+
+def test_a_chunk_error_names_the_chunk_and_keeps_the_others(spec, tmp_path, monkeypatch):
+    calls = []
+
+    def failing(s, chunk):
+        calls.append(chunk.name)
+        if len(calls) == 3:
+            raise EctskinError("boom")
+        return field_solve.solve_chunk(s, chunk)
+
+    monkeypatch.setattr(field_build, "solve_chunk", failing)
+    with pytest.raises(EctskinError, match=f"field chunk {chunks_of(spec)[2].name}: boom"):
+        build_chunks([spec], tmp_path, workers=0, progress=False)
+    assert len(list((field_dir(spec, tmp_path) / "chunks").iterdir())) == 2
+
+
+def test_the_hover_path_refuses_a_finger_that_moves_the_body(spec, monkeypatch):
+    sensor = spec.sensor()
+    real = sensor.electrode_panels
+
+    def moved(inflation, touch, forces, handling=None):
+        out = real(inflation, touch, forces, handling)
+        if touch is None:
+            return out
+        p = out[0]
+        return [type(p)(p.centres + 0.01, p.u, p.v, p.conductor, p.n_conductors)]
+
+    monkeypatch.setattr(sensor, "electrode_panels", moved)
+    with pytest.raises(EctskinError, match="moves the electrode panels"):
+        field_solve.hover_row(sensor, spec.inflation_ml, "front", 0.0, np.array([54.0]), [1.0])
+
+
+def test_the_hover_path_falls_back_to_the_direct_solve(spec, monkeypatch):
+    sensor = spec.sensor()
+    heights = spec.heights()
+    v = np.array([54.0, 56.0])
+    fast = field_solve.hover_row(sensor, spec.inflation_ml, "front", 2.0, v, heights)
+
+    def fail(*args, **kwargs):
+        raise EctskinError("not positive definite")
+
+    monkeypatch.setattr(field_solve, "_readouts", fail)
+    slow = field_solve.hover_row(sensor, spec.inflation_ml, "front", 2.0, v, heights)
+    np.testing.assert_allclose(slow, fast, rtol=1e-10, atol=0)
+
+
+# ---------------------------------------------------------------------- Dask
+def test_one_and_two_workers_give_the_same_bits(spec, one_go, tmp_path):
+    a = build_field(spec, tmp_path / "w1", workers=1, progress=False)
+    b = build_field(spec, tmp_path / "w2", workers=2, progress=False)
+    _same(a, b)
+    _same(a, one_go)
+
+
+def test_a_running_scheduler_builds_the_same_field(spec, one_go, tmp_path):
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address=":0") as cluster:
+        got = build_field(spec, tmp_path, scheduler=cluster.scheduler_address, progress=False)
+    _same(got, one_go)
+
+
+def test_a_worker_with_other_physics_refuses(spec):
+    with pytest.raises(EctskinError, match="same ectskin"):
+        field_solve.solve_chunk(spec, chunks_of(spec)[0], physics="0" * 64)
+
+
+def test_a_bad_scheduler_is_one_clear_error(spec, tmp_path, monkeypatch):
+    with pytest.raises(EctskinError, match="tcp://HOST:PORT"):
+        build_field(spec, tmp_path, scheduler="localhost:8786", progress=False)
+    monkeypatch.setattr(field_build, "CONNECT_TIMEOUT_S", 1.0)
+    with pytest.raises(EctskinError, match="no Dask scheduler answered"):
+        build_field(spec, tmp_path, scheduler="tcp://127.0.0.1:9", progress=False)
+    with pytest.raises(EctskinError, match="workers"):
+        build_field(spec, tmp_path, workers=-1, progress=False)
