@@ -17,6 +17,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 from ectskin._check import EctskinError
+from ectskin._dask import dask_client
 
 log = logging.getLogger(__name__)
 
@@ -85,40 +86,7 @@ def open_runner(n_workers: int = 2, scheduler: str | None = None) -> Iterator[An
     if scheduler is None and n_workers == 0:
         yield SerialRunner()
         return
-    from distributed import Client, LocalCluster
-
-    logging.getLogger("distributed").setLevel(logging.WARNING)
-    if scheduler is not None:
-        if not isinstance(scheduler, str) or not scheduler.startswith(("tcp://", "tls://")):
-            raise EctskinError(
-                f"--scheduler: expected an address like tcp://HOST:PORT, got {scheduler!r}"
-            )
-        try:
-            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
-        except (OSError, TimeoutError) as exc:
-            raise EctskinError(
-                f"--scheduler {scheduler}: no Dask scheduler answered within "
-                f"{CONNECT_TIMEOUT_S:g} s ({type(exc).__name__}: {exc}); start one with "
-                f"`dask scheduler` and workers with `dask worker {scheduler}`, or leave "
-                f"--scheduler out for a local cluster"
-            ) from None
-        try:
-            yield DaskRunner(client)
-        finally:
-            client.close()
-        return
-    cluster = LocalCluster(
-        n_workers=n_workers,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=":0",  # any free port: never clashes with another cluster
-        silence_logs=logging.WARNING,
-        env={"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},
-    )
-    client = Client(cluster)
-    log.info("Dask LocalCluster with %d worker(s) at %s", n_workers, cluster.scheduler_address)
-    try:
+    with dask_client(
+        n_workers, scheduler, timeout_s=CONNECT_TIMEOUT_S, what="design"
+    ) as client:
         yield DaskRunner(client)
-    finally:
-        client.close()
-        cluster.close()

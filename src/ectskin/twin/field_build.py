@@ -36,6 +36,7 @@ from tqdm.auto import tqdm
 
 import ectskin
 from ectskin._check import EctskinError
+from ectskin._dask import dask_client
 from ectskin._files import atomic_write, read_json_object, write_json_atomic
 from ectskin.twin.field import ResponseField
 from ectskin.twin.field_solve import Chunk, chunks_of, solve_chunk
@@ -154,52 +155,20 @@ def _client(scheduler: str | None, workers: int | None, n_tasks: int) -> Iterato
     if scheduler is None and workers == 0:
         yield None
         return
-    from distributed import Client, LocalCluster  # deferred: start-up speed of the package
-
-    logging.getLogger("distributed").setLevel(logging.WARNING)
-    if scheduler is not None:
-        if not isinstance(scheduler, str) or not scheduler.startswith(("tcp://", "tls://")):
-            raise EctskinError(
-                f"scheduler: expected an address like tcp://HOST:PORT, got {scheduler!r}"
-            )
-        try:
-            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
-        except (OSError, TimeoutError) as exc:
-            raise EctskinError(
-                f"scheduler {scheduler}: no Dask scheduler answered within "
-                f"{CONNECT_TIMEOUT_S:g} s ({type(exc).__name__}: {exc}); start one with "
-                f"`dask scheduler` and workers with `dask worker {scheduler}`, or leave the "
-                "scheduler out for a local cluster"
-            ) from None
-        try:
-            try:
-                client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
-            except TimeoutError:
-                raise EctskinError(
-                    f"scheduler {scheduler}: no worker joined within {CONNECT_TIMEOUT_S:g} s; "
-                    f"start some with `dask worker {scheduler}`"
-                ) from None
-            yield client
-        finally:
-            client.close()
-        return
-    n = workers if workers is not None else len(os.sched_getaffinity(0))
-    n = max(1, min(n, n_tasks))
-    cluster = LocalCluster(
-        n_workers=n,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=":0",  # any free port: never clashes with another cluster
-        silence_logs=logging.WARNING,
-        env={"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},
-    )
-    client = Client(cluster)
-    log.info("response field: Dask LocalCluster with %d worker(s) at %s", n, cluster.scheduler_address)
-    try:
+    if scheduler is None:
+        n = workers if workers is not None else len(os.sched_getaffinity(0))
+        n = max(1, min(n, n_tasks))
+    else:
+        n = 0  # the scheduler's workers
+    with dask_client(
+        n,
+        scheduler,
+        option="scheduler",
+        wait_for_workers=True,
+        timeout_s=CONNECT_TIMEOUT_S,
+        what="response field",
+    ) as client:
         yield client
-    finally:
-        client.close()
-        cluster.close()
 
 
 def _check_workers(workers: int | None) -> None:

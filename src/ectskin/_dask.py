@@ -1,0 +1,81 @@
+"""Dask distributed clients for the project's parallel work (layout sweeps, response fields).
+
+:func:`dask_client` opens a new ``LocalCluster`` of single-threaded worker processes (BLAS
+limited to one thread each: the workers are the parallelism), or connects to a running scheduler
+(``tcp://HOST:PORT``, a real cluster), and closes what it opened. Deferred imports: the package
+starts without Dask.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Iterator
+from typing import Any
+
+from ectskin._check import EctskinError
+
+log = logging.getLogger(__name__)
+
+#: seconds a scheduler (and, where asked, its first worker) has to answer (assumed: long enough
+#: for a scheduler on a LAN)
+CONNECT_TIMEOUT_S = 10.0
+
+
+@contextlib.contextmanager
+def dask_client(
+    n_workers: int,
+    scheduler: str | None = None,
+    *,
+    option: str = "--scheduler",
+    wait_for_workers: bool = False,
+    timeout_s: float | None = None,
+    what: str = "Dask",
+) -> Iterator[Any]:
+    """A ``distributed.Client``: on the scheduler at ``scheduler`` if given, else on a new
+    ``LocalCluster`` of ``n_workers`` single-threaded processes. ``option`` names the setting in
+    errors; ``wait_for_workers``: a scheduler must have a worker within the timeout;
+    ``what`` names the work in the log."""
+    from distributed import Client, LocalCluster
+
+    timeout = CONNECT_TIMEOUT_S if timeout_s is None else timeout_s
+    logging.getLogger("distributed").setLevel(logging.WARNING)
+    if scheduler is not None:
+        if not isinstance(scheduler, str) or not scheduler.startswith(("tcp://", "tls://")):
+            raise EctskinError(f"{option}: expected an address like tcp://HOST:PORT, got {scheduler!r}")
+        try:
+            client = Client(scheduler, timeout=timeout)
+        except (OSError, TimeoutError) as exc:
+            raise EctskinError(
+                f"{option} {scheduler}: no Dask scheduler answered within {timeout:g} s "
+                f"({type(exc).__name__}: {exc}); start one with `dask scheduler` and workers "
+                f"with `dask worker {scheduler}`, or leave {option} out for a local cluster"
+            ) from None
+        try:
+            if wait_for_workers:
+                try:
+                    client.wait_for_workers(1, timeout=timeout)
+                except TimeoutError:
+                    raise EctskinError(
+                        f"{option} {scheduler}: no worker joined within {timeout:g} s; start "
+                        f"some with `dask worker {scheduler}`"
+                    ) from None
+            yield client
+        finally:
+            client.close()
+        return
+    cluster = LocalCluster(
+        n_workers=n_workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=":0",  # any free port: never clashes with another cluster
+        silence_logs=logging.WARNING,
+        env={"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},
+    )
+    client = Client(cluster)
+    log.info("%s: LocalCluster with %d worker(s) at %s", what, n_workers, cluster.scheduler_address)
+    try:
+        yield client
+    finally:
+        client.close()
+        cluster.close()
