@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from ectskin._check import EctskinError
-from ectskin.io import Recording, Trial
+from ectskin.io import Recording, Trial, read_recording
 from ectskin.layout import default_layout
 from ectskin.pipeline import ReproduceConfig, reproduce
 
@@ -418,10 +418,12 @@ def test_reproduce_tiny_twin_experiment(tmp_path, monkeypatch):
     md = (out / "report.md").read_text()
     assert "(characterize/fig3_inflation.png)" in md and "(characterize/fig4_touch.png)" in md
     assert {"simulate", "characterize", "train_touch", "evaluate_track"} <= set(m["timings_s"])
+    # the twin's touch trials say where their fingers were placed: at least one point each
+    n_touch = sum(1 for t in read_recording(out / "contact.h5").trials if t.meta.get("touch_uv_mm"))
+    assert m["contact"]["n_touch_points"] >= 1 and n_touch >= 1
+    assert f"placed at {m['contact']['n_touch_points']} distinct points" in md
     # manual handling off: the contact run's test trials simulated again without the hand, in
     # place of their hand-on versions; everything else as it was
-    from ectskin.io import read_recording
-
     off = m["contact"]["handling_off"]
     assert off["loc_mm_mean"] > 0 and set(off["baselines"]) == {"region_centre", "knn", "ridge"}
     assert "Manual handling on and off" in md

@@ -28,6 +28,8 @@ def test_reproduce_reports_contact_two_fingers_and_ect_images(tmp_path, contact_
     for key in ("loc_mm_mean", "loc_mm_median", "loc_mm_p90", "force_mae_n", "hover_detect_mm"):
         assert key in m["contact"], key
     assert m["contact"]["loc_mm_mean"] > 0
+    # a recording from elsewhere does not say where its fingers were placed
+    assert "n_touch_points" in m["contact"] and m["contact"]["n_touch_points"] is None
     assert set(m["contact"]["baselines"]) == {"region_centre", "knn", "ridge"}
     assert m["multi"]["count_accuracy"] is not None
     assert set(m["multi"]["baselines"]) == {"region_centre", "knn", "ridge"}

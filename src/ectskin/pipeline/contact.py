@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from ectskin._check import EctskinError
-from ectskin._files import read_json, save_figure_atomic, write_json_atomic
+from ectskin._files import read_json, save_figure_atomic, to_jsonable, write_json_atomic
 from ectskin.electrostatics.reconstruct import METHODS
 from ectskin.io import Recording, read_recording, write_recording
 from ectskin.learn.evaluate import evaluate_run
@@ -62,7 +62,34 @@ def with_paper_trials(paper: Recording, contact: Recording) -> Recording:
     trials = [replace(t, name=f"paper_{t.name}") for t in paper.trials]
     trials += [replace(t, name=f"contact_{t.name}") for t in contact.trials]
     meta = {"protocol": contact.meta.get("protocol"), "paper_protocol": paper.meta.get("protocol")}
+    if "manipulator" in contact.meta:  # the body both were simulated on (distances go around it)
+        if to_jsonable(paper.meta.get("manipulator")) != to_jsonable(contact.meta["manipulator"]):
+            raise EctskinError(
+                "the paper's recording and the contact experiment were made on different "
+                "manipulators (meta 'manipulator'); they cannot be trained on together"
+            )
+        meta["manipulator"] = contact.meta["manipulator"]
     return Recording(contact.layout, trials, contact.frame_rate_hz, meta=meta)
+
+
+def n_touch_points(rec: Recording) -> int | None:
+    """How many distinct points (face, u, v) the fingers of ``rec``'s touch trials were placed
+    at: the dwell points the twin planned (trial meta ``touch_uv_mm`` with ``surface``, and
+    ``second_finger``), to 0.01 mm; None when no trial says (a recording from elsewhere)."""
+    points: set[tuple[str, float, float]] = set()
+    said = False
+    for t in rec.trials:
+        dwells = t.meta.get("touch_uv_mm")
+        if dwells is None:
+            continue
+        said = True
+        for u, v in dwells:
+            points.add((str(t.meta.get("surface", "")), round(float(u), 2), round(float(v), 2)))
+        second = t.meta.get("second_finger")
+        if isinstance(second, dict) and second.get("touch_uv_mm"):
+            u, v = second["touch_uv_mm"]
+            points.add((str(second.get("surface", "")), round(float(u), 2), round(float(v), 2)))
+    return len(points) if said else None
 
 
 def contact_data(

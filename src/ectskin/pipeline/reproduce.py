@@ -32,6 +32,7 @@ from typing import Any
 
 from ectskin._check import EctskinError, check_type
 from ectskin._files import read_json, write_json_atomic
+from ectskin.io.hdf5 import read_recording
 from ectskin.learn.threads import torch_threads
 from ectskin.pipeline.config import ReproduceConfig
 from ectskin.pipeline.contact import (
@@ -40,6 +41,7 @@ from ectskin.pipeline.contact import (
     ect_block,
     ect_images,
     handling_off,
+    n_touch_points,
 )
 from ectskin.pipeline.metrics import combine_metrics, copy_figures, handling_block
 from ectskin.pipeline.runner import StepRunner
@@ -76,7 +78,7 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
         characterise(runner, config)
     train_runs(runner, config, data_path, data_settings, threads)
     results = evaluate_runs(runner, config, data_path, data_settings)
-    contact = ect = off = None
+    contact = ect = off = found = None
     if config.contact:
         found = contact_data(runner, config, data_settings)
         if found is not None:
@@ -94,6 +96,8 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
         data_path=data_path,
         contact=contact,
     )
+    if found is not None and "contact" in metrics:
+        metrics["contact"]["n_touch_points"] = n_touch_points(read_recording(found[0]))
     if off is not None:
         metrics["contact"]["handling_off"] = handling_block(off)
     if ect is not None:

@@ -150,7 +150,12 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
                 "a point on the wrong face is charged the way around the body's side edge (the "
                 "same rule as the ECT images below). Baselines: "
                 + ", ".join(baseline_name(b) for b in (c.get("baselines") or {}))
-                + " (the region centre is the touch classifier's answer turned into a point).",
+                + " (the region centre is the touch classifier's answer turned into a point)."
+                + (
+                    f" The fingers were placed at {c['n_touch_points']} distinct points."
+                    if isinstance(c.get("n_touch_points"), int)
+                    else ""
+                ),
             )
         )
         s.append(("table", (header, contact_table(c))))
