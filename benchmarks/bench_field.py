@@ -36,13 +36,10 @@ from ectskin.layout import default_layout
 from ectskin.twin import Discretisation, Touch
 from ectskin.twin.field_build import build_fields
 from ectskin.twin.field_solve import hover_row
-from ectskin.twin.field_spec import FieldSpec
+from ectskin.twin.field_spec import COARSE_FIELD_MESH, FieldSpec
 
 #: the coarse discretisation of the field's budget runs and tests (the twin's default is finer)
-COARSE = Discretisation(
-    wire_panel_length_mm=4.0, wire_panels_across=1, pad_panels=2, finger_sphere_n=3,
-    finger_shaft_around=8, finger_shaft_along=3, cavity_cell_mm=8.0, cavity_layers=2,
-)
+COARSE = COARSE_FIELD_MESH
 ABS_PF, REL = 0.5e-3, 0.02
 
 

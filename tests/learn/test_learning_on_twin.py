@@ -16,21 +16,12 @@ from ectskin.io import write_recording
 from ectskin.learn.evaluate import evaluate_run
 from ectskin.learn.train import TrainConfig, train_from_recording
 from ectskin.twin import Protocol, simulate_experiment
-from ectskin.twin.sensor import Discretisation
+from ectskin.twin.bound import COARSE as BOUND_COARSE
 
 pytestmark = pytest.mark.slow
 
 #: a coarse mesh: about 4x fewer panels than the default, readouts within a few % of it
-COARSE = Discretisation(
-    wire_panel_length_mm=5.0,
-    wire_panels_across=1,
-    pad_panels=2,
-    finger_sphere_n=4,
-    finger_shaft_around=8,
-    finger_shaft_along=3,
-    cavity_cell_mm=8.0,
-    cavity_layers=2,
-)
+COARSE = BOUND_COARSE
 #: the margins this test holds the models to (measured: touch 72 % vs 33 %, AD 0.77 vs 1.45 mm)
 TOUCH_MARGIN_POINTS = 20.0  # test accuracy at least this many points above the majority class
 TRACK_AD_RATIO = 0.7  # test AD at most this fraction of the "markers do not move" AD

@@ -13,19 +13,16 @@ import pytest
 from threadpoolctl import threadpool_limits
 
 from ectskin._check import EctskinError
-from ectskin.twin import Discretisation, Touch
+from ectskin.twin import Touch
 from ectskin.twin.field import JACOBIAN_AXES, ResponseField
 from ectskin.twin.field_build import build_field, load_field
-from ectskin.twin.field_spec import FieldSpec
+from ectskin.twin.field_spec import COARSE_FIELD_MESH, FieldSpec
 
 #: the acceptance bound: absolute (pF) and relative to the finger's signal, per pair
 ABS_PF = 0.5e-3
 REL = 0.02
 
-COARSE = Discretisation(
-    wire_panel_length_mm=4.0, wire_panels_across=1, pad_panels=2, finger_sphere_n=3,
-    finger_shaft_around=8, finger_shaft_along=3, cavity_cell_mm=8.0, cavity_layers=2,
-)
+COARSE = COARSE_FIELD_MESH
 WINDOW = ((-1.0, 3.0), (52.0, 56.0))
 
 

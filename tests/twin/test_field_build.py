@@ -15,7 +15,6 @@ from threadpoolctl import threadpool_limits
 
 from ectskin._check import EctskinError
 from ectskin.twin import (
-    Discretisation,
     Finger,
     ManipulatorConfig,
     field_build,
@@ -31,12 +30,9 @@ from ectskin.twin.field_build import (
     load_field,
 )
 from ectskin.twin.field_solve import chunks_of
-from ectskin.twin.field_spec import FieldSpec, physics_modules
+from ectskin.twin.field_spec import COARSE_FIELD_MESH, FieldSpec, physics_modules
 
-COARSE = Discretisation(
-    wire_panel_length_mm=4.0, wire_panels_across=1, pad_panels=2, finger_sphere_n=3,
-    finger_shaft_around=8, finger_shaft_along=3, cavity_cell_mm=8.0, cavity_layers=2,
-)
+COARSE = COARSE_FIELD_MESH
 
 
 @pytest.fixture(autouse=True, scope="module")

@@ -43,6 +43,18 @@ from ectskin.twin.sensor import Discretisation, Finger, SensorModel
 
 #: version of the cache's file layout (manifest, chunks, field.npz)
 FIELD_FORMAT = 1
+#: a mesh for quick fields (tests, the benchmark's default): 4 mm wire panels, a coarse fingertip
+#: and cavity grid; its interpolation against direct solves is measured by benchmarks/bench_field.py
+COARSE_FIELD_MESH = Discretisation(
+    wire_panel_length_mm=4.0,
+    wire_panels_across=1,
+    pad_panels=2,
+    finger_sphere_n=3,
+    finger_shaft_around=8,
+    finger_shaft_along=3,
+    cavity_cell_mm=8.0,
+    cavity_layers=2,
+)
 #: the modules whose import closure is the physics of the node values (:func:`physics_digest`):
 #: the chunk solver, which imports this module (the nodes), the sensor and the electrostatics
 PHYSICS_ROOTS = ("ectskin.twin.field_solve",)
