@@ -3,8 +3,9 @@
 :func:`combine_metrics` builds the dict that :mod:`ectskin.report` renders (its keys are listed
 there): the paper runs' metrics under ``touch`` and ``track``; the robust TouchMLP under
 ``touch.robust``, with ``recipe_description``, its training recipe in words; the ablations under
-``track.ablations``; then the data, the protocol, the step timings, the reused steps and the
-machine.
+``track.ablations``; the contact run's blocks (:func:`contact_blocks`); the physical limit under
+``bound`` (:func:`bound_block`, from the bound step's bound.json); then the data, the protocol,
+the step timings, the reused steps and the machine.
 """
 
 from __future__ import annotations
@@ -148,7 +149,10 @@ def contact_blocks(run: Mapping[str, Any]) -> dict[str, Any]:
         arch=c.get("arch"),
         training=c.get("training"),
         split=c.get("split"),
-        baselines={b: {k: v.get(k) for k in CONTACT_KEYS} for b, v in baselines.items()},
+        baselines={
+            b: {**{k: v.get(k) for k in CONTACT_KEYS}, "per_state": v.get("per_state")}
+            for b, v in baselines.items()
+        },
     )
     multi_of = lambda m: {k: (m.get("multi") or {}).get(k) for k in MULTI_KEYS}  # noqa: E731
     multi = multi_of(c)
@@ -178,9 +182,11 @@ def combine_metrics(
     data_settings: Mapping[str, Any],
     data_path: Path,
     contact: Mapping[str, Any] | None = None,
+    bound: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The OUT_DIR/metrics.json dict from ``results`` ({run: its metrics.json}) and the contact
-    run's metrics.json (``contact``, None when it did not run)."""
+    """The OUT_DIR/metrics.json dict from ``results`` ({run: its metrics.json}), the contact
+    run's metrics.json (``contact``, None when it did not run) and the bound step's bound.json
+    (``bound``, None when it did not run)."""
     m: dict[str, Any] = {
         "format": METRICS_FORMAT,
         "version": 1,
@@ -207,6 +213,8 @@ def combine_metrics(
             m["track"]["ablations"] = abl
     if contact is not None:
         m.update(contact_blocks(contact))
+    if bound is not None:
+        m["bound"] = bound_block(bound, m.get("contact"))
     try:
         n_trials = len(list_trials(data_path))
     except EctskinError:
@@ -220,6 +228,99 @@ def combine_metrics(
     return m
 
 
+#: the keys of a reduction of bounds copied into metrics.json's ``bound`` blocks
+BOUND_KEYS = (
+    "loc_mm_mean",
+    "loc_mm_median",
+    "loc_mm_p95",
+    "force_n_mean",
+    "force_n_median",
+    "force_observable_share",
+    "force_observable_share_near_wires",
+    "force_observable_share_away_from_wires",
+    "position_resolved_share",
+    "force_resolved_share",
+    "n_points",
+)
+
+
+def _pooled(parts: list[Mapping[str, Any]]) -> dict[str, Any]:
+    """Reductions of parts (each over its own points) pooled: the means weighted by each part's
+    resolved points, the shares by its points; medians and p95 cannot be pooled and are left
+    out."""
+    n = [p.get("n_points") or 0 for p in parts]
+    out: dict[str, Any] = {"n_points": int(sum(n))}
+    for key, weight in (
+        ("loc_mm_mean", "position_resolved_share"),
+        ("force_n_mean", "force_resolved_share"),
+        ("force_observable_share", None),
+        ("position_resolved_share", None),
+        ("force_resolved_share", None),
+    ):
+        num = den = 0.0
+        for p, k in zip(parts, n):
+            w = k * (p.get(weight) or 0.0) if weight else k
+            if isinstance(p.get(key), int | float) and w > 0:
+                num += w * p[key]
+                den += w
+        out[key] = num / den if den > 0 else None
+    return out
+
+
+def bound_block(bound: Mapping[str, Any], contact: Mapping[str, Any] | None) -> dict[str, Any]:
+    """metrics.json's ``bound`` from the bound step's bound.json (``docs/bound.md``, "In
+    metrics.json"): the headline case's reductions over every map cell, per face, per state (with
+    the bound at the test frames' true points and ContactNet's error of the same state beside
+    it), every case pooled, and the settings; ``contact``: metrics.json's ``contact`` or None."""
+    case = bound.get("headline_case") or "all"
+    settings = bound.get("settings") or {}
+    per_face_parts: dict[str, list[Mapping[str, Any]]] = {}
+    per_state: dict[str, Any] = {}
+    test = bound.get("test") or {}
+    test_states = test.get("per_state") or {}
+    model_states = (contact or {}).get("per_state") or {}
+    base = (contact or {}).get("baselines") or {}
+    for st in bound.get("states") or []:
+        name = "/".join(f"{float(v):g}" for v in st["inflation_ml"]) + " ml"
+        faces = {
+            f: {k: (e["contact"][case].get("reduction") or {}).get(k) for k in BOUND_KEYS}
+            for f, e in (st.get("faces") or {}).items()
+        }
+        for f, r in faces.items():
+            per_face_parts.setdefault(f, []).append(r)
+        entry: dict[str, Any] = {**_pooled(list(faces.values())), "per_face": faces}
+        entry["test"] = test_states.get(name)
+        entry["contact_loc_mm_mean"] = (model_states.get(name) or {}).get("loc_mm_mean")
+        entry["baseline_loc_mm_mean"] = {
+            b: ((v.get("per_state") or {}).get(name) or {}).get("loc_mm_mean")
+            for b, v in base.items()
+        }
+        per_state[name] = entry
+    top = (bound.get("summary") or {}).get("contact", {})
+    head = top.get(case) or {}
+    return {
+        "case": case,
+        **{k: head.get(k) for k in BOUND_KEYS},
+        "per_face": {f: _pooled(parts) for f, parts in per_face_parts.items()},
+        "per_state": per_state,
+        "cases": {c: {k: v.get(k) for k in BOUND_KEYS} for c, v in top.items()},
+        "test": {**(test.get("pooled") or {}), "states_without_field": test.get("states_without_field")},
+        "settings": {k: settings.get(k) for k in (
+            "source", "faces", "spacing_mm", "force_n", "nuisances", "prior_sd",
+            "force_threshold_n", "near_wire_mm", "position")},
+        "nuisance_columns": bound.get("nuisance_columns"),
+        "timing_s": (bound.get("timing") or {}).get("total_s"),
+    }
+
+
+#: the bound step's figures (file stem in OUT_DIR/bound, caption), copied by :func:`copy_figures`
+BOUND_FIGURES = (
+    ("bound", "The physical limit: Cramér–Rao bound maps of the finger's point and force per "
+              "inflation state (every nuisance at its prior)"),
+    ("bound_vs_error", "ContactNet's localisation error beside the bound (the same log scale)"),
+)
+
+
 def copy_figures(out: Path, runs: tuple[str, ...], figure_format: str = "png") -> dict[str, str]:
     """Copy the report's figures of ``runs`` (files in ``figure_format``) into OUT_DIR/figures;
     {caption: path relative to OUT_DIR}."""
@@ -230,6 +331,12 @@ def copy_figures(out: Path, runs: tuple[str, ...], figure_format: str = "png") -
         src = out / "runs" / run / figure_file(stem, figure_format)
         if run in runs and src.is_file():
             dst = fig_dir / figure_file(copy_stem, figure_format)
+            shutil.copyfile(src, dst)
+            figures[caption] = dst.relative_to(out).as_posix()
+    for stem, caption in BOUND_FIGURES:
+        src = out / "bound" / figure_file(stem, figure_format)
+        if src.is_file():
+            dst = fig_dir / src.name
             shutil.copyfile(src, dst)
             figures[caption] = dst.relative_to(out).as_posix()
     return figures

@@ -1,8 +1,9 @@
 """The report's contact sections: where, how hard and how many fingers, and ECT images.
 
-Each number stands beside the goal of issue 10 and beside the strongest baseline scored on the
-same test frames, with the margin; nothing here computes a metric, it only words metrics.json's
-``contact``, ``multi`` and ``ect_image`` blocks.
+Each number stands beside the goal of issue 10, beside the strongest baseline scored on the
+same test frames, with the margin, and, where metrics.json carries a ``bound`` block, beside the
+physical limit (the Cramér–Rao bound at the test frames' true points); nothing here computes a
+metric, it only words metrics.json's ``contact``, ``multi``, ``bound`` and ``ect_image`` blocks.
 """
 
 from __future__ import annotations
@@ -67,25 +68,144 @@ def _margin(model: Any, best: tuple[str, float] | None, unit: str, lower: bool) 
     return f"{'better' if diff >= 0 else 'worse'} by {_value(abs(diff), unit)}"
 
 
+#: which reduction of the bound at the test frames (metrics.json ``bound.test``) stands beside
+#: each contact metric; a metric not named has no bound
+BOUND_OF = {
+    "loc_mm_mean": ("loc_mm_mean", "mm"),
+    "loc_mm_median": ("loc_mm_median", "mm"),
+    "force_mae_n": ("force_n_mean", "N"),
+}
+
+
+def _bound_cell(bound_test: Mapping[str, Any] | None, key: str) -> str:
+    if not bound_test or key not in BOUND_OF:
+        return DASH
+    name, unit = BOUND_OF[key]
+    return _value(bound_test.get(name), unit)
+
+
 def contact_table(
-    block: Mapping[str, Any], rows=CONTACT_ROWS, goals: Mapping[str, str] = GOALS
+    block: Mapping[str, Any],
+    rows=CONTACT_ROWS,
+    goals: Mapping[str, str] = GOALS,
+    bound_test: Mapping[str, Any] | None = None,
 ) -> list[tuple[str, ...]]:
-    """Rows "metric · goal · model · strongest baseline · margin" of a contact-like block."""
+    """Rows "metric · goal · model · strongest baseline · margin" of a contact-like block, and
+    "· bound" when ``bound_test`` (metrics.json's ``bound.test``) is given."""
     baselines = lookup(block, "baselines") or {}
     out: list[tuple[str, ...]] = []
     for key, label, unit, lower in rows:
         model = block.get(key)
         best = _best(baselines, key, lower)
-        out.append(
-            (
-                label,
-                goals.get(key, DASH),
-                _value(model, unit),
-                f"{baseline_name(best[0])} {_value(best[1], unit)}" if best else DASH,
-                _margin(model, best, unit, lower),
-            )
+        row = (
+            label,
+            goals.get(key, DASH),
+            _value(model, unit),
+            f"{baseline_name(best[0])} {_value(best[1], unit)}" if best else DASH,
+            _margin(model, best, unit, lower),
         )
+        out.append(row + ((_bound_cell(bound_test, key),) if bound_test is not None else ()))
     return out
+
+
+def per_state_table(
+    per_state: Mapping[str, Any],
+    baselines: Mapping[str, Any],
+    bound_states: Mapping[str, Any] | None,
+) -> tuple[tuple[str, ...], list[tuple[str, ...]]]:
+    """(header, rows) of the per-state errors: state · mean · p90 · strongest baseline's mean ·
+    frames, and with ``bound_states`` (metrics.json ``bound.per_state``) the bound at the
+    state's test frames (position, force); a state without a field shows "—" there."""
+    rows = []
+    for name, v in per_state.items():
+        base = {
+            b: x for b, bv in baselines.items()
+            if isinstance(x := ((bv.get("per_state") or {}).get(name) or {}).get("loc_mm_mean"),
+                          int | float)
+        }
+        best = min(base.items(), key=lambda kv: kv[1]) if base else None
+        row: tuple[str, ...] = (
+            name,
+            _value(v.get("loc_mm_mean"), "mm"),
+            _value(v.get("loc_mm_p90"), "mm"),
+            f"{baseline_name(best[0])} {_value(best[1], 'mm')}" if best else DASH,
+        )
+        if bound_states is not None:
+            test = (bound_states.get(name) or {}).get("test") or {}
+            row += (_value(test.get("loc_mm_mean"), "mm"), _value(test.get("force_n_mean"), "N"))
+        rows.append(row + (str(v.get("n_frames")),))
+    head: tuple[str, ...] = ("state", "mean", "p90", "strongest baseline")
+    if bound_states is not None:
+        head += ("bound (CRB)", "force bound")
+    return head + ("frames",), rows
+
+
+def _share(x: Any) -> str:
+    return pct(x) if isinstance(x, int | float) else DASH
+
+
+def bound_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
+    """The physical limit's words and per-state table (metrics.json ``bound``); [] without it."""
+    b = lookup(metrics, "bound")
+    if not isinstance(b, Mapping) or not b:
+        return []
+    s: list[tuple[str, Any]] = [("h2", "The physical limit: Cramér–Rao bound")]
+    settings = b.get("settings") or {}
+    case = b.get("case")
+    nuis = list(settings.get("nuisances") or [])
+    known = {
+        "none": "every nuisance known",
+        "all": f"the nuisances ({', '.join(nuis)}) estimated alongside, within their priors",
+    }.get(str(case), f"the nuisance {case} estimated alongside, within its prior")
+    window = lookup(metrics, "contact.window")
+    tested = bool((b.get("test") or {}).get("n_points"))
+    s.append((
+        "p",
+        "The Cramér–Rao bound is the least root-mean-square error any unbiased estimator can "
+        "reach from one frame of readouts, given each pair's noise (docs/bound.md). Here it is "
+        f"taken from the response field of each contact state with {known} (case `{case}`)"
+        + (", at each test frame's true point and force" if tested else "")
+        + ". A mean or median error may lie somewhat below a root-mean-square bound, and a "
+        "model that reads several frames"
+        + (f" (ContactNet reads {window})" if isinstance(window, int) else "")
+        + " of a still finger can go below the one-frame bound by up to the square root of "
+        "their number; a model far above it has room to learn.",
+    ))
+    thr = settings.get("force_threshold_n") or 0.1
+    near, away = b.get("force_observable_share_near_wires"), b.get("force_observable_share_away_from_wires")
+    faces = b.get("per_face") or {}
+    where = "; ".join(
+        f"{f} face {_share(v.get('force_observable_share'))}" for f, v in faces.items()
+    )
+    if isinstance(b.get("force_observable_share"), int | float):
+        s.append((
+            "p",
+            f"Force is observable (bound < {thr:g} N at {settings.get('force_n', DASH)} N) on "
+            f"{_share(b.get('force_observable_share'))} of the faces' map cells over all states"
+            + (f" ({where})" if where else "")
+            + (
+                f": on {_share(near)} of the cells within {settings.get('near_wire_mm', DASH)} mm "
+                f"of a wire and on {_share(away)} of those farther from every wire"
+                if isinstance(near, int | float) and isinstance(away, int | float) else ""
+            )
+            + f". Where it is not, no unbiased estimate from one frame comes within {thr:g} N of "
+            "the force (root mean square).",
+        ))
+    rows = [
+        (name, _value(v.get("loc_mm_mean"), "mm"), _value(v.get("force_n_mean"), "N"),
+         _share(v.get("force_observable_share")))
+        for name, v in (b.get("per_state") or {}).items()
+    ]
+    if rows:
+        s.append(("p", f"Over the whole faces (map cells, {settings.get('force_n', DASH)} N), "
+                       "per inflation state:"))
+        s.append(("table", (("state", "position bound", "force bound", "force observable"),
+                            rows)))
+    missing = (b.get("test") or {}).get("states_without_field") or {}
+    if missing:
+        s.append(("p", "Test frames without a response field (not bounded): "
+                       + ", ".join(f"{k} ({n} frames)" for k, n in missing.items()) + "."))
+    return s
 
 
 def handling_table(
@@ -158,23 +278,23 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
                 ),
             )
         )
-        s.append(("table", (header, contact_table(c))))
+        bound_test = lookup(metrics, "bound.test")
+        has_bound = isinstance(bound_test, Mapping) and bool(bound_test.get("n_points"))
+        if has_bound:
+            s.append(("table", (header + ("bound (CRB)",), contact_table(c, bound_test=bound_test))))
+        else:
+            s.append(("table", (header, contact_table(c))))
         per_state = c.get("per_state") or {}
         if per_state:
-            rows: list[tuple[str, ...]] = [
-                (
-                    name,
-                    _value(v.get("loc_mm_mean"), "mm"),
-                    _value(v.get("loc_mm_p90"), "mm"),
-                    str(v.get("n_frames")),
-                )
-                for name, v in per_state.items()
-            ]
-            s.append(("p", "Contact point error per inflation state (chamber volumes):"))
-            s.append(("table", (("state", "mean", "p90", "frames"), rows)))
+            s.append(("p", "Contact point error per inflation state (chamber volumes)" + (
+                ", beside the strongest baseline's and the physical limit at the same states' "
+                "test frames (the bound's section below):" if has_bound else ":")))
+            bound_states = lookup(metrics, "bound.per_state", {}) if has_bound else None
+            s.append(("table", per_state_table(per_state, c.get("baselines") or {},
+                                               bound_states)))
         per_face = c.get("per_face") or {}
         if per_face:
-            rows = [
+            rows: list[tuple[str, ...]] = [
                 (
                     name,
                     _value(v.get("loc_mm_mean"), "mm"),
@@ -198,6 +318,7 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
             head = ("metric", "hand on", "hand off", "strongest baseline, on", "… off")
             multi_on = lookup(metrics, "multi") or {}
             s.append(("table", (head, handling_table(c, multi_on, off))))
+    s.extend(bound_sections(metrics))
     multi = lookup(metrics, "multi")
     if isinstance(multi, Mapping) and multi and multi.get("count_accuracy") is not None:
         s.append(("h2", "Two fingers"))

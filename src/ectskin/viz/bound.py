@@ -1,4 +1,5 @@
-"""Figures of the Cramér–Rao bound maps (:func:`ectskin.twin.bound.bound_maps`).
+"""Figures of the Cramér–Rao bound maps (:func:`ectskin.twin.bound.bound_maps`,
+:func:`ectskin.twin.bound_field.field_bound_maps`), and a model's error beside them.
 
 Like the other plot functions: ``axes=None, show=False``, the Figure is returned, nothing is saved.
 """
@@ -104,4 +105,70 @@ def plot_bound_maps(
     fig.colorbar(images["position_mm"], ax=list(ax[:, :n].flat), label="position bound (mm)",
                  shrink=0.6)
     fig.colorbar(images[third], ax=list(ax[:, n:].flat), label=third_label, shrink=0.6)
+    return _finish(fig, show)
+
+
+def _mean_over_states(maps: Mapping[str, Any], face: str, case: str) -> np.ma.MaskedArray:
+    """The position bound of ``case`` on ``face`` averaged over the states (unresolved cells
+    left out of the average; masked where no state resolves the cell)."""
+    grids = [_grid(s["faces"][face]["contact"][case]["position_mm"]) for s in maps["states"]]
+    return np.ma.mean(np.ma.stack(grids), axis=0)
+
+
+def plot_error_vs_bound(
+    error_maps: Mapping[str, Any],
+    maps: Mapping[str, Any],
+    *,
+    case: str = "all",
+    axes: Any = None,
+    show: bool = False,
+) -> Figure:
+    """A contact model's localisation error beside the physical limit, per face.
+
+    Row per face of ``maps``: the model's mean error per cell (``error_maps[face]``: ``u_edges``,
+    ``v_edges``, ``mean_mm`` (nv, nu), from the contact metrics' ``map``) and the position bound
+    of ``case`` averaged over the maps' states. One log colour scale for both, so the gap between
+    them reads as a colour step; wires in black; grey: no test frame / unresolved.
+    ``axes``: an (n_faces, 2) array of Axes, or None for a new figure.
+    """
+    if case not in maps.get("cases", ()):
+        raise EctskinError(f"plot_error_vs_bound: case {case!r} is not in the maps ({maps.get('cases')})")
+    faces = [f for f in maps["settings"]["faces"] if f in error_maps]
+    if not faces:
+        raise EctskinError(
+            f"plot_error_vs_bound: the error maps cover {sorted(error_maps)}, the bound maps "
+            f"{list(maps['settings']['faces'])}: no face in common"
+        )
+    if axes is None:
+        fig = _new_figure(show, figsize=(6.0, 5.2 * len(faces) + 0.6), layout="constrained")
+        ax = np.asarray(fig.subplots(len(faces), 2, squeeze=False))
+    else:
+        ax = np.asarray(axes, dtype=object).reshape(len(faces), 2)
+        fig = ax.flat[0].figure
+    err = {f: _grid(error_maps[f]["mean_mm"]) for f in faces}
+    bnd = {f: _mean_over_states(maps, f, case) for f in faces}
+    norm = _norm(list(err.values()) + list(bnd.values()))
+    image: Any = None
+    for r, face in enumerate(faces):
+        e = error_maps[face]
+        (u0, u1), (v0, v1) = maps["skins"][face]["u_mm"], maps["skins"][face]["v_mm"]
+        b = bnd[face]
+        panels = (
+            (np.asarray(e["u_edges"], float), np.asarray(e["v_edges"], float), err[face],
+             "model's error"),
+            (np.linspace(u0, u1, b.shape[1] + 1), np.linspace(v0, v1, b.shape[0] + 1), b,
+             f"bound ({case})"),
+        )
+        for k, (ue, ve, g, title) in enumerate(panels):
+            a = ax[r, k]
+            image = a.pcolormesh(ue, ve, g, norm=norm, cmap="viridis")
+            a.set_facecolor("0.75")
+            for wire in maps["wires"].get(face, []):
+                w = np.asarray(wire, float)
+                a.plot(w[:, 0], w[:, 1], color="k", lw=1.2)
+            a.set_aspect("equal")
+            a.set_title(f"{face}: {title}")
+            a.set_xlabel("u (mm)")
+        ax[r, 0].set_ylabel("v (mm)")
+    fig.colorbar(image, ax=list(ax.flat), label="position error / bound (mm)", shrink=0.6)
     return _finish(fig, show)

@@ -1,0 +1,200 @@
+"""The reproduction's bound step: the physical limit beside the contact model's errors.
+
+::
+
+    bound   OUT_DIR/bound/bound.json        Cramér–Rao bound maps of every contact state's
+            OUT_DIR/bound/bound.<fmt>       response field over both faces (ectskin.twin.
+            OUT_DIR/bound/bound_vs_error.<fmt>  bound_field), and the bound at each test frame's
+                                            true point; the maps, and ContactNet's error map
+                                            beside the bound map per face
+
+:func:`bound_step` takes fields already built (the field step's {state: ResponseField}); the
+nuisance columns come from direct solves of each field's own sensor (``field_nuisances``).
+:func:`ectskin.pipeline.metrics.bound_block` turns bound.json into metrics.json's ``bound``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from ectskin._check import EctskinError, check_option
+from ectskin._files import read_json, save_figure_atomic, write_json_atomic
+from ectskin.io import Recording, read_recording
+from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
+from ectskin.pipeline.runner import StepRunner, digest
+from ectskin.twin.bound import NUISANCES, cases
+from ectskin.twin.bound_field import (
+    MAP_SPACING_MM,
+    StateNuisances,
+    field_bound_maps,
+    field_bounds,
+    field_nuisances,
+    reduce,
+)
+from ectskin.twin.field import ResponseField
+from ectskin.viz import figure_file
+from ectskin.viz.bound import plot_bound_maps, plot_error_vs_bound
+
+log = logging.getLogger(__name__)
+
+BOUND_DIR = "bound"
+BOUND_FILE = "bound.json"
+#: the case the metrics lead with: every nuisance at its prior (the hand's push unknown, the
+#: inflation to ±1 ml, the finger's radius to ±1 mm), as the contact data have them
+HEADLINE_CASE = "all"
+
+
+def state_key(inflation: Sequence[float]) -> str:
+    """The name of a state in metrics.json, as the contact metrics' ``per_state`` write it:
+    "0/20/0 ml"."""
+    return "/".join(f"{float(v):g}" for v in inflation) + " ml"
+
+
+def frame_points(rec: Recording, trials: Sequence[str]) -> dict[tuple[float, ...], dict[str, Any]]:
+    """{state: {face: (uv (n, 2) mm, force (n,) N)}} of the frames of ``trials`` with exactly
+    one finger on the skin (the frames the contact metrics' single-finger errors are over)."""
+    out: dict[tuple[float, ...], dict[str, Any]] = {}
+    for name in trials:
+        t = rec.trial(name)
+        n_on = t.n_contacts
+        if n_on is None or t.finger_uv_mm is None:
+            continue
+        single = n_on == 1
+        for k in range(t.n_fingers):
+            f = t.finger(k)
+            if f.contact is None or f.uv_mm is None or f.surface is None:
+                continue
+            m = single & f.contact.astype(bool)
+            if not m.any():
+                continue
+            force = np.zeros(t.n_frames) if f.force is None else f.force
+            faces = out.setdefault(tuple(float(x) for x in t.inflation), {})
+            uv, fo = faces.get(f.surface, (np.zeros((0, 2)), np.zeros(0)))
+            faces[f.surface] = (np.r_[uv, f.uv_mm[m]], np.r_[fo, force[m]])
+    return out
+
+
+def frame_bounds(
+    fields: Mapping[tuple[float, ...], ResponseField],
+    columns: Mapping[tuple[float, ...], StateNuisances],
+    points: Mapping[tuple[float, ...], Mapping[str, Any]],
+    *,
+    case: str = HEADLINE_CASE,
+    nuisances: Sequence[str] = NUISANCES,
+    prior_sd: Mapping[str, float] | None = None,
+) -> dict[str, Any]:
+    """The bound (``case``) at each test frame's true point, reduced per state (``state_key``)
+    and pooled: {"per_state": {state: reduce(...) + n_frames_clipped}, "pooled": ...,
+    "states_without_field": {state: n_frames}}.
+
+    A point outside the field's extent or a force outside its range is moved to the nearest
+    edge (counted in ``n_frames_clipped``); a state without a field is counted, not bounded.
+    """
+    check_option("case", case, cases(tuple(nuisances)))
+    per_state: dict[str, Any] = {}
+    missing: dict[str, int] = {}
+    pooled: list[np.ndarray] = []
+    for state, faces in points.items():
+        field = fields.get(state)
+        n_state = sum(len(f) for _, f in faces.values())
+        if field is None:
+            missing[state_key(state)] = n_state
+            continue
+        parts, clipped = [], 0
+        for face, (uv, force) in faces.items():
+            if face not in field.faces:
+                missing[f"{state_key(state)} {face}"] = len(force)
+                continue
+            (ulo, uhi), (vlo, vhi) = field.spec.extent(face)
+            flo, fhi = field.spec.force_range_n
+            q = np.c_[np.clip(uv[:, 0], ulo, uhi), np.clip(uv[:, 1], vlo, vhi)]
+            fq = np.clip(force, flo, fhi)
+            clipped += int(np.sum(np.any(q != uv, axis=1) | (fq != force)))
+            res = field_bounds(field, face, q, fq, columns=columns.get(state),
+                               nuisances=nuisances, prior_sd=prior_sd, only=[case])[case]
+            parts.append(np.stack([res["position_mm"], res["force_n"]]))
+        if not parts:
+            continue
+        a = np.concatenate(parts, axis=1)
+        pooled.append(a)
+        per_state[state_key(state)] = {**reduce(a[0], a[1]), "n_frames_clipped": clipped}
+    all_ = np.concatenate(pooled, axis=1) if pooled else np.zeros((2, 0))
+    return {"case": case, "per_state": per_state, "pooled": reduce(all_[0], all_[1]),
+            "states_without_field": missing}
+
+
+def bound_step(
+    runner: StepRunner,
+    config: ReproduceConfig,
+    fields: Mapping[tuple[float, ...], ResponseField],
+    data: tuple[Path, Mapping[str, Any]] | None = None,
+    *,
+    nuisances: Sequence[str] = NUISANCES,
+    prior_sd: Mapping[str, float] | None = None,
+    spacing_mm: float = MAP_SPACING_MM,
+    force_n: float = 1.0,
+    case: str = HEADLINE_CASE,
+) -> dict[str, Any]:
+    """Step "bound": OUT_DIR/bound/ (module docstring) from ``fields`` ({inflation: field});
+    returns bound.json.
+
+    ``data``: (contact.h5, its settings) of the contact step, whose test trials
+    (runs/contact/split.json) are bounded frame by frame; None: the maps alone. The error map
+    beside the bound (runs/contact/metrics.json's ``contact.map``) is drawn when there.
+    """
+    if not fields:
+        raise EctskinError("bound_step: no response fields given")
+    fields = {tuple(float(x) for x in s): f for s, f in fields.items()}
+    check_option("case", case, cases(tuple(nuisances)))
+    out_dir = runner.out / BOUND_DIR
+    run_dir = runner.out / "runs" / CONTACT_RUN
+    test: list[str] = []
+    if data is not None and (run_dir / "split.json").is_file():
+        test = list(read_json(run_dir / "split.json", "contact run split").get("test") or [])
+    settings = {
+        "fields": {state_key(s): f.key for s, f in fields.items()},
+        "nuisances": list(nuisances), "prior_sd": dict(prior_sd or {}), "case": case,
+        "spacing_mm": spacing_mm, "force_n": force_n,
+        "data": digest(dict(data[1])) if data is not None else None, "test_trials": test,
+        **config.figure_settings,
+    }
+
+    def make() -> None:
+        t0 = time.perf_counter()
+        first = next(iter(fields.values()))
+        with threadpool_limits(1):
+            columns = {s: field_nuisances(f) for s, f in fields.items()} if nuisances else {}
+            t_cols = time.perf_counter() - t0
+            maps = field_bound_maps(fields, columns, first.spec.layout, spacing_mm=spacing_mm,
+                                    force_n=force_n, nuisances=nuisances, prior_sd=prior_sd)
+            t_maps = time.perf_counter() - t0 - t_cols
+            if data is not None and test:
+                pts = frame_points(read_recording(data[0]), test)
+                maps["test"] = frame_bounds(fields, columns, pts, case=case,
+                                            nuisances=nuisances, prior_sd=prior_sd)
+        maps["headline_case"] = case
+        maps["timing"].update(columns_s=t_cols, maps_s=t_maps,
+                              total_s=time.perf_counter() - t0)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        fmt, dpi = config.figure_format, config.dpi
+        save_figure_atomic(plot_bound_maps(maps, cases=[case]), out_dir / figure_file("bound", fmt),
+                           dpi=dpi)
+        contact = read_json(run_dir / "metrics.json", "contact run metrics") if (
+            run_dir / "metrics.json").is_file() else {}
+        error_map = (contact.get("contact") or {}).get("map")
+        if error_map:
+            save_figure_atomic(plot_error_vs_bound(error_map, maps, case=case),
+                               out_dir / figure_file("bound_vs_error", fmt), dpi=dpi)
+        write_json_atomic(out_dir / BOUND_FILE, maps)
+        log.info("bound: %d states in %.1f s (nuisance columns %.1f s)", len(fields),
+                 maps["timing"]["total_s"], t_cols)
+
+    runner.step("bound", settings, [out_dir], make)
+    return read_json(out_dir / BOUND_FILE, "bound maps")
