@@ -372,11 +372,15 @@ def test_model_choice_errors_before_the_data_is_read(tmp_path):
     missing = tmp_path / "never-read.h5"
     with pytest.raises(EctskinError, match="allowed values are 'mlp', 'auto'"):
         train_from_recording("touch", missing, tmp_path / "a", TrainConfig(model="svm"))
-    with pytest.raises(EctskinError, match="--model applies to 'touch' only"):
+    with pytest.raises(EctskinError, match="--model applies to 'touch' and 'contact' only"):
         train_from_recording("track", missing, tmp_path / "a", TrainConfig(model="gbt"))
+    with pytest.raises(EctskinError, match="allowed values are 'contactnet', 'auto'"):
+        train_from_recording("contact", missing, tmp_path / "a", TrainConfig(model="logreg"))
 
 
 def test_the_command_offers_the_library_choices():
     from ectskin.commands.train import MODELS
+    from ectskin.learn.contact_choice import CONTACT_MODELS
 
-    assert MODELS == TOUCH_MODELS
+    assert set(MODELS) == set(TOUCH_MODELS) | set(CONTACT_MODELS) | {"mlp"}
+    assert MODELS[: len(TOUCH_MODELS)] == TOUCH_MODELS

@@ -133,9 +133,23 @@ def summary_lines(metrics: dict) -> list[str]:
             lines.append(f"  baselines skipped: {k['baselines_skipped']}")
     c = metrics.get("contact")
     if c:
-        lines.append("contact: " + _contact_line(c))
+        model = c.get("selected_model", "contactnet")
+        lines.append(
+            "contact: " + _contact_line(c) + (f" with {model}" if model != "contactnet" else "")
+        )
+        for name, cand in (c.get("candidates") or {}).items():
+            test = cand.get("test_loc_mm")
+            val = cand.get("val_loc_mm")
+            lines.append(
+                f"  candidate {name}: "
+                + (f"test point error {test:.2f} mm" if test is not None else cand["model"])
+                + (f", validation {val:.2f} mm" if val is not None else "")
+                + (" (selected)" if cand.get("selected") else "")
+            )
         for name, b in (c.get("baselines") or {}).items():
             lines.append(f"  baseline {name}: " + _contact_line(b))
+        for name, why in (c.get("baselines_left_out") or {}).items():
+            lines.append(f"  baseline {name}: {why}")
         if c.get("baselines_skipped"):
             lines.append(f"  baselines skipped: {c['baselines_skipped']}")
     return lines

@@ -173,6 +173,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--frame-rate", type=float, default=None,
                    help="frames/s, overriding the file's (default: the file's, else the "
                         "timestamps')")
+    p.add_argument("--readouts", choices=("absolute", "difference"), default="absolute",
+                   help="absolute readouts (default: Eq. 2 divides by a reference) or readouts "
+                        "that are already differences (difference imaging: Eq. 2 is the "
+                        "identity on them, no reference)")
     add_overwrite(p, help="replace an existing output file (default: refuse)")
 
 
@@ -323,7 +327,9 @@ def _run_build(args: argparse.Namespace) -> None:
 def _run_generic(args: argparse.Namespace) -> None:
     from ectskin.io.generic import load_generic
 
-    rec = load_generic(args.file, frame_rate_hz=args.frame_rate, layout=args.layout)
+    rec = load_generic(
+        args.file, frame_rate_hz=args.frame_rate, layout=args.layout, readouts=args.readouts
+    )
     _write(rec, args)
 
 

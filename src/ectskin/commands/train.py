@@ -6,7 +6,9 @@ default profile is the paper's, meant for a GPU: on a CPU the training says so a
 estimates its remaining time after the first epoch; ``--profile quick`` is the CPU setting. Runs
 ``--model`` (touch) chooses the classifier: the paper's TouchMLP (``mlp``, default), ``auto`` (the
 MLP and the classical candidates, the best validation accuracy selected, see
-:mod:`ectskin.learn.candidates`) or one classical model alone. Runs
+:mod:`ectskin.learn.candidates`) or one classical model alone; for contact ContactNet
+(default), ``auto`` or one of knn, ridge, gbt, gp (:mod:`ectskin.learn.contact_choice`).
+``--init-from RUN`` fine-tunes a trained run (:mod:`ectskin.learn.finetune`). Runs
 unchanged on several processes (distributed data parallel)::
 
     torchrun --nproc_per_node 3 -m ectskin.cli train track data.h5 --out runs/track
@@ -22,12 +24,14 @@ import logging
 import os
 from pathlib import Path
 
+from ectskin._check import EctskinError
 from ectskin.commands._options import add_out, add_overwrite, add_seed, integer, resolve_out
 from ectskin.learn.profiles import PROFILE_TASKS, PROFILES
 
-#: ``--model`` values: ectskin.learn.candidates.TOUCH_MODELS, listed here because importing that
-#: module loads torch, which every ``ectskin`` call would pay for (a test keeps the two equal)
-MODELS = ("mlp", "auto", "gbt", "random_forest", "logreg", "knn")
+#: ``--model`` values: ectskin.learn.candidates.TOUCH_MODELS and the contact-only ones of
+#: ectskin.learn.contact_choice.CONTACT_MODELS, listed here because importing those modules
+#: loads torch, which every ``ectskin`` call would pay for (a test keeps them equal)
+MODELS = ("mlp", "auto", "gbt", "random_forest", "logreg", "knn", "contactnet", "ridge", "gp")
 
 HELP = "train the touch classifier (TouchMLP) or the tracking transformer (C2DT) on a recording"
 EXAMPLES = """\
@@ -37,6 +41,8 @@ EXAMPLES = """\
   ectskin train touch data.h5 -o runs/touch --overwrite       # start the run over
   ectskin train touch data.h5 -o runs/auto --model auto --profile quick  # best on validation
   ectskin train touch data.h5 -o runs/gbt --model gbt         # gradient-boosted trees alone
+  ectskin train contact press.h5 -o runs/c --model auto --window 1 --profile quick
+  ectskin train contact new.h5 -o runs/ft --init-from runs/c --window 1 --epochs 5
   torchrun --nproc_per_node 3 -m ectskin.cli train track data.h5 -o runs/track
 """
 log = logging.getLogger(__name__)
@@ -64,11 +70,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default="mlp",
         help="touch classifier: mlp, the paper's TouchMLP (default); auto: the MLP and the "
         "classical candidates (gbt, random_forest, logreg, knn), the best validation accuracy "
-        "selected (candidates.json); or one classical model alone (model.skops)",
+        "selected (candidates.json); or one classical model alone (model.skops). contact: "
+        "contactnet (default; mlp means it too); auto: ContactNet and knn, ridge, gbt (and gp "
+        "on at most 2000 training frames), the lowest validation point error selected; or one "
+        "of knn, ridge, gbt, gp alone",
     )
     add_seed(p, help="seed of the split and training (default 0)")
     p.add_argument(
-        "--epochs", type=integer(1), default=None, help="override the profile's epochs"
+        "--epochs",
+        type=integer(0),
+        default=None,
+        help="override the profile's epochs (0 only with --init-from: the base run's weights)",
+    )
+    p.add_argument(
+        "--init-from",
+        metavar="RUN",
+        default=None,
+        help="fine-tune a trained run (its config, normaliser and weights) on this data, e.g. "
+        "a few labelled frames of another skin with the same pair count "
+        "(ectskin.learn.finetune)",
     )
     p.add_argument(
         "--batch-size", type=integer(1), default=None, help="override the profile's batch size"
@@ -101,6 +121,11 @@ def run(args: argparse.Namespace) -> int:
     # all subcommand modules to build its parser
     from ectskin.learn.train import TrainConfig, train_from_recording
 
+    if args.epochs == 0 and args.init_from is None:
+        raise EctskinError(
+            "argument --epochs: must be an integer >= 1, got '0' (0 epochs only with "
+            "--init-from: the base run's weights as they are)"
+        )
     out = Path(resolve_out(args, "a run directory"))
     config = TrainConfig(
         profile=args.profile,
@@ -114,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         threads=args.threads,
         model=args.model,
+        init_from=args.init_from,
     )
     summary = train_from_recording(args.task, args.data, out, config)
     if int(os.environ.get("RANK", "0")) != 0:
@@ -133,14 +159,18 @@ def run(args: argparse.Namespace) -> int:
             out / "model.pt",
         )
     if "selected_model" in summary:
+        contact = args.task == "contact"
         scores = ", ".join(
-            f"{k} {100 * v:.2f} %" for k, v in summary["candidates"].items() if v is not None
+            f"{k} {v:.3f} mm" if contact else f"{k} {100 * v:.2f} %"
+            for k, v in summary["candidates"].items()
+            if v is not None
         )
         log.info(
-            "%s: selected %s (%s); validation accuracy: %s -> %s",
+            "%s: selected %s (%s); validation %s: %s -> %s",
             args.task,
             summary["selected_model"],
             summary["selected_because"],
+            "point error" if contact else "accuracy",
             scores,
             out / "candidates.json",
         )

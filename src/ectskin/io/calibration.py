@@ -26,7 +26,14 @@ Where references come from (``reference`` argument of :func:`touch_reference`):
 array        an explicit (n_pairs,) reference in the recording's units (pF); only the measured
              channels are used (an unmeasured one may be NaN).
 
-:func:`own_reference` says which of these a recording carries itself ("meta", "rest" or None);
+**Readouts that are already differences** (difference imaging; a generic import with
+``readouts="difference"``, ``docs/import-format.md``): the recording's ``meta["readouts"]`` is
+``"difference"`` (:func:`is_difference`). Eq. 2 has no reference to divide by: the calibrated
+readout is the difference itself (``reference=None`` in :func:`calibrate`, the identity), every
+trial's touch reference is None, and an explicit reference array is refused.
+
+:func:`own_reference` says which of these a recording carries itself ("meta", "rest",
+"difference" or None);
 :func:`rest_reference` is the rest-state mean alone (what a trained run stores, so that it can
 calibrate a recording without a rest state of its own); :func:`choose_reference` picks among a
 reference recording given, the recording's own and a stored one, and says which it took.
@@ -47,6 +54,8 @@ from ectskin.io.recording import Recording, Trial
 log = logging.getLogger(__name__)
 
 REFERENCE_OPTIONS = ("auto", "rest", "meta")
+#: ``rec.meta["readouts"]`` of a recording whose readouts are differences (difference imaging)
+DIFFERENCE = "difference"
 
 #: A reference channel is "tiny" when |c_0| <= REFERENCE_RTOL * max_j |c_0,j|: dividing by it
 #: would turn readout noise into huge calibrated values. Readouts of one skin span at most a few
@@ -121,9 +130,15 @@ def relative_change(c_t: np.ndarray, c_0: np.ndarray) -> np.ndarray:
     return (c_t - c_0) / c_0
 
 
+def is_difference(rec: Recording) -> bool:
+    """Whether the readouts of ``rec`` are already differences (``meta["readouts"]``): Eq. 2 is
+    then the identity on them (module docstring)."""
+    return rec.meta.get("readouts") == DIFFERENCE
+
+
 def calibrate(
     frames: np.ndarray,
-    reference: np.ndarray,
+    reference: np.ndarray | None,
     *,
     source: str = "frames",
     pair_names: Sequence[str] | None = None,
@@ -135,8 +150,10 @@ def calibrate(
     ----------
     frames : (n_frames, n_pairs) or (n_pairs,) array
         Raw readouts c_t, pF (any unit: Eq. 2 is a ratio).
-    reference : (n_pairs,) or (n_frames, n_pairs) array
-        Reference readouts c_0 in the same unit, one for all frames or one per frame.
+    reference : (n_pairs,) or (n_frames, n_pairs) array, or None
+        Reference readouts c_0 in the same unit, one for all frames or one per frame. None:
+        the frames are already differences (difference imaging), returned as they are (the
+        identity; checked as above).
     source : str
         Where the frames come from, for error messages, e.g. ``"trial 'touch_003'"``.
     pair_names : sequence of str, optional
@@ -162,8 +179,12 @@ def calibrate(
             f"{source}: readouts must have shape (n_frames, n_pairs), got {c_t.shape}"
         )
     n, n_pairs = c_t.shape
-    c_0 = check_reference(reference, n_pairs, source=source, pair_names=pair_names)
-    if c_0.ndim == 2 and c_0.shape[0] != n:
+    c_0 = (
+        None
+        if reference is None
+        else check_reference(reference, n_pairs, source=source, pair_names=pair_names)
+    )
+    if c_0 is not None and c_0.ndim == 2 and c_0.shape[0] != n:
         raise EctskinError(
             f"{source}: a per-frame reference must have {n} rows (one per frame), got {c_0.shape[0]}"
         )
@@ -174,7 +195,7 @@ def calibrate(
             f"{source}: frame {i}, {_channel(j, pair_names)} is {c_t[i, j]}; calibrated readouts "
             f"must be finite (drop masked frames, e.g. touch_dataset(..., nonfinite='drop'))"
         )
-    c = relative_change(c_t, c_0)  # Eq. 2
+    c = c_t if c_0 is None else relative_change(c_t, c_0)  # Eq. 2 (identity on differences)
     # float32 cannot hold everything float64 can: refuse an overflow rather than return inf.
     big = finite & (np.abs(c) > np.finfo(np.float32).max)
     if big.any():
@@ -241,7 +262,7 @@ def touch_reference(
     *,
     reference: str | np.ndarray = "auto",
     channels: np.ndarray | None = None,
-) -> dict[str, np.ndarray]:
+) -> dict[str, Any]:  # (n_kept,) arrays; None for differences
     """The touch-recognition reference c_0 of every trial (see the module docstring).
 
     Parameters
@@ -253,10 +274,19 @@ def touch_reference(
 
     Returns
     -------
-    dict trial name → (n_kept,) float64 reference, pF.
+    dict trial name → (n_kept,) float64 reference, pF; None for every trial of a recording of
+    differences (:func:`is_difference`: Eq. 2 is the identity, any ``reference`` option but an
+    array is accepted and means none).
     """
     keep = np.arange(rec.n_pairs) if channels is None else np.asarray(channels)
     names = [rec.layout.pair_names[j] for j in keep]
+    if is_difference(rec):
+        if not isinstance(reference, str):
+            raise EctskinError(
+                "reference: the recording's readouts are differences (meta 'readouts': "
+                "'difference'): Eq. 2 takes no reference, expected none, found an array"
+            )
+        return {t.name: None for t in rec.trials}
     if not isinstance(reference, str):
         try:
             full = np.asarray(reference, dtype=np.float64)
@@ -279,9 +309,12 @@ def touch_reference(
 
 
 def own_reference(rec: Recording) -> str | None:
-    """The reference ``rec`` carries itself: "meta" (every trial has ``meta["reference"]``),
-    "rest" (a rest-state trial, :func:`rest_trials`) or None (neither: it needs one from
-    elsewhere, e.g. the rest state of another recording of the same skin)."""
+    """The reference ``rec`` carries itself: "difference" (its readouts are differences and need
+    none), "meta" (every trial has ``meta["reference"]``), "rest" (a rest-state trial,
+    :func:`rest_trials`) or None (neither: it needs one from elsewhere, e.g. the rest state of
+    another recording of the same skin)."""
+    if is_difference(rec):
+        return DIFFERENCE
     if rec.trials and all("reference" in t.meta for t in rec.trials):
         return "meta"
     return "rest" if rest_trials(rec) else None
@@ -363,6 +396,14 @@ def choose_reference(
     ((n_pairs,) pF with its rest-state trials, kept from ``stored_from``); else an error.
     ``channels``: the measured channels of ``rec`` (the others are NaN in an array value)."""
     keep = np.arange(rec.n_pairs) if channels is None else np.asarray(channels)
+    if is_difference(rec):
+        if given is not None:
+            raise EctskinError(
+                f"--reference does not apply to {source}: its readouts are differences "
+                "(difference imaging), Eq. 2 takes no reference"
+            )
+        text = f"none: the readouts of {source} are differences (Eq. 2 is the identity on them)"
+        return ReferenceChoice("auto", "recording", text)
     if given is not None:
         name = given_name or "the given recording"
         if list(given.layout.pair_names) != list(rec.layout.pair_names):

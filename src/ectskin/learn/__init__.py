@@ -26,6 +26,9 @@ not pull in torch. Lowest first:
 ``learn.runfiles``          the files of a run directory (metrics.csv, config.json, ...)
 ``learn.tasks``             one class per task: model, loss, metrics, figures
 ``learn.touch_choice``      the touch model choice of a run (``--model auto`` / classical)
+``learn.contact_classical`` a classical contact model (k-NN, ridge, trees, GP), ``model.skops``
+``learn.contact_choice``    the contact model choice of a run (``--model auto`` / classical)
+``learn.finetune``          ``--init-from RUN``: fine-tuning a trained run on another skin
 ``learn.train``             train / train_from_recording (TrainConfig), resume, DDP
 ``learn.evaluate``          evaluate_run: a run's test metrics, baselines and figures
 ==========================  ==============================================================

@@ -185,7 +185,9 @@ def write_candidates(run_dir: str | Path, doc: Mapping[str, Any]) -> Path:
 
 
 def read_candidates(run_dir: str | Path) -> dict[str, Any] | None:
-    """The run's ``candidates.json`` checked, or None when the run has none (an MLP run).
+    """The run's ``candidates.json`` checked, or None when the run has none (an MLP run). A
+    contact run's (``"task": "contact"``) is checked by
+    :func:`ectskin.learn.contact_choice.check_contact_candidates`.
 
     It must name the ``model`` choice, the ``selected`` candidate (one of ``candidates``) and
     per candidate a ``val_accuracy``; a selected classical model needs ``model.skops``.
@@ -195,6 +197,12 @@ def read_candidates(run_dir: str | Path) -> dict[str, Any] | None:
     if not path.exists():
         return None
     doc = read_json_object(path, "candidates file")
+    if doc.get("task") == "contact":  # a contact run's choice (ectskin.learn.contact_choice)
+        from ectskin.learn.contact_choice import CANDIDATES_FORMAT as CONTACT_FORMAT
+        from ectskin.learn.contact_choice import check_contact_candidates
+
+        if doc.get("format") == CONTACT_FORMAT:
+            return check_contact_candidates(path, doc)
     if doc.get("format") != CANDIDATES_FORMAT:
         raise EctskinError(
             f"{path}: expected format {CANDIDATES_FORMAT!r}, found {doc.get('format')!r}"

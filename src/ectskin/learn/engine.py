@@ -103,7 +103,7 @@ def improved(
     validation loss ("val_metric")."""
     if select == "val_loss":
         return val_loss < best_loss
-    if best_epoch == 0:
+    if best_epoch == 0 and not math.isfinite(best_metric):  # nothing kept yet
         return True
     sign = 1.0 if lower_is_better_metric else -1.0
     new, old = sign * val_metric, sign * best_metric

@@ -59,9 +59,9 @@ from ectskin._check import EctskinError, check_option, check_seed
 from ectskin._files import save_figure_atomic, write_json_atomic
 from ectskin.io import Recording, read_recording
 from ectskin.io.calibration import ReferenceChoice, choose_reference
+from ectskin.learn import contact_choice as cc
 from ectskin.learn.candidates import (
     CLASSICAL_FILE,
-    ClassicalModel,
     accuracy,
     fit_classical,
     load_classical,
@@ -121,19 +121,22 @@ class Run:
 
     path: Path
     task: Task
-    model: nn.Module | None  # the MLP / C2DT of model.pt (None: a classical model alone)
+    model: nn.Module | None  # the network of model.pt (None: a classical model alone)
     config: Any  # the answering model's config (a ClassicalConfig for a classical model)
     payload: dict[str, Any]  # the checkpoint (extra: pair names, kept epoch, profile, ...)
     split: dict[str, Any]  # split.json
     run_config: dict[str, Any] | None  # config.json (None: the run has none)
     metrics_rows: list[dict[str, float]]  # metrics.csv ([] when absent)
     candidates: dict[str, Any] | None = None  # candidates.json (None: an MLP run)
-    classical: ClassicalModel | None = None  # the selected classical model (model.skops)
+    classical: Any = None  # the selected classical model (model.skops; ClassicalModel for touch)
 
     @property
     def selected(self) -> str:
-        """The model the run answers with: "mlp" or a classical candidate's name."""
-        return "mlp" if self.candidates is None else str(self.candidates["selected"])
+        """The model the run answers with: the network ("mlp"; "contactnet" for contact) or a
+        classical candidate's name."""
+        if self.candidates is None:
+            return cc.NET if self.task.name == "contact" else "mlp"
+        return str(self.candidates["selected"])
 
     @property
     def model_file(self) -> Path:
@@ -149,13 +152,18 @@ def read_run(run_dir: str | Path) -> Run:
     run = Path(run_dir)
     check_run_dir(run)
     candidates = read_candidates(run)
+    contact = candidates is not None and candidates.get("task") == "contact"
+    net = cc.NET if contact else "mlp"
     model, config, payload, classical = None, None, {}, None
-    if candidates is None or "mlp" in candidates["candidates"]:
+    if candidates is None or net in candidates["candidates"]:
         model, config, payload = load_checkpoint(run / "model.pt")
         task = task_for_model(payload["kind"])
     else:
-        task = get_task("touch")  # only touch runs choose among candidates
-    if candidates is not None and candidates["selected"] != "mlp":
+        task = get_task("contact" if contact else "touch")  # a classical model alone
+    if contact and candidates["selected"] != net:
+        classical = cc.load_selected(run, candidates)
+        config = classical.config
+    elif not contact and candidates is not None and candidates["selected"] != "mlp":
         classical = load_classical(run / CLASSICAL_FILE)
         if classical.name != candidates["selected"]:
             raise EctskinError(
@@ -333,13 +341,16 @@ def evaluate_run(
     log.info("calibration: %s", calib.text)
     case, chosen, train = _test_case(run, rec, calib, test_trials, data_desc)
     m = run.task.test_metrics(case)
-    if run.task.name == "touch":
+    if run.task.name in ("touch", "contact"):
         m["selected_model"] = run.selected
     if run.candidates is not None:
-        m["candidates"] = _candidates_on_test(run, case, train)
+        on_test = cc.candidates_on_test if run.task.name == "contact" else _candidates_on_test
+        m["candidates"] = on_test(run, case, train)
     if baselines:
         if train.data is not None:
             m["baselines"] = run.task.baseline_metrics(train.data, case.test, seed=seed)
+            if notes := run.task.baselines_left_out(train.data):
+                m["baselines_left_out"] = notes
         else:
             m["baselines"], m["baselines_skipped"] = {}, train.note
             log.warning("baselines skipped: %s", train.note)

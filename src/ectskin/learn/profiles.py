@@ -178,10 +178,15 @@ class TrainConfig:
     threads : torch CPU threads while training (:mod:`ectskin.learn.threads`: an int, "auto");
         None: :data:`~ectskin.learn.threads.TRAIN_DEFAULT_THREADS`. Ignored on CUDA. The
         classical candidates use as many native threads.
-    model : touch only: "mlp" (the paper's TouchMLP, default), "auto" (every candidate, the
+    model : touch: "mlp" (the paper's TouchMLP, default), "auto" (every candidate, the
         best on validation selected) or one classical candidate
-        (:data:`~ectskin.learn.candidates.TOUCH_MODELS`, see :mod:`ectskin.learn.touch_choice`).
+        (:data:`~ectskin.learn.candidates.TOUCH_MODELS`, see :mod:`ectskin.learn.touch_choice`);
+        contact: "contactnet" ("mlp" means it too), "auto", "knn", "ridge", "gbt" or "gp"
+        (:mod:`ectskin.learn.contact_choice`).
     settings : overrides of any :class:`TrainSettings` field (e.g. ``{"step_size": 2}``).
+    init_from : a trained run (or its ``model.pt``) to fine-tune: its config, normaliser and
+        weights are the start (:mod:`ectskin.learn.finetune`); ``epochs`` may then be 0 (the
+        base weights kept as they are).
     """
 
     profile: str = "paper"
@@ -199,6 +204,7 @@ class TrainConfig:
     threads: int | str | None = None
     model: str = "mlp"
     settings: dict[str, Any] | None = None
+    init_from: str | None = None
 
     def settings_for(self, task: str) -> TrainSettings:
         """The :class:`TrainSettings` of :attr:`profile` for ``task`` with :attr:`settings`,
@@ -207,6 +213,10 @@ class TrainConfig:
         for name in ("epochs", "batch_size"):
             if getattr(self, name) is not None:
                 overrides[name] = getattr(self, name)
+        if self.init_from is not None and overrides.get("epochs") == 0:
+            # a fine-tune of 0 epochs keeps the base run's weights (ectskin.learn.finetune)
+            overrides["epochs"] = 1
+            return replace(profile_settings(task, self.profile, **overrides), epochs=0)
         return profile_settings(task, self.profile, **overrides)
 
 

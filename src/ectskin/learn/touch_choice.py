@@ -51,18 +51,26 @@ __all__ = ["check_model_choice", "choose_after_mlp", "fit_classical", "remove_st
 
 
 def check_model_choice(task: Task, model: str, out: str | Path, *, resume: bool) -> None:
-    """Refuse a model choice the task does not have ("mlp" only for tracking) or, when resuming,
-    one other than the run's own (config.json's ``model_choice``; "mlp" when absent)."""
-    check_option("model", model, TOUCH_MODELS)
-    if task.name != "touch" and model != "mlp":
+    """Refuse a model choice the task does not have ("mlp" only for tracking; contact: the
+    choices of :mod:`ectskin.learn.contact_choice`) or, when resuming, one other than the run's
+    own (config.json's ``model_choice``; the task's network when absent)."""
+    if task.name == "contact":
+        from ectskin.learn.contact_choice import normalise_choice
+
+        model = normalise_choice(model)
+    else:
+        check_option("model", model, TOUCH_MODELS)
+    if task.name not in ("touch", "contact") and model != "mlp":
         raise EctskinError(
-            f"--model applies to 'touch' only: {task.name!r} trains its paper model, got "
-            f"model={model!r}"
+            f"--model applies to 'touch' and 'contact' only: {task.name!r} trains its paper "
+            f"model, got model={model!r}"
         )
     path = Path(out) / "config.json"
     if not (resume and path.is_file()):
         return
     before = read_json_object(path, "run config").get("model_choice", "mlp")
+    if task.name == "contact":
+        before = "contactnet" if before == "mlp" else before
     if before != model:
         raise EctskinError(
             f"{path}: the run in this folder was trained with --model {before}, not --model "
@@ -70,11 +78,17 @@ def check_model_choice(task: Task, model: str, out: str | Path, *, resume: bool)
         )
 
 
-def remove_stale(out: Path, model: str) -> None:
+def remove_stale(out: Path, model: str, task: str = "touch") -> None:
     """Starting over (``resume=False``): remove the files of an earlier run that this one would
     not replace, so that no earlier selection or model survives beside the new one."""
     stale = [CANDIDATES_FILE, CLASSICAL_FILE]
-    if model in CLASSICAL:
+    if task == "contact":
+        from ectskin.learn.contact_choice import CONTACT_CLASSICAL
+
+        classical = model in CONTACT_CLASSICAL
+    else:
+        classical = model in CLASSICAL
+    if classical:
         stale += ["model.pt", "last.pt", "metrics.csv"]  # no MLP in this run
     gone = [out / n for n in stale if (out / n).is_file()]
     for p in gone:

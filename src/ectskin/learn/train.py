@@ -11,7 +11,9 @@ Both write a run directory (files: :mod:`ectskin.learn.runfiles`). The task
 best validation epoch kept (lowest loss, or best metric for the ``robust`` recipe). The epoch
 loops are :mod:`ectskin.learn.engine`; the touch model choice (``TrainConfig.model``,
 ``--model``: the paper's TouchMLP by default, or classical candidates) is
-:mod:`ectskin.learn.touch_choice`.
+:mod:`ectskin.learn.touch_choice`, the contact one :mod:`ectskin.learn.contact_choice`;
+fine-tuning a trained run (``TrainConfig.init_from``, ``--init-from``) is
+:mod:`ectskin.learn.finetune`.
 
 Determinism and resume: every random draw of an epoch is seeded from ``(seed, epoch, rank)``
 (see :mod:`ectskin.learn.engine`), so a run that is stopped and resumed from ``last.pt``
@@ -33,6 +35,7 @@ import logging
 import math
 import time
 from dataclasses import asdict, dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +46,8 @@ from torch import nn
 from ectskin._check import EctskinError, check_seed
 from ectskin._files import to_jsonable
 from ectskin.io import read_recording
+from ectskin.learn import contact_choice as cc
+from ectskin.learn import finetune
 from ectskin.learn.candidates import CLASSICAL
 from ectskin.learn.checkpoint import save_checkpoint
 from ectskin.learn.data import SampleData
@@ -175,6 +180,7 @@ def train(
     t = get_task(task)
     _check_seeds(config)
     check_model_choice(t, config.model, out_dir, resume=config.resume)
+    finetune.check_init_choice(task, config.model, config.init_from)
     s = config.settings_for(task)
     t.check_data(train_data, "train_data")
     t.check_data(val_data, "val_data")
@@ -189,15 +195,19 @@ def train(
     d = setup(config.device)
     out = Path(out_dir)
     job = _Job(t, s, config, int(config.seed), d, split, out)
+    contact = t.name == "contact"
     if d.main and not config.resume:
-        remove_stale(out, config.model)
+        remove_stale(out, config.model, t.name)
     with torch_threads(n_threads if d.device.type == "cpu" else None) as used_threads:
         native = used_threads if d.device.type == "cpu" else resolve_threads(n_threads)
-        if config.model in CLASSICAL:
+        if contact and config.model in cc.CONTACT_CLASSICAL:
+            return cc.fit_contact_alone(config, out, train_data, val_data, native, d=d, split=split)
+        if not contact and config.model in CLASSICAL:
             return fit_classical(t, config, out, train_data, val_data, native, d=d, split=split)
         summary = _train(job, train_data, val_data)
         if config.model == "auto" and d.main:
-            summary.update(choose_after_mlp(t, config, out, train_data, val_data, summary, native))
+            choose = cc.choose_after_net if contact else partial(choose_after_mlp, t)
+            summary.update(choose(config, out, train_data, val_data, summary, native))
         return summary
 
 
@@ -266,6 +276,12 @@ def _train(job: _Job, train_data: SampleData, val_data: SampleData) -> dict[str,
     criterion = task.criterion(m.model, s, train_data, d.device)
     for note in criterion.notes if d.main else ():
         logger.warning(note)
+    if job.config.init_from is not None and state.epoch == 0:  # the base weights: epoch 0
+        scores = finetune.keep_base(task, m.model, criterion, val_data, s, d)
+        state.best_loss, state.best_metric = scores
+        if d.main:
+            job.out_dir.mkdir(parents=True, exist_ok=True)
+            finetune.save_base(job.out_dir, m.model, m.normalizer, m.extra, scores)
     recipe = {k: getattr(s, k) for k in RECIPE_FIELDS}
     recipe["inflation_shift_states"] = criterion.shift_states
     rank_batch = math.ceil(s.batch_size / d.world_size)
@@ -282,9 +298,16 @@ def _build(job: _Job, train_data: SampleData) -> _Model:
     optimizer and scheduler, and the checkpoint metadata."""
     task, s, d = job.task, job.settings, job.d
     torch.manual_seed(job.seed)  # model initialisation: identical on every rank
-    model = task.build_model(train_data, job.config.model_options)
-    normalizer = task.fit_normalization(model, train_data)
+    base: dict[str, Any] = {}
+    if job.config.init_from is not None:  # fine-tuning: the base run's config, normaliser, weights
+        model, normalizer, base = finetune.base_model(
+            job.config.init_from, task, train_data, job.config.model_options
+        )
+    else:
+        model = task.build_model(train_data, job.config.model_options)
+        normalizer = task.fit_normalization(model, train_data)
     extra = {
+        **base,
         "task": task.name,
         "pair_names": list(getattr(train_data, "pair_names", []) or []),
         "profile": job.config.profile,
@@ -328,6 +351,7 @@ def _write_header(
         "n_val": int(val_data.x.shape[0]),
         "pair_names": m.extra["pair_names"],
         "data_fingerprint": m.fingerprint,
+        **({"init_from": m.extra["init_from"]} if "init_from" in m.extra else {}),
         "torch": torch.__version__,
         "torch_threads": torch.get_num_threads(),
     }

@@ -15,7 +15,12 @@ one passed in (``layout=``: the channels are then that layout's pairs in the fix
 * when the channel count is not n(n−1)/2 the last pairs have no data: they hold NaN and are listed
   in ``rec.meta["unmeasured_pairs"]``, which every data set of :mod:`ectskin.learn.data` leaves
   out (so 5 channels give a 4-electrode layout with 6 pairs, of which pair 5 is unmeasured);
-* one region per touch class (1..max label) and one marker per tracked point.
+* one region per touch class (1..max label) and one marker per tracked point
+  (``rec.meta["virtual_layout"]`` is True: :func:`is_virtual_layout`).
+
+A file with contact labels alone (no touch classes, no markers) takes its classes from them: 1
+where a finger is on the skin, else 0. ``readouts="difference"`` imports readouts that are
+already differences (difference imaging; ``rec.meta["readouts"]``).
 
 The file's channel and marker names are kept in ``rec.meta["channel_names"]`` and
 ``rec.meta["marker_names"]``. Every problem is an :class:`~ectskin.EctskinError` naming the file,
@@ -30,15 +35,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ectskin._check import EctskinError
-from ectskin.io.generic.build import build_recording, virtual_layout
+from ectskin._check import EctskinError, check_option
+from ectskin.io.generic.build import READOUTS, build_recording, is_virtual_layout, virtual_layout
 from ectskin.io.generic.csvfile import read_csv
 from ectskin.io.generic.fields import NPZ_FIELDS
 from ectskin.io.generic.npz import read_npz
 from ectskin.io.recording import Recording
 from ectskin.layout import SensorLayout, load_layout
 
-__all__ = ["NPZ_FIELDS", "load_generic", "virtual_layout"]
+__all__ = ["NPZ_FIELDS", "READOUTS", "is_virtual_layout", "load_generic", "virtual_layout"]
 
 
 def load_generic(
@@ -46,6 +51,7 @@ def load_generic(
     *,
     frame_rate_hz: float | None = None,
     layout: SensorLayout | str | Path | None = None,
+    readouts: str = "absolute",
 ) -> Recording:
     """Read a generic NPZ or CSV recording (see ``docs/import-format.md``).
 
@@ -60,6 +66,10 @@ def load_generic(
         The skin the channels come from: the file must then hold exactly ``layout.n_pairs``
         channels in the fixed pair order, ``layout.n_markers`` markers and classes up to
         ``layout.n_regions``. Default: a virtual layout built from the data (module docstring).
+    readouts : "absolute" (default) or "difference"
+        "difference": the readouts are already differences (difference imaging): Eq. 2 is the
+        identity on them, no reference is divided by (``rec.meta["readouts"]``, honoured by
+        :mod:`ectskin.io.calibration`); a reference field is then refused.
 
     Returns
     -------
@@ -72,9 +82,10 @@ def load_generic(
             f"{path}: unknown generic recording type {path.suffix!r}; expected .npz or .csv "
             f"(see docs/import-format.md)"
         )
+    check_option("readouts", readouts, READOUTS)
     if not path.is_file():
         raise EctskinError(f"{path}: file not found")
     fields = read_npz(path) if suffix == ".npz" else read_csv(path)
     if isinstance(layout, (str, Path)):
         layout = load_layout(layout)
-    return build_recording(fields, layout, frame_rate_hz, fmt=suffix[1:])
+    return build_recording(fields, layout, frame_rate_hz, fmt=suffix[1:], readouts=readouts)

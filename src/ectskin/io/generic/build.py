@@ -9,19 +9,24 @@ Kept, it would pass the import and fail training (Eq. 2 divides by a reference o
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from ectskin._check import EctskinError
-from ectskin.io.calibration import REFERENCE_RTOL
+from ectskin.io.calibration import DIFFERENCE, REFERENCE_RTOL
 from ectskin.io.frame_rate import frame_rate, stated_rate
 from ectskin.io.generic.fields import Fields
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import SensorLayout
 
 log = logging.getLogger(__name__)
+
+#: the ``readouts`` option of the import: absolute readouts (Eq. 2 divides by a reference) or
+#: differences (difference imaging; Eq. 2 is then the identity)
+READOUTS = ("absolute", DIFFERENCE)
 
 
 def virtual_layout(
@@ -74,16 +79,50 @@ def virtual_layout(
     return SensorLayout.from_dict(d, source="virtual layout")
 
 
+def _labels_from_contact(truth: Any, n: int) -> np.ndarray:
+    """Touch classes of a file with contact labels alone: 1 where a finger is on the skin."""
+    if truth.contact is not None:
+        on = truth.contact.any(axis=1)
+    elif truth.position_mm is not None:
+        on = np.isfinite(truth.position_mm).all(axis=2).any(axis=1)
+    else:
+        on = np.zeros(n, dtype=bool)
+    return on.astype(np.int64)
+
+
+def is_virtual_layout(rec: Recording) -> bool:
+    """Whether ``rec`` lies on a virtual layout of the generic import (:func:`virtual_layout`):
+    its ``meta["virtual_layout"]`` (set by the import), or, for files imported before that was
+    stored, the virtual layout's name (``generic-<n>-virtual-electrodes``). Its regions are then
+    strips over the whole face, one per touch class, not touch regions of a skin."""
+    if "virtual_layout" in rec.meta:
+        return bool(rec.meta["virtual_layout"])
+    return re.fullmatch(r"generic-\d+-virtual-electrodes", rec.layout.name) is not None
+
+
 def build_recording(
-    f: Fields, layout: SensorLayout | None, frame_rate_hz: float | None, fmt: str
+    f: Fields,
+    layout: SensorLayout | None,
+    frame_rate_hz: float | None,
+    fmt: str,
+    readouts: str = "absolute",
 ) -> Recording:
-    """One trial per group (in order of first appearance) on ``layout`` (None: virtual)."""
+    """One trial per group (in order of first appearance) on ``layout`` (None: virtual);
+    ``readouts`` "difference": the readouts are differences (see ``load_generic``)."""
     n, m = f.readouts.shape
+    if f.labels is None and f.markers is None and f.truth is not None:
+        f.labels = _labels_from_contact(f.truth, n)
     if f.labels is None and f.markers is None:
         raise EctskinError(
-            f"{f.source}: no labels: give touch classes ('labels' / column 'label') and/or marker "
-            f"coordinates ('markers' / columns 'm:<marker>.x|.y|.z')"
+            f"{f.source}: no labels: give touch classes ('labels' / column 'label'), marker "
+            f"coordinates ('markers' / columns 'm:<marker>.x|.y|.z') and/or contact labels"
         )
+    if readouts == "difference" and f.reference is not None:
+        raise EctskinError(
+            f"{f.source}: field 'reference' with readouts='difference': the readouts are "
+            "already differences, Eq. 2 has no reference to divide by; expected no reference"
+        )
+    virtual = layout is None
     layout = _layout(f, layout)
     dead = _dead_channels(f)
     groups = _Groups(f.group)
@@ -100,6 +139,7 @@ def build_recording(
         "file": f.source,
         # the names of the measured channels (datasets.channel_names: one per measured channel)
         "channel_names": [c for j, c in enumerate(f.channel_names) if j not in dead],
+        "virtual_layout": virtual,
     }
     if f.marker_names is not None:
         rec_meta["marker_names"] = list(f.marker_names)
@@ -120,6 +160,8 @@ def build_recording(
         rec_meta["import_notes"] = notes
     if per_frame_ref is not None:
         rec_meta["readout_unit"] = "ratio to the per-frame reference"
+    if readouts == "difference":
+        rec_meta["readouts"] = DIFFERENCE
     rec = Recording(layout=layout, trials=trials, frame_rate_hz=rate, meta=rec_meta)
     log.info(
         "%s: %d frames, %d channels, %d trials, %d markers, classes up to %d",

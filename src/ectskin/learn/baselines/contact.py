@@ -7,7 +7,8 @@ one finger slot filled, the others copies), so one function computes the metrics
 ==================  =====================================================================
 ``region_centre``   the touch classifier's answer turned into a point: logistic regression
                     (the strongest touch baseline) over no touch + the regions, the point is
-                    the predicted region's centre; force = the mean training force
+                    the predicted region's centre; force = the mean training force. Left out
+                    (:func:`left_out`, with a note) on a layout without physical regions
 ``knn``             5 nearest training frames: count and hover by vote, face by vote among
                     frames in contact, (u, v) and force their mean
 ``ridge``           ridge regression of (u, v) and force on frames in contact; count, face and
@@ -37,6 +38,7 @@ __all__ = [
     "CONTACT_BASELINES",
     "MAX_TRAIN",
     "contact_baselines",
+    "left_out",
     "contact_knn_baseline",
     "contact_ridge_baseline",
     "region_centre_baseline",
@@ -88,18 +90,24 @@ def region_centre_baseline(
     train: ContactData, test: ContactData, region_centres: np.ndarray, *, seed: int = 0
 ) -> np.ndarray:
     """Region classifier → the region's centre. ``region_centres`` (n_regions + 1, 3): (face
-    index, u, v) of each region id (row 0 unused)."""
+    index, u, v) of each region id (row 0 unused). Training frames of one class give that
+    class for every frame (logistic regression needs two)."""
     idx = subsample(train.n_samples, MAX_TRAIN, np.random.default_rng(seed))
     x = _frames(train)[idx]
     region = train.group_region[train.group[idx]] * (train.count[idx] > 0)
-    clf = _logreg(seed)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        clf.fit(x, region)
     xt = _frames(test)
-    proba = clf.predict_proba(xt)
-    r = clf.classes_[proba.argmax(1)]
-    p_contact = 1.0 - (proba[:, list(clf.classes_).index(0)] if 0 in clf.classes_ else 0.0)
+    classes = np.unique(region)
+    if classes.size == 1:  # one class (e.g. every frame a press of one region): it, always
+        r = np.full(len(xt), classes[0])
+        p_contact = np.full(len(xt), float(classes[0] != 0))
+    else:
+        clf = _logreg(seed)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            clf.fit(x, region)
+        proba = clf.predict_proba(xt)
+        r = clf.classes_[proba.argmax(1)]
+        p_contact = 1.0 - (proba[:, list(clf.classes_).index(0)] if 0 in clf.classes_ else 0.0)
     hover_p, _ = _fit_classes(_logreg(seed), x, train.hover[idx].astype(int))
     centre = region_centres[np.clip(r, 0, len(region_centres) - 1)]
     on = train.count > 0
@@ -117,74 +125,56 @@ def region_centre_baseline(
 def contact_knn_baseline(
     train: ContactData, test: ContactData, *, seed: int = 0, k: int = 5
 ) -> np.ndarray:
-    """k nearest standardised training frames (see the module docstring)."""
-    from sklearn.neighbors import KNeighborsClassifier, KNeighborsRegressor
-    from sklearn.pipeline import make_pipeline
-    from sklearn.preprocessing import StandardScaler
-
-    idx = subsample(train.n_samples, MAX_TRAIN, np.random.default_rng(seed))
-    x = _frames(train)[idx]
-    xt = _frames(test)
-    count = np.minimum(train.count[idx], 1)
-    cnt = make_pipeline(StandardScaler(), KNeighborsClassifier(k))
-    p_contact, count_pred = _fit_classes(cnt, x, count)
-    hov = make_pipeline(StandardScaler(), KNeighborsClassifier(k))
-    p_hover, _ = _fit_classes(hov, x, train.hover[idx].astype(int))
-    on = count > 0
-    face = np.zeros(len(xt))
-    uv = np.zeros((len(xt), 2))
-    force = np.zeros(len(xt))
-    if on.any():
-        _, face_pred = _fit_classes(
-            make_pipeline(StandardScaler(), KNeighborsClassifier(k)), x[on], train.face[idx][on, 0]
-        )
-        face = face_pred(xt)
-        reg = make_pipeline(StandardScaler(), KNeighborsRegressor(k))
-        targets = np.column_stack([train.uv[idx][on, 0], train.force[idx][on, 0]])
-        reg.fit(x[on], targets)
-        out = reg.predict(xt)
-        uv, force = out[:, :2], out[:, 2]
-    return _pack(count_pred(xt), p_contact(xt), p_hover(xt), face, uv, force)
+    """k nearest standardised training frames (see the module docstring): the ``knn``
+    candidate of the contact model choice (:mod:`ectskin.learn.contact_classical`)."""
+    return _classical("knn", train, test, seed, k=k)
 
 
 def contact_ridge_baseline(train: ContactData, test: ContactData, *, seed: int = 0) -> np.ndarray:
-    """Ridge for (u, v) and force, logistic regression for count, face and hover."""
-    from sklearn.linear_model import RidgeCV
-    from sklearn.pipeline import make_pipeline
-    from sklearn.preprocessing import StandardScaler
+    """Ridge for (u, v) and force, logistic regression for count, face and hover: the ``ridge``
+    candidate of the contact model choice (:mod:`ectskin.learn.contact_classical`)."""
+    return _classical("ridge", train, test, seed)
 
-    idx = subsample(train.n_samples, MAX_TRAIN, np.random.default_rng(seed))
-    x = _frames(train)[idx]
-    xt = _frames(test)
-    count = np.minimum(train.count[idx], 1)
-    p_contact, count_pred = _fit_classes(_logreg(seed), x, count)
-    p_hover, _ = _fit_classes(_logreg(seed), x, train.hover[idx].astype(int))
-    on = count > 0
-    face = np.zeros(len(xt))
-    uv = np.zeros((len(xt), 2))
-    force = np.zeros(len(xt))
-    if on.any():
-        _, face_pred = _fit_classes(_logreg(seed), x[on], train.face[idx][on, 0])
-        face = face_pred(xt)
-        reg = make_pipeline(StandardScaler(), RidgeCV(alphas=np.logspace(-3, 3, 13)))
-        reg.fit(x[on], np.column_stack([train.uv[idx][on, 0], train.force[idx][on, 0]]))
-        out = reg.predict(xt)
-        uv, force = out[:, :2], np.maximum(out[:, 2], 0.0)
-    return _pack(count_pred(xt), p_contact(xt), p_hover(xt), face, uv, force)
+
+def _classical(name: str, train: ContactData, test: ContactData, seed: int, **kw) -> np.ndarray:
+    # imported on use: contact_classical imports this package's base module
+    from ectskin.learn import contact_classical as cc
+
+    if name == "knn" and kw.get("k", 5) != cc.SETTINGS["knn"]["n_neighbors"]:
+        raise EctskinError(f"contact k-NN baseline: k must be {cc.SETTINGS['knn']['n_neighbors']}")
+    model, _, _ = cc.fit_contact_classical(name, train, seed=seed, max_train=MAX_TRAIN)
+    return model.predict(test.x)
+
+
+def left_out(train: ContactData) -> dict[str, str]:
+    """{baseline: why} of the baselines that give no meaningful number on ``train``'s skin: the
+    region centre where the layout has no physical regions (the virtual layout of a generic
+    import: its "regions" are strips over the whole face, so the distance to their centre is no
+    region error) or none at all."""
+    if not train.regions_physical:
+        return {
+            "region_centre": "left out: the layout has no physical touch regions (a virtual "
+            "layout of a generic import), so the distance to a region's centre is no region error"
+        }
+    return {}
 
 
 def contact_baselines(
     train: ContactData, test: ContactData, region_centres: np.ndarray, *, seed: int = 0
 ) -> dict[str, tuple[np.ndarray, float]]:
-    """{name: (predictions (n_test, columns), fit+predict seconds)} of :data:`CONTACT_BASELINES`."""
+    """{name: (predictions (n_test, columns), fit+predict seconds)} of :data:`CONTACT_BASELINES`
+    but those :func:`left_out` names."""
     if train.n_samples == 0 or test.n_samples == 0:
         raise EctskinError("contact baselines: the training or test split is empty")
     out: dict[str, Any] = {}
+    skip = left_out(train)
     for name, fn in (
         ("region_centre", lambda: region_centre_baseline(train, test, region_centres, seed=seed)),
         ("knn", lambda: contact_knn_baseline(train, test, seed=seed)),
         ("ridge", lambda: contact_ridge_baseline(train, test, seed=seed)),
     ):
+        if name in skip:
+            continue
         t0 = time.perf_counter()
         pred = fn()
         out[name] = (pred, time.perf_counter() - t0)

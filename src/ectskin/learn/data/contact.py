@@ -39,6 +39,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from ectskin._check import EctskinError
 from ectskin.io import Recording, require_ground_truth
 from ectskin.io.calibration import calibrate, touch_reference
+from ectskin.io.generic import is_virtual_layout
 from ectskin.io.recording import Trial
 from ectskin.learn.channels import channel_names, measured_channels
 from ectskin.learn.data.base import SampleData
@@ -67,7 +68,9 @@ class ContactData(SampleData):
     ``region_centre`` (n_regions + 1, 3) each region's (face index, u, v) (row 0: no region).
     ``body_mm`` (width, thickness) of the body the recording was made on (its
     ``meta["manipulator"]``, else the default body; ``body_source`` says which): the distance
-    from one face to the other over the skin goes around it.
+    from one face to the other over the skin goes around it. ``regions_physical``: False when
+    the layout's regions are no touch regions of a skin (none, or the virtual layout of a
+    generic import, :func:`ectskin.io.generic.is_virtual_layout`).
     """
 
     SAMPLE_FIELDS: ClassVar[tuple[str, ...]] = (
@@ -103,6 +106,7 @@ class ContactData(SampleData):
     body_source: str
     group_region: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     region_centre: np.ndarray = field(default_factory=lambda: np.zeros((1, 3)))
+    regions_physical: bool = True
 
     @property
     def window(self) -> int:
@@ -234,6 +238,7 @@ def contact_dataset(
         face_extent=extent,
         group_region=np.array([t.region for t in chosen], dtype=np.int64),
         region_centre=region_centre,
+        regions_physical=bool(rec.layout.n_regions) and not is_virtual_layout(rec),
         body_mm=(float(body.width_mm), float(body.thickness_mm)),
         body_source=body_source,
     )

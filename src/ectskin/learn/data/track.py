@@ -21,7 +21,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from ectskin._check import EctskinError
-from ectskin.io.calibration import calibrate, is_no_contact, touch_reference
+from ectskin.io.calibration import calibrate, is_difference, is_no_contact, touch_reference
 from ectskin.io.recording import Recording, Trial
 from ectskin.learn.channels import channel_names, check_regions, measured_channels
 from ectskin.learn.data.base import NONFINITE_OPTIONS, SampleData, finite_rows, select_trials
@@ -193,6 +193,12 @@ def track_dataset(
         raise EctskinError(
             "track_dataset: no usable tracking trial (need touch trials with markers and no "
             "occlusion)"
+        )
+    if prior and is_difference(rec):
+        raise EctskinError(
+            "track_dataset: prior knowledge calibrates each trajectory against its first frame "
+            "by Eq. 2, a ratio, but the recording's readouts are differences (meta 'readouts': "
+            "'difference'); train without it (--no-prior)"
         )
     refs = None if prior else touch_reference(rec, reference=reference, channels=keep)
 

@@ -1,17 +1,24 @@
-"""Contact inference on a stream: :class:`ContactPredictor` (a trained ContactNet run).
+"""Contact inference on a stream: :class:`ContactPredictor` (a trained contact run).
 
 ``predict(window)`` gives the raw columns of :meth:`ContactNet.decode`; ``read(window)`` one
 :class:`ContactReading` per frame: finger count, probabilities of contact and hover, and per
-finger its face, point (mm), uncertainty (mm, the model's own, one standard deviation per axis)
-and force (N).
+finger its face, point (mm), uncertainty (mm, the model's own, one standard deviation per axis;
+NaN where the model gives none) and force (N).
+
+A contact run whose ``candidates.json`` selects a classical model
+(:mod:`ectskin.learn.contact_choice`) answers with its ``model.skops`` instead
+(:class:`~ectskin.learn.contact_classical.ContactClassical`: the same columns, through
+scikit-learn, from the window's last frame).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from ectskin._check import EctskinError
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
@@ -55,6 +62,64 @@ class ContactPredictor(Predictor):
     kind = "contact_net"
     _output = "decode"  # ContactNet.decode, the model's own
 
+    def __init__(
+        self,
+        model: torch.nn.Module | None,
+        config: Any,
+        payload: dict,
+        source: str,
+        classical: Any = None,
+    ) -> None:
+        self.classical = classical
+        if classical is None:
+            super().__init__(model, config, payload, source)
+            return
+        self.model = None
+        self.config = classical.config
+        self.payload = {
+            "kind": f"contact_{classical.name}",
+            "extra": {"faces": classical.faces, "face_extent": classical.face_extent},
+        }
+        self.source = source
+        self.device = torch.device("cpu")
+        self.pair_names = list(classical.pair_names)
+
+    @classmethod
+    def from_run(
+        cls, run_dir: str | Path, *, device: str | torch.device = "cpu", layout: Any = None
+    ):
+        """Load the model a contact run answers with: ``model.skops`` when its
+        ``candidates.json`` selects a classical model, else ``model.pt`` (on ``device``); or the
+        model file itself. With ``layout`` a model of another skin is refused."""
+        from ectskin.learn.candidates import read_candidates
+        from ectskin.learn.contact_classical import load_contact_classical
+
+        path = Path(run_dir)
+        if path.is_dir():
+            doc = read_candidates(path)
+            if doc is not None and doc.get("task") == "contact" and doc["selected"] != "contactnet":
+                path = path / "model.skops"
+        if path.suffix == ".skops":
+            model = load_contact_classical(path, layout=layout)
+            return cls(None, None, {}, str(path), classical=model)
+        return super().from_run(run_dir, device=device, layout=layout)
+
+    @property
+    def model_name(self) -> str:
+        """ "contactnet" or the classical candidate answering."""
+        return "contactnet" if self.classical is None else self.classical.name
+
+    @property
+    def runtime(self) -> str:
+        return "skops" if self.classical is not None else super().runtime
+
+    def use_runtime(self, runtime: str):
+        """As :meth:`Predictor.use_runtime`; a classical model answers through scikit-learn
+        whatever is asked."""
+        if self.classical is not None:
+            return self
+        return super().use_runtime(runtime)
+
     @property
     def window(self) -> int:
         return int(self.config.window)
@@ -82,7 +147,10 @@ class ContactPredictor(Predictor):
             f"ContactPredictor({self.source})",
             self.pair_names,
         )
-        out = self._forward([x], batched)
+        if self.classical is not None:
+            out = self.classical.predict(x.numpy()).astype(np.float32)
+        else:
+            out = self._forward([x], batched)
         return out if batched else out[0]
 
     def read(self, window_calibrated: Any) -> ContactReading:

@@ -204,6 +204,11 @@ class Task(ABC, Generic[DataT]):
     def baseline_metrics(self, train: DataT, test: DataT, *, seed: int) -> dict[str, Any]:
         """The task's baselines fit on ``train`` and scored on ``test``: {name: metrics}."""
 
+    def baselines_left_out(self, train: DataT) -> dict[str, str]:
+        """{baseline: why} of the baselines :meth:`baseline_metrics` leaves out on ``train``
+        (no meaningful number there); none by default."""
+        return {}
+
     @abstractmethod
     def figures(self, case: EvalCase[DataT], metrics: dict[str, Any]) -> dict[str, Any]:
         """The figures of :attr:`figure_captions`: {file stem: matplotlib Figure}. May add what

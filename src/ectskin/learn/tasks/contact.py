@@ -38,7 +38,7 @@ from ectskin._check import EctskinError
 from ectskin.io import Recording
 from ectskin.layout.geometry import on_skin_distance
 from ectskin.learn.augment import no_contact_means
-from ectskin.learn.baselines.contact import contact_baselines
+from ectskin.learn.baselines.contact import contact_baselines, left_out
 from ectskin.learn.data.contact import (
     CONTACT_SPLIT,
     HOVER_MAX_MM,
@@ -317,7 +317,7 @@ class ContactTask(Task[ContactData]):
     def test_metrics(self, case: EvalCase[ContactData]) -> dict[str, Any]:
         m = contact_report(case.test, case.pred)
         m["window"] = int(case.config.window)
-        m["arch"] = case.config.arch
+        m["arch"] = getattr(case.config, "arch", None)  # None: a classical model
         return m
 
     def baseline_metrics(
@@ -331,6 +331,9 @@ class ContactTask(Task[ContactData]):
             m["fit_s"] = seconds
             out[name] = m
         return out
+
+    def baselines_left_out(self, train: ContactData) -> dict[str, str]:
+        return left_out(train)
 
     def figures(self, case: EvalCase[ContactData], metrics: dict[str, Any]) -> dict[str, Any]:
         test, pred = case.test, case.pred
