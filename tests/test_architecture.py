@@ -29,6 +29,7 @@ LAYERS = (
     ("electrostatics",),
     ("io",),
     ("twin",),
+    ("inversion",),
     ("learn",),
     ("report",),
     ("pipeline",),

@@ -1,0 +1,23 @@
+"""Training-free physical inversion: fingers fitted to readouts through the response field.
+
+``docs/inversion.md`` describes the model, its assumptions and the API:
+:class:`Inversion` (``fit`` one frame), :func:`fit_frames` and :func:`invert_recording` (many),
+:func:`push_basis` (the hand's push as nuisance columns, from direct solves);
+:mod:`ectskin.inversion.coupling` (two fingers as coupled conductors).
+"""
+
+from ectskin.inversion.fit import FingerEstimate, Inversion, InversionResult
+from ectskin.inversion.frames import fit_frames, invert_recording, results_to_arrays
+from ectskin.inversion.model import FieldLike, StateModel, push_basis
+
+__all__ = [
+    "FieldLike",
+    "FingerEstimate",
+    "Inversion",
+    "InversionResult",
+    "StateModel",
+    "fit_frames",
+    "invert_recording",
+    "push_basis",
+    "results_to_arrays",
+]

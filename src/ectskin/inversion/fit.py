@@ -1,0 +1,497 @@
+"""The inversion itself: fit 0, 1 or 2 fingers to one frame through the response field.
+
+For a frame y (n_pairs,) pF of a known state (the model of :mod:`ectskin.inversion.model`):
+
+1. **No finger**: y − c_u = N β + e, weighted linear least squares (closed form).
+2. **One finger**: a coarse search over the node table (the noise-weighted distance of the
+   frame, projected off the nuisance columns, to every node's signal, one matrix-vector
+   product), then Levenberg–Marquardt (``scipy.optimize.least_squares``, MINPACK's ``lm``, the
+   analytic Jacobian ∂Δ/∂(u, v, s) of the field and the nuisance columns) over (u, v, s, β)
+   from the nearest node of each face and mode, best first; the face and the mode (pressing or
+   hovering) are those of the start. The field's ranges bound (u, v, s) (``_fit_fingers``).
+3. **Two fingers**: a coarse search over pairs of nodes (:meth:`NodeTable.pairs`), and the
+   one-finger solution with the node nearest what it leaves (y − c_u − Δ₁); from each, one fit
+   of both fingers and β together (and their coupling ρ with ``two_fingers="coupled"``).
+
+Counts and starts are tried in turn while the fits so far do not explain the frame within the
+noise (the gate, ``gate_p``): a one-finger frame costs one fit, a two-finger frame two.
+
+Each fit's Gaussian log-likelihood ℓ = −½ χ² − Σ ln σ − (n/2) ln 2π, with the same σ for all
+three (the noise at the frame's readout), and its BIC = k ln n − 2 ℓ (k: 3 per finger, + 1 for a
+coupling, + the nuisance columns; n: the channels). The count with the lowest BIC wins. The standard errors of
+the winner are the Cramér–Rao bound at the solution (:func:`ectskin.twin.bound.crb` with the
+nuisances estimated): the Fisher information of the fitted model.
+
+``model_error`` widens σ by a floor for what the field does not model, σ² + a² + (r |y − c_u|)²
+(a in pF, r relative to the finger's signal): the field's interpolation error, the
+superposition of two fingers, the twin's per-channel drift. Zero by default (the readout noise
+alone; then the standard errors are the bound).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.stats import chi2
+
+from ectskin._check import EctskinError
+from ectskin.inversion.coupling import RHO_MAX
+from ectskin.inversion.model import MODES, FieldLike, StateModel
+from ectskin.twin.bound import crb
+from ectskin.twin.readout import ReadoutConfig
+
+#: the kinds of readout :meth:`Inversion.fit` takes
+KINDS = ("absolute", "relative", "difference")
+#: how two fingers' signals combine
+TWO_FINGER_MODELS = ("coupled", "superposition")
+#: the coupling ρ a two-finger fit starts from
+RHO_START = 0.2
+#: the state keys of two fields are the same state when they differ by less than this (ml)
+STATE_TOL_ML = 1e-6
+#: the penalty residual per unit (mm, N, ln mm) a parameter lies outside the field's range
+BOUND_WEIGHT = 1e4
+#: the most residual evaluations of one Levenberg–Marquardt fit
+MAX_NFEV = 50
+#: the optimiser's scaling and tolerances
+LM_OPTIONS: dict[str, Any] = {"x_scale": "jac", "ftol": 1e-6, "xtol": 1e-6, "gtol": 1e-8}
+
+
+@dataclass(frozen=True)
+class FingerEstimate:
+    """One fitted finger: its face, whether it presses (``contact``) or hovers, its point
+    (u, v) mm, force N (0 hovering), height mm (0 pressing), and their standard errors (the
+    bound at the solution; 0 for the value the mode fixes, inf where unresolved)."""
+
+    face: str
+    contact: bool
+    u_mm: float
+    v_mm: float
+    force_n: float
+    height_mm: float
+    u_se_mm: float
+    v_se_mm: float
+    force_se_n: float
+    height_se_mm: float
+
+
+@dataclass(frozen=True)
+class InversionResult:
+    """The inversion of one frame.
+
+    ``n_fingers`` (0, 1 or 2) is the count chosen by BIC; ``fingers`` its estimates;
+    ``log_likelihood`` and ``bic`` those of the chosen fit; ``bic_by_count`` the BIC of every
+    count (index = count; inf where the count was not tried, see ``gate_p``); ``converged``
+    whether the chosen fit's optimiser stopped on a tolerance (always True for no finger);
+    ``nuisance`` the fitted nuisance coefficients by name; ``coupling`` the two fingers' fitted
+    coupling ρ (:mod:`ectskin.inversion.coupling`; NaN unless two coupled fingers).
+    """
+
+    n_fingers: int
+    fingers: tuple[FingerEstimate, ...]
+    log_likelihood: float
+    bic: float
+    converged: bool
+    bic_by_count: tuple[float, ...]
+    nuisance: dict[str, float] = field(default_factory=dict)
+    coupling: float = math.nan
+
+
+@dataclass
+class _Fit:
+    fingers: list[tuple[int, int, np.ndarray]]  # (face index, mode index, x = (u, v, s))
+    beta: np.ndarray
+    chi2: float
+    converged: bool
+    rho: float = math.nan  # the two fingers' coupling (coupled two-finger fits)
+
+    @property
+    def n_params(self) -> int:
+        return 3 * len(self.fingers) + (0 if math.isnan(self.rho) else 1) + self.beta.size
+
+
+class Inversion:
+    """Training-free inversion of frames through per-state response fields (module docstring).
+
+    Parameters
+    ----------
+    fields : {inflation state (ml per chamber): its response field (or any
+        :class:`~ectskin.inversion.model.FieldLike`)}.
+    noise : the readout's noise model (:class:`~ectskin.twin.readout.ReadoutConfig`).
+    push : {state: (n_pairs, m) push columns} (:func:`~ectskin.inversion.model.push_basis`), or
+        None for no push nuisance. A state missing from it has none.
+    drift : the drift terms, some of ("gain", "offset").
+    max_fingers : 0, 1 or 2: the largest count tried.
+    model_error : (a pF, r) the σ floor of the module docstring.
+    starts : how many starts a count may take (one finger: the nearest node of each face and
+        mode, best first; two: the best pairs of nodes, and the one-finger solution with the
+        node nearest what it leaves); it stops at the first whose χ² passes the gate.
+    push_prior_sd : a Gaussian prior of this standard deviation on each push coefficient (in
+        the columns' unit: N for :func:`~ectskin.inversion.model.push_basis`), its term joins
+        χ² (a penalised fit); None: the push is unknown, without a prior.
+    two_fingers : "coupled" (two fingers as coupled conductors, one more parameter ρ:
+        :mod:`ectskin.inversion.coupling`) or "superposition" (the sum of their signals).
+    gate_p : a count of k + 1 fingers, or a further start, is tried only while the fits so
+        far leave χ² above its upper ``gate_p`` quantile (χ² with n − 3k − m degrees of freedom
+        for k fingers): the frame is not explained within the noise. 0 tries every count and
+        every start.
+    """
+
+    def __init__(
+        self,
+        fields: Mapping[tuple[float, ...], FieldLike],
+        noise: ReadoutConfig | None = None,
+        *,
+        push: Mapping[tuple[float, ...], np.ndarray] | None = None,
+        drift: Sequence[str] = ("gain", "offset"),
+        max_fingers: int = 2,
+        model_error: tuple[float, float] = (0.0, 0.0),
+        starts: int = 2,
+        gate_p: float = 1e-4,
+        push_prior_sd: float | None = None,
+        two_fingers: str = "superposition",
+    ) -> None:
+        if not isinstance(fields, Mapping) or not fields:
+            raise EctskinError(
+                "Inversion: fields must be a non-empty mapping {inflation state: response field}, "
+                f"got {type(fields).__name__}"
+            )
+        if max_fingers not in (0, 1, 2):
+            raise EctskinError(f"Inversion: max_fingers must be 0, 1 or 2, got {max_fingers!r}")
+        try:
+            a, r = (float(x) for x in model_error)
+        except (TypeError, ValueError):
+            a = r = math.nan
+        if not (a >= 0 and r >= 0 and math.isfinite(a) and math.isfinite(r)):
+            raise EctskinError(f"Inversion: model_error must be (pF >= 0, ratio >= 0), got {model_error!r}")
+        if not (isinstance(starts, int) and starts >= 1):
+            raise EctskinError(f"Inversion: starts must be an integer >= 1, got {starts!r}")
+        if not (isinstance(gate_p, int | float) and 0 <= gate_p < 1):
+            raise EctskinError(f"Inversion: gate_p must be in [0, 1), got {gate_p!r}")
+        if push_prior_sd is not None and not (math.isfinite(push_prior_sd) and push_prior_sd > 0):
+            raise EctskinError(f"Inversion: push_prior_sd must be > 0 or None, got {push_prior_sd!r}")
+        if two_fingers not in TWO_FINGER_MODELS:
+            raise EctskinError(
+                f"Invalid value for 'two_fingers': allowed values are {list(TWO_FINGER_MODELS)}; "
+                f"got {two_fingers!r}"
+            )
+        self.coupled = two_fingers == "coupled"
+        self.starts = starts
+        self.gate_p = float(gate_p)
+        self.push_prior_sd = push_prior_sd
+        self.noise = noise or ReadoutConfig()
+        self.max_fingers = int(max_fingers)
+        self.model_error = (a, r)
+        self.states: list[tuple[float, ...]] = []
+        self._models: list[StateModel] = []
+        n_pairs = None
+        for key, fld in fields.items():
+            state = _state("fields key", key)
+            if n_pairs is not None and fld.n_pairs != n_pairs:
+                raise EctskinError(
+                    f"Inversion: the field of state {list(state)} has {fld.n_pairs} pairs, "
+                    f"another {n_pairs}"
+                )
+            n_pairs = int(fld.n_pairs)
+            extra = None
+            if push is not None:
+                extra = next((np.asarray(v, float) for k, v in push.items()
+                              if _same(_state("push key", k), state)), None)
+                if extra is not None and (extra.ndim != 2 or extra.shape[0] != n_pairs
+                                          or not np.all(np.isfinite(extra))):
+                    raise EctskinError(
+                        f"Inversion: push[{list(state)}] must be finite with shape ({n_pairs}, m), "
+                        f"got shape {extra.shape}"
+                    )
+            self.states.append(state)
+            sm = StateModel(fld, extra, drift, self.noise)
+            n_push = 0 if extra is None else extra.shape[1]
+            # 1/sd of each nuisance coefficient's Gaussian prior (0: none)
+            sm.prior_w = np.zeros(sm.N.shape[1])
+            if push_prior_sd is not None:
+                sm.prior_w[:n_push] = 1.0 / push_prior_sd
+            self._models.append(sm)
+            if self.coupled and max_fingers == 2 and sm.pairs is None:
+                raise EctskinError(
+                    f"Inversion: the field of state {list(state)} has {sm.n_pairs} channels, not "
+                    "the pairs of a set of electrodes; two_fingers='coupled' needs them, use "
+                    "'superposition'"
+                )
+        self.n_pairs = int(n_pairs or 0)
+
+    # ------------------------------------------------------------------ the door
+    def model(self, state: Any) -> StateModel:
+        """The :class:`StateModel` of ``state`` (an inflation vector, ml)."""
+        s = _state("state", state)
+        for known, m in zip(self.states, self._models):
+            if _same(known, s):
+                return m
+        raise EctskinError(
+            f"Inversion: no response field for state {list(s)} ml; the fields cover "
+            f"{[list(k) for k in self.states]}"
+        )
+
+    def observed(self, readouts: Any, state: Any, kind: str = "absolute",
+                 reference: Any = None) -> tuple[np.ndarray, int]:
+        """The frame's absolute readout (n_pairs,) pF and the number of frames averaged.
+
+        ``readouts`` (n_pairs,) or a window (w, n_pairs) (averaged); ``kind``: "absolute" (pF),
+        "relative" (paper Eq. 2, c = (c_t − c_0)/c_0 against ``reference`` c_0 (n_pairs,) pF) or
+        "difference" (pF less the untouched readout of ``state``). NaN marks a masked channel
+        (in any frame of the window, or in the reference): :meth:`fit` leaves it out.
+        """
+        m = self.model(state)
+        y = np.asarray(readouts, dtype=np.float64)
+        if y.ndim == 1:
+            y = y[None]
+        if y.ndim != 2 or y.shape[1] != self.n_pairs or y.shape[0] == 0:
+            raise EctskinError(
+                f"Inversion: readouts must have shape ({self.n_pairs},) or (n_frames, "
+                f"{self.n_pairs}), got {np.shape(readouts)}"
+            )
+        if np.any(np.isinf(y)):
+            k = tuple(int(i) for i in np.argwhere(np.isinf(y))[0])
+            raise EctskinError(f"Inversion: readouts must be finite or NaN (masked); found {y[k]} at {k}")
+        mean = y.mean(axis=0)
+        if kind == "absolute":
+            return mean, y.shape[0]
+        if kind == "difference":
+            return m.untouched + mean, y.shape[0]
+        if kind == "relative":
+            if reference is None:
+                raise EctskinError("Inversion: kind 'relative' needs the reference c_0 (n_pairs,) pF")
+            ref = np.asarray(reference, dtype=np.float64)
+            if ref.shape != (self.n_pairs,) or np.any(np.isinf(ref)) or np.any(ref == 0):
+                raise EctskinError(
+                    f"Inversion: reference must be ({self.n_pairs},) nonzero pF (NaN: a masked "
+                    f"channel), got shape {ref.shape}"
+                )
+            return ref * (1.0 + mean), y.shape[0]
+        raise EctskinError(f"Invalid value for 'kind': allowed values are {list(KINDS)}; got {kind!r}")
+
+    # ------------------------------------------------------------------ one frame
+    def fit(self, readouts: Any, state: Any, *, kind: str = "absolute",
+            reference: Any = None) -> InversionResult:
+        """Invert one frame (or a window of frames, averaged) of ``state``."""
+        m = self.model(state)
+        y, w = self.observed(readouts, state, kind, reference)
+        ok = np.isfinite(y)
+        if not ok.all():  # masked channels (NaN in any frame of the window) are left out
+            nb = m.N.shape[1]
+            if ok.sum() < 3 * max(self.max_fingers, 1) + nb + 1:
+                raise EctskinError(
+                    f"Inversion: {int(ok.sum())} unmasked channels of {ok.size} are too few to fit "
+                    f"{self.max_fingers} finger(s) and {nb} nuisance terms"
+                )
+            m, y = m.masked(ok), y[ok]
+        sigma = self._sigma(m, y, w)
+        delta = y - m.untouched
+        n, nb = m.n_pairs, m.N.shape[1]
+        fits: list[_Fit | None] = [self._fit_none(m, delta, sigma)]
+        passed = [self._passes(fits[0], 0, nb, n)]
+        starts: list[list[list[tuple[int, int, np.ndarray]]]] = [[]]
+        # counts in turn, each from its first start while no count passes the gate; a count's
+        # further starts only when no larger count passes either (a two-finger frame does not
+        # spend them on one finger)
+        for k in range(1, self.max_fingers + 1):
+            if passed[-1]:
+                break
+            starts.append(self._starts(m, delta, k, fits[1] if k > 1 else None))
+            fits.append(self._fit_fingers(m, delta, sigma, starts[k][0], self.coupled))
+            passed.append(self._passes(fits[k], k, nb, n))
+            if k == self.max_fingers:
+                for j in range(k, 0, -1):
+                    for start in starts[j][1:]:
+                        if passed[j]:
+                            break
+                        f = self._fit_fingers(m, delta, sigma, start, self.coupled)
+                        if f.chi2 < fits[j].chi2:  # type: ignore[union-attr]
+                            fits[j] = f
+                            passed[j] = self._passes(f, j, nb, n)
+                    if passed[j]:
+                        break
+        fits += [None] * (self.max_fingers + 1 - len(fits))
+        const = -float(np.sum(np.log(sigma))) - 0.5 * n * math.log(2 * math.pi)
+        lls = [-math.inf if f is None else const - 0.5 * f.chi2 for f in fits]
+        bics = [math.inf if f is None else f.n_params * math.log(n) - 2 * ll
+                for f, ll in zip(fits, lls)]
+        best_k = int(np.argmin(bics))
+        chosen = fits[best_k]
+        if chosen is None:  # never: the no-finger fit always exists and has a finite BIC
+            raise RuntimeError("inversion: no fit to choose")
+        return self._result(m, chosen, y, w, lls[best_k], bics)
+
+    def _passes(self, fit: _Fit | None, k: int, nb: int, n: int) -> bool:
+        """Whether the k-finger fit explains the frame of n channels within the noise (the
+        gate)."""
+        if fit is None or not self.gate_p:
+            return False
+        return fit.chi2 <= _chi2_gate(n - fit.n_params, self.gate_p)
+
+    def _sigma(self, m: StateModel, y: np.ndarray, w: int) -> np.ndarray:
+        s = m.sigma(y, w)
+        a, r = self.model_error
+        if a or r:
+            s = np.sqrt(s**2 + a**2 + (r * (y - m.untouched)) ** 2)
+        return s
+
+    def _starts(self, m: StateModel, delta: np.ndarray, k: int,
+                one: _Fit | None) -> list[list[tuple[int, int, np.ndarray]]]:
+        """Starting points of a k-finger fit, best first: for one finger the nearest node of
+        each face and mode; for two the best pairs of nodes (:meth:`NodeTable.pairs`), then the
+        one-finger solution with the node nearest what it leaves."""
+        t = m.table
+
+        def node(i: int) -> tuple[int, int, np.ndarray]:
+            return int(t.face[i]), int(t.mode[i]), t.x[i].copy()
+
+        if k == 1:
+            return [[node(i)] for i in t.starts(delta, self.starts)]
+        out = [[node(i), node(j)] for i, j in t.pairs(delta, self.starts)]
+        if one is not None:
+            fi, mi, x = one.fingers[0]
+            rest = delta - m.signal(m.faces[fi], MODES[mi], x)[0]
+            out.insert(1, [(fi, mi, x.copy()), node(t.starts(rest, 1)[0])])
+        return out[: self.starts + 1]
+
+    @staticmethod
+    def _fit_none(m: StateModel, delta: np.ndarray, sigma: np.ndarray) -> _Fit:
+        nb = m.N.shape[1]
+        Nw = np.vstack([m.N / sigma[:, None], np.diag(m.prior_w)])
+        z = np.concatenate([delta / sigma, np.zeros(nb)])
+        beta = np.linalg.lstsq(Nw, z, rcond=None)[0] if nb else np.zeros(0)
+        r = z - Nw @ beta
+        return _Fit([], beta, float(r @ r), True)
+
+    @staticmethod
+    def _fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
+                     start: list[tuple[int, int, np.ndarray]], coupled: bool = False) -> _Fit:
+        """Levenberg–Marquardt over (x_1, …, x_k, [ρ], β) from ``start`` (ρ: two coupled
+        fingers).
+
+        The bounds (the field's ranges, ρ in [0, RHO_MAX]) hold by evaluating the model at the
+        parameters clipped into them and adding a stiff penalty residual ``BOUND_WEIGHT`` ×
+        (p − clip(p)): MINPACK's LM (``method="lm"``) takes no bounds, and costs a fraction of
+        the bounded solvers' per iteration. The result is clipped into the ranges.
+        """
+        k = len(start)
+        keys = [(m.faces[fi], MODES[mi]) for fi, mi, _ in start]
+        with_rho = coupled and k == 2
+        nx = 3 * k + int(with_rho)  # the bounded parameters
+        nb, n = m.N.shape[1], m.n_pairs
+        Nw = m.N / sigma[:, None]
+        lo = np.concatenate([m.bounds[key][0] for key in keys] + [np.zeros(int(with_rho))])
+        hi = np.concatenate([m.bounds[key][1] for key in keys] + [np.full(int(with_rho), RHO_MAX)])
+        # rows: the channels, the range penalties, the nuisances' priors; the Jacobian's constant
+        # parts (the nuisance columns, the priors) are set once
+        J = np.zeros((n + nx + nb, nx + nb))
+        J[:n, nx:] = -Nw
+        J[n + nx:, nx:] = np.diag(m.prior_w)
+        cache: dict[str, Any] = {"p": None}
+        diag = np.arange(nx)
+        neg_inv_sigma = (-1.0 / sigma)[:, None]
+
+        def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            if cache["p"] is None or not (cache["p"] == p).all():
+                x = p[:nx]
+                xc = np.clip(x, lo, hi)
+                inside = x == xc
+                total = np.zeros(n)
+                for j, key in enumerate(keys):
+                    d, dj = m.signal(key[0], key[1], xc[3 * j: 3 * j + 3])
+                    total += d
+                    J[:n, 3 * j: 3 * j + 3] = dj * neg_inv_sigma
+                if with_rho:
+                    c, da, db, drho = m.coupling(keys, [xc[:3], xc[3:6]], float(xc[6]))
+                    total += c
+                    J[:n, 0:3] += da * neg_inv_sigma
+                    J[:n, 3:6] += db * neg_inv_sigma
+                    J[:n, 6] = drho * neg_inv_sigma[:, 0]
+                if not inside.all():  # beyond a range: the model is flat there, the penalty not
+                    J[:n, :nx][:, ~inside] = 0.0
+                J[n + diag, diag] = np.where(inside, 0.0, BOUND_WEIGHT)
+                r = np.concatenate([(delta - total) / sigma - Nw @ p[nx:],
+                                    BOUND_WEIGHT * (x - xc), m.prior_w * p[nx:]])
+                cache.update(p=p.copy(), r=r, J=J.copy())
+            return cache["r"], cache["J"]
+
+        x0 = np.concatenate([x for _, _, x in start] + [np.full(int(with_rho), RHO_START)])
+        x0 = np.clip(x0, lo, hi)
+        # β from the linear fit at the start, so that the optimiser begins near its valley
+        r0 = evaluate(np.concatenate([x0, np.zeros(nb)]))[0][:n]
+        beta0 = np.linalg.lstsq(Nw, r0, rcond=None)[0] if nb else np.zeros(0)
+        sol = least_squares(
+            lambda p: evaluate(p)[0], np.concatenate([x0, beta0]), jac=lambda p: evaluate(p)[1],
+            method="lm", max_nfev=MAX_NFEV, **LM_OPTIONS,
+        )
+        p = sol.x.copy()
+        p[:nx] = np.clip(p[:nx], lo, hi)
+        res = evaluate(p)[0]
+        r = np.concatenate([res[:n], res[n + nx:]])  # the channels and the priors
+        fingers = [(fi, mi, p[3 * j: 3 * j + 3].copy()) for j, (fi, mi, _) in enumerate(start)]
+        return _Fit(fingers, p[nx:].copy(), float(r @ r), bool(sol.status > 0),
+                    rho=float(p[6]) if with_rho else math.nan)
+
+    def _result(self, m: StateModel, fit: _Fit, y: np.ndarray, w: int, ll: float,
+                bics: list[float]) -> InversionResult:
+        k = len(fit.fingers)
+        ests: list[FingerEstimate] = []
+        if k:
+            mu = m.untouched + m.N @ fit.beta
+            cols = []
+            for fi, mi, x in fit.fingers:
+                d, dj = m.signal(m.faces[fi], MODES[mi], x)
+                mu = mu + d
+                cols.append(dj)
+            if not math.isnan(fit.rho):  # the coupling: its share, slopes and its own column
+                keys = [(m.faces[fi], MODES[mi]) for fi, mi, _ in fit.fingers]
+                c, da, db, drho = m.coupling(keys, [x for _, _, x in fit.fingers], fit.rho)
+                mu = mu + c
+                cols = [cols[0] + da, cols[1] + db, drho[:, None]]
+            J = np.concatenate(cols + [m.N], axis=1)
+            prior = {J.shape[1] - m.N.shape[1] + i: float(1.0 / pw**2)
+                     for i, pw in enumerate(m.prior_w) if pw > 0}
+            b = crb(J, self._sigma(m, mu, w), nuisance_cols=range(3 * k, J.shape[1]),
+                    prior_var=prior)
+            for j, (fi, mi, x) in enumerate(fit.fingers):
+                se = b.std[3 * j: 3 * j + 3]
+                contact = MODES[mi] == "contact"
+                h = 0.0 if contact else float(np.exp(x[2]))
+                ests.append(FingerEstimate(
+                    face=m.faces[fi], contact=contact, u_mm=float(x[0]), v_mm=float(x[1]),
+                    force_n=float(x[2]) if contact else 0.0, height_mm=h,
+                    u_se_mm=float(se[0]), v_se_mm=float(se[1]),
+                    force_se_n=float(se[2]) if contact else 0.0,
+                    height_se_mm=0.0 if contact else h * float(se[2]),
+                ))
+        return InversionResult(
+            n_fingers=k, fingers=tuple(ests), log_likelihood=ll, bic=bics[k],
+            converged=fit.converged, bic_by_count=tuple(bics),
+            nuisance={n: float(v) for n, v in zip(m.nuisance_names, fit.beta)},
+            coupling=fit.rho,
+        )
+
+
+@functools.lru_cache(maxsize=64)
+def _chi2_gate(dof: int, p: float) -> float:
+    """The upper ``p`` quantile of χ² with ``dof`` degrees of freedom (inf if dof < 1)."""
+    return float(chi2.isf(p, dof)) if dof >= 1 else math.inf
+
+
+def _state(name: str, value: Any) -> tuple[float, ...]:
+    try:
+        s = tuple(float(x) for x in np.atleast_1d(np.asarray(value, dtype=np.float64)))
+    except (TypeError, ValueError):
+        raise EctskinError(f"Inversion: {name} must be an inflation vector (ml), got {value!r}") from None
+    if not all(math.isfinite(x) for x in s):
+        raise EctskinError(f"Inversion: {name} must be finite, got {list(s)}")
+    return s
+
+
+def _same(a: tuple[float, ...], b: tuple[float, ...]) -> bool:
+    return len(a) == len(b) and all(abs(x - y) <= STATE_TOL_ML for x, y in zip(a, b))

@@ -1,0 +1,505 @@
+"""The forward model of the inversion: one frame's readouts as a function of the fingers.
+
+For one sensor state (an inflation vector) a frame's n_pairs readouts y (pF) are modelled as
+
+    y = c_u + Σ_k Δ(face_k, mode_k; u_k, v_k, s_k) + N β + e,   e ~ N(0, diag σ²)
+
+* c_u (n_pairs,): the untouched readout of the state (``field.untouched``);
+* Δ: one finger's signal, the response field's readout less c_u. ``mode`` is "contact" (the
+  finger presses, s = its force F in N) or "hover" (force 0, s = ln h of its height h in mm: the
+  field interpolates in ln h, so the fit does too). Two fingers add their signals
+  (superposition; the twin's two fingers are one grounded conductor, so this is an
+  approximation whose error grows as the fingers come close);
+* N (n_pairs, m): linear nuisance columns, β their unknown coefficients: the hand's push (a
+  per-state basis from direct solves, :func:`push_basis`) and the readout's drift, a common
+  gain (the column c_u: the excitation, the amplifier's gain and the permittivity's temperature
+  coefficient scale every channel alike) and a common offset (a column of ones: a stray
+  capacitance shared through the readout's ground path);
+* σ: the readout noise per pair (:func:`ectskin.twin.readout.noise_pf`), divided by √w for a
+  window of w frames averaged.
+
+:class:`StateModel` holds this for one state: Δ and ∂Δ/∂(u, v, s) of each face and mode, the
+nuisance columns and the node table of the coarse search (every node's Δ, whitened by the
+untouched state's σ and projected off the nuisance columns, so that the distance of a frame to
+every node is one matrix-vector product).
+
+Fields: a :class:`~ectskin.twin.field.ResponseField` is evaluated through tensor-product
+B-splines built here from its public node values with the field's own construction (identical
+values, checked by the tests, without the field's per-call checks, which cost more than the
+evaluation); any other object with the field's interface (:class:`FieldLike`) through its
+``readout`` and ``jacobian``.
+"""
+
+from __future__ import annotations
+
+import bisect
+import copy
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from scipy.interpolate import make_interp_spline
+
+from ectskin._check import EctskinError
+from ectskin.inversion.coupling import correction, electrode_pairs, rank_one
+from ectskin.twin.bound import DEFAULT_PUSH_LOADS
+from ectskin.twin.field import ResponseField
+from ectskin.twin.mechanics import Handling, Touch
+from ectskin.twin.readout import ReadoutConfig, noise_pf
+
+#: the modes of one finger: pressing (s = force, N) or hovering (s = ln height, ln mm)
+MODES = ("contact", "hover")
+#: about how many nodes the two-finger coarse search pairs (every pair of them: a Gram matrix of
+#: this size squared, precomputed per state)
+PAIR_NODES = 300
+#: the drift columns there are
+DRIFT_TERMS = ("gain", "offset")
+
+
+class FieldSpecLike(Protocol):
+    """What the inversion reads of a field's spec."""
+
+    @property
+    def inflation_ml(self) -> tuple[float, ...]: ...
+
+    @property
+    def force_range_n(self) -> tuple[float, float]: ...
+
+    @property
+    def height_range_mm(self) -> tuple[float, float]: ...
+
+    def extent(self, face: str) -> tuple[tuple[float, float], tuple[float, float]]: ...
+
+
+class FieldLike(Protocol):
+    """The interface of :class:`~ectskin.twin.field.ResponseField` that the inversion uses (an
+    analytic model with the same methods plugs in)."""
+
+    @property
+    def spec(self) -> Any: ...
+
+    @property
+    def faces(self) -> tuple[str, ...]: ...
+
+    @property
+    def n_pairs(self) -> int: ...
+
+    @property
+    def untouched(self) -> np.ndarray: ...
+
+    @property
+    def forces_n(self) -> np.ndarray: ...
+
+    @property
+    def heights_mm(self) -> np.ndarray: ...
+
+    def grid(self, face: str) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def node_values(self, face: str, part: str = "contact") -> np.ndarray: ...
+
+    def readout(self, face: str, u_mm: Any, v_mm: Any, force_n: Any, height_mm: Any = 0.0) -> np.ndarray: ...
+
+    def jacobian(self, face: str, u_mm: Any, v_mm: Any, force_n: Any, height_mm: Any = 0.0) -> np.ndarray: ...
+
+
+# ---------------------------------------------------------------------------- one finger's signal
+#: Δ and ∂Δ/∂(u, v, s) of one face and mode at one point x = (u, v, s): ((n_pairs,), (n_pairs, 3))
+Signal = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def _restricted(signal: Signal, ok: np.ndarray) -> Signal:
+    """``signal`` on the channels where ``ok``."""
+
+    def sub(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d, J = signal(p)
+        return d[ok], J[ok]
+
+    return sub
+
+
+def _clamped(lo: float, hi: float, k: int) -> np.ndarray:
+    return np.r_[[lo] * (k + 1), [hi] * (k + 1)]
+
+
+def field_axes(field: FieldLike, face: str, mode: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """The node axes of ``field`` on ``face`` in ``mode``: u, v, s (forces, or ln heights) and
+    the range [lo, hi] of s."""
+    u, v = field.grid(face)
+    if mode == "contact":
+        lo, hi = (float(a) for a in field.spec.force_range_n)
+        return u, v, np.asarray(field.forces_n, dtype=np.float64), lo, hi
+    lo, hi = (float(a) for a in np.log(field.spec.height_range_mm))
+    return u, v, np.log(np.asarray(field.heights_mm, dtype=np.float64)), lo, hi
+
+
+def spline_signal(field: ResponseField, face: str, mode: str) -> Signal:
+    """Δ of ``field`` on ``face`` in ``mode`` by the field's interpolant, rebuilt from its node
+    values: cubic not-a-knot in u and v, the polynomial through the force (ln height) nodes."""
+    u, v, x, lo, hi = field_axes(field, face, mode)
+    values = np.asarray(field.node_values(face, mode), dtype=np.float64) - field.untouched
+    return tensor_spline(u, v, x, lo, hi, values)
+
+
+def tensor_spline(u: np.ndarray, v: np.ndarray, x: np.ndarray, lo: float, hi: float,
+                  values: np.ndarray) -> Signal:
+    """The interpolant of ``values`` (n_u, n_v, n_s, q) over the nodes (u, v, s) as the field
+    builds it, and its three slopes: p = (u, v, s) → ((q,), (q, 3))."""
+    c = values
+    ts, ks = [], []
+    for ax, (nodes, k, t) in enumerate(
+        [(u, min(3, u.size - 1), None), (v, min(3, v.size - 1), None),
+         (x, x.size - 1, _clamped(lo, hi, x.size - 1))]
+    ):
+        s = make_interp_spline(nodes, c, k=k, t=t, axis=ax)
+        c = np.moveaxis(s.c, 0, ax)
+        ts.append(s.t)
+        ks.append(k)
+    knots = [[float(a) for a in t] for t in ts]
+    coef = np.ascontiguousarray(c)
+    n_pairs = coef.shape[-1]
+    ends = [(float(t[k]), float(t[-k - 1])) for t, k in zip(knots, ks)]
+
+    def signal(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        # tensor-product evaluation: the k+1 live basis functions of each axis and their
+        # slopes (The NURBS Book, A2.2/A2.3), contracted with the live block of coefficients
+        spans, bases = [], []
+        for ax in range(2):
+            i, b = _basis(knots[ax], ks[ax], min(max(float(p[ax]), ends[ax][0]), ends[ax][1]))
+            spans.append(i)
+            bases.append(b)
+        # s: one polynomial piece on [lo, hi] (clamped knots): the Bernstein basis
+        bases.append(_bernstein(ks[2], lo, hi, min(max(float(p[2]), lo), hi)))
+        (iu, iv), (ku, kv, k_s), i_s = spans, ks, ks[2]
+        block = coef[iu - ku: iu + 1, iv - kv: iv + 1, i_s - k_s: i_s + 1]  # (ku+1, kv+1, ks+1, p)
+        (bu, du), (bv, dv), s2 = bases
+        uu, vv = np.array([bu, du, bu]), np.array([bv, bv, dv])
+        w = (uu[:, :, None] * vv[:, None, :]).reshape(3, -1)  # u·v, u'·v, u·v'
+        uvs = (w @ block.reshape(w.shape[1], -1)).reshape(3, k_s + 1, n_pairs)
+        z = np.array(s2) @ uvs  # (3, 2, p): [u·v, u'·v, u·v'] × [s, s']
+        return z[0, 0], np.stack([z[1, 0], z[2, 0], z[0, 1]], axis=-1)
+
+    return signal
+
+
+def _bernstein(k: int, lo: float, hi: float, x: float) -> tuple[list[float], list[float]]:
+    """The Bernstein polynomials of degree k on [lo, hi] at x, and their slopes (d/dx)."""
+    t = (x - lo) / (hi - lo)
+    low = [math.comb(k - 1, j) * t**j * (1 - t) ** (k - 1 - j) for j in range(k)] if k else []
+    val = [math.comb(k, j) * t**j * (1 - t) ** (k - j) for j in range(k + 1)]
+    scale = k / (hi - lo)
+    der = [scale * ((low[j - 1] if j else 0.0) - (low[j] if j < k else 0.0)) for j in range(k + 1)]
+    return val, der
+
+
+def _basis(t: list[float], k: int, x: float) -> tuple[int, tuple[list[float], list[float]]]:
+    """The span i (t[i] <= x < t[i+1], inside [t[k], t[-k-1]]) and the values (row 0) and first
+    derivatives (row 1) of the k+1 B-splines of degree k alive there, B_{i-k} … B_i."""
+    i = bisect.bisect_right(t, x) - 1
+    i = min(max(i, k), len(t) - k - 2)
+    left = [x - t[i + 1 - j] for j in range(1, k + 1)]
+    right = [t[i + j] - x for j in range(1, k + 1)]
+    n = [1.0]
+    low = n
+    for d in range(1, k + 1):
+        low = n
+        saved = 0.0
+        n = []
+        for r in range(d):
+            tmp = low[r] / (right[r] + left[d - r - 1])
+            n.append(saved + right[r] * tmp)
+            saved = left[d - r - 1] * tmp
+        n.append(saved)
+    # slopes from the degree k-1 functions (zero beyond the live ones)
+    lk = [0.0] + list(low) + [0.0] if k else [0.0, 0.0]
+    der = []
+    for r in range(k + 1):
+        j = i - k + r
+        a = lk[r] / (t[j + k] - t[j]) if k and t[j + k] > t[j] else 0.0
+        b = lk[r + 1] / (t[j + k + 1] - t[j + 1]) if k and t[j + k + 1] > t[j + 1] else 0.0
+        der.append(k * (a - b))
+    return i, (n, der)
+
+
+def generic_signal(field: FieldLike, face: str, mode: str) -> Signal:
+    """Δ of any :class:`FieldLike` through its ``readout`` and ``jacobian`` (hovering, the
+    height column times h is the derivative in ln h)."""
+    c_u = np.asarray(field.untouched, dtype=np.float64)
+
+    def signal(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        u, v, s = (float(a) for a in p)
+        if mode == "contact":
+            d = np.asarray(field.readout(face, u, v, s, 0.0)) - c_u
+            J = np.asarray(field.jacobian(face, u, v, s, 0.0))[:, :3]
+        else:
+            h = float(np.exp(s))
+            d = np.asarray(field.readout(face, u, v, 0.0, h)) - c_u
+            J4 = np.asarray(field.jacobian(face, u, v, 0.0, h))
+            J = np.stack([J4[:, 0], J4[:, 1], J4[:, 3] * h], axis=-1)
+        return d, J
+
+    return signal
+
+
+# ---------------------------------------------------------------------------- nuisances
+def push_basis(
+    field: ResponseField,
+    loads: Sequence[tuple[Touch, tuple[float, float, float]]] = DEFAULT_PUSH_LOADS,
+    *,
+    step_n: float = 0.2,
+    rank: int | None = 3,
+    noise: ReadoutConfig | None = None,
+) -> np.ndarray:
+    """(n_pairs, r) columns that span how the hand's push moves the untouched readouts.
+
+    One direct solve pair per load (``SensorModel.capacitance`` with a
+    :class:`~ectskin.twin.mechanics.Handling` push of ±``step_n`` N along the load's direction,
+    :data:`~ectskin.twin.bound.DEFAULT_PUSH_LOADS` by default): central differences, pF per N.
+    The push bends the whole body, so its effect on the readouts has few independent directions:
+    ``rank`` keeps the leading ``rank`` left singular vectors of the noise-whitened columns (scaled
+    back to pF, each carrying its singular value), ``None`` keeps every load's column.
+    """
+    if not (np.isfinite(step_n) and step_n > 0):
+        raise EctskinError(f"push_basis: step_n must be a force > 0 N, got {step_n!r}")
+    spec = field.spec
+    sensor = spec.sensor()
+    cols = []
+    for point, direction in loads:
+        d = np.asarray(direction, dtype=np.float64)
+        h = Handling(push=point, push_force_n=np.stack([step_n * d, -step_n * d]))
+        c = sensor.capacitance(spec.inflation_ml, None, np.zeros(2), h)
+        cols.append((c[0] - c[1]) / (2 * step_n))
+    P = np.stack(cols, axis=1)
+    if rank is None:
+        return P
+    if not (isinstance(rank, int) and 1 <= rank <= P.shape[1]):
+        raise EctskinError(f"push_basis: rank must be 1..{P.shape[1]} or None, got {rank!r}")
+    sigma = noise_pf(field.untouched, noise or ReadoutConfig())
+    U, S, _ = np.linalg.svd(P / sigma[:, None], full_matrices=False)
+    return (U[:, :rank] * S[:rank]) * sigma[:, None]
+
+
+def nuisance_columns(
+    untouched: np.ndarray, drift: Sequence[str], extra: np.ndarray | None
+) -> tuple[np.ndarray, list[str]]:
+    """(n_pairs, m) nuisance columns and their names: ``extra`` (push_1 …), then the drift's."""
+    p = untouched.size
+    cols, names = [], []
+    if extra is not None:
+        for i in range(extra.shape[1]):
+            cols.append(extra[:, i])
+            names.append(f"push_{i + 1}")
+    for term in drift:
+        if term not in DRIFT_TERMS:
+            raise EctskinError(
+                f"Invalid value for 'drift': allowed terms are {list(DRIFT_TERMS)}; got {term!r}"
+            )
+        cols.append(untouched.copy() if term == "gain" else np.ones(p))
+        names.append(term)
+    N = np.stack(cols, axis=1) if cols else np.zeros((p, 0))
+    return N, names
+
+
+# ---------------------------------------------------------------------------- one state
+@dataclass
+class NodeTable:
+    """The coarse search's table of one state: every node's whitened, projected Δ.
+
+    ``D`` (n_nodes, n_pairs): P⊥ (Δ_node / σ_u); ``norm2`` (n_nodes,): its squared norms;
+    ``face`` / ``mode`` (n_nodes,) int: indices into the state's faces and :data:`MODES`;
+    ``x`` (n_nodes, 3): the node's (u, v, s); ``Q`` (n_pairs, r): an orthonormal basis of the
+    whitened nuisance columns (P⊥ = I − Q Qᵀ); ``sigma`` (n_pairs,): σ_u, the untouched noise;
+    ``groups``: the (start, stop) rows of each (face, mode);
+    ``pair_rows`` (n_sub,): the nodes of the two-finger search (the middle s of every
+    ``stride``-th grid point, at most about :data:`PAIR_NODES`); ``gram`` (n_sub, n_sub):
+    2 d_i·d_j of those for i < j, +inf elsewhere.
+    """
+
+    D: np.ndarray
+    norm2: np.ndarray
+    face: np.ndarray
+    mode: np.ndarray
+    x: np.ndarray
+    Q: np.ndarray
+    sigma: np.ndarray
+    groups: list[tuple[int, int]]
+    pair_rows: np.ndarray
+    gram: np.ndarray
+
+    def project(self, z: np.ndarray) -> np.ndarray:
+        return z - self.Q @ (self.Q.T @ z)
+
+    def cost(self, target: np.ndarray) -> np.ndarray:
+        """(n_nodes,) the squared whitened, projected distance of ``target`` (n_pairs,) pF (a
+        finger's signal: the untouched readout and any known fingers taken off) to every node,
+        less the constant ||P⊥ target / σ||²."""
+        z = self.project(target / self.sigma)
+        return self.norm2 - 2.0 * (self.D @ z)
+
+    def pairs(self, target: np.ndarray, n: int) -> list[tuple[int, int]]:
+        """The ``n`` best pairs of nodes (i, j) for a frame of two fingers, best first, searched
+        over every pair of the pair subset (``pair_rows``):
+        ||z − d_i − d_j||² = ||z||² + a_i + a_j + 2 d_i·d_j with a_i = ||d_i||² − 2 d_i·z, the
+        products d_i·d_j precomputed (``gram``)."""
+        z = self.project(target / self.sigma)
+        a = self.norm2[self.pair_rows] - 2.0 * (self.D[self.pair_rows] @ z)
+        cost = a[:, None] + a[None, :] + self.gram  # the lower triangle is +inf in ``gram``
+        flat = np.argpartition(cost, n - 1, axis=None)[:n]
+        flat = flat[np.argsort(cost.ravel()[flat])]
+        m = cost.shape[1]
+        return [(int(self.pair_rows[f // m]), int(self.pair_rows[f % m])) for f in flat]
+
+    def starts(self, target: np.ndarray, n: int) -> list[int]:
+        """The nearest node of each (face, mode) group, best first, at most ``n`` of them."""
+        cost = self.cost(target)
+        best = [lo + int(np.argmin(cost[lo:hi])) for lo, hi in self.groups]
+        best.sort(key=lambda i: cost[i])
+        return best[:n]
+
+
+class StateModel:
+    """The forward model of one state (module docstring) and its coarse-search table.
+
+    Parameters
+    ----------
+    field : the state's response field (or any :class:`FieldLike`).
+    nuisance : (n_pairs, m) extra nuisance columns (the push basis) or None.
+    drift : drift terms among :data:`DRIFT_TERMS`.
+    noise : the readout's noise model.
+    """
+
+    def __init__(
+        self,
+        field: FieldLike,
+        nuisance: np.ndarray | None,
+        drift: Sequence[str],
+        noise: ReadoutConfig,
+    ) -> None:
+        self.field = field
+        self.faces: tuple[str, ...] = tuple(field.faces)
+        self.n_pairs = int(field.n_pairs)
+        #: the field's channels this model covers (all; fewer in a :meth:`masked` copy)
+        self.channels = np.arange(self.n_pairs)
+        self._masked: dict[bytes, StateModel] = {}
+        self.untouched = np.asarray(field.untouched, dtype=np.float64)
+        self.noise = noise
+        self.N, self.nuisance_names = nuisance_columns(self.untouched, drift, nuisance)
+        #: 1/sd of a Gaussian prior on each nuisance coefficient, 0 for none (set by Inversion)
+        self.prior_w = np.zeros(self.N.shape[1])
+        spec = field.spec
+        self.modes: tuple[str, ...] = ("contact", "hover") if np.size(field.heights_mm) else ("contact",)
+        lo_f, hi_f = (float(a) for a in spec.force_range_n)
+        self.bounds: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+        self._signals: dict[tuple[str, str], Signal] = {}
+        for face in self.faces:
+            (ulo, uhi), (vlo, vhi) = spec.extent(face)
+            for mode in self.modes:
+                if mode == "contact":
+                    slo, shi = lo_f, hi_f
+                else:
+                    slo, shi = (float(a) for a in np.log(spec.height_range_mm))
+                self.bounds[(face, mode)] = (np.array([ulo, vlo, slo]), np.array([uhi, vhi, shi]))
+                make = spline_signal if isinstance(field, ResponseField) else generic_signal
+                self._signals[(face, mode)] = make(field, face, mode)  # type: ignore[arg-type]
+        self.table = self._table(noise_pf(self.untouched, noise))
+        # the rank-one factors of the node signals, per (face, mode), built at first use
+        # (two fingers, coupled): full pairs, shared with the masked copies
+        self._factors: dict[tuple[str, str], Signal] = {}
+        try:
+            self.pairs: tuple[np.ndarray, np.ndarray] | None = electrode_pairs(self.n_pairs)
+        except EctskinError:
+            self.pairs = None  # not an electrode set's pairs: no coupled two-finger model
+
+    def factor(self, face: str, mode: str, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """g (n_e,) and ∂g/∂(u, v, s) (n_e, 3): one finger's rank-one factor at ``x``
+        (:mod:`ectskin.inversion.coupling`)."""
+        key = (face, mode)
+        if self.pairs is None:
+            raise EctskinError(
+                f"coupling: {self.n_pairs} channels are not the pairs of a set of electrodes; "
+                "use two_fingers='superposition'"
+            )
+        if key not in self._factors:
+            u, v, s, lo, hi = field_axes(self.field, face, mode)
+            delta = np.asarray(self.field.node_values(face, mode), dtype=np.float64)
+            g = rank_one(delta - np.asarray(self.field.untouched, dtype=np.float64), self.pairs)
+            self._factors[key] = tensor_spline(u, v, s, lo, hi, g)
+        return self._factors[key](x)
+
+    def coupling(self, keys: list[tuple[str, str]], xs: list[np.ndarray], rho: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The coupling's share of two fingers' signal on this model's channels, and its
+        derivatives along each finger's (u, v, s) and ρ (:func:`coupling.correction`)."""
+        ga, dga = self.factor(*keys[0], xs[0])
+        gb, dgb = self.factor(*keys[1], xs[1])
+        pairs = self.pairs
+        if pairs is None:  # never: factor() refuses first
+            raise RuntimeError("coupling: no electrode pairs")
+        c, da, db, drho = correction(ga, dga, gb, dgb, rho, pairs)
+        ch = self.channels
+        return c[ch], da[ch], db[ch], drho[ch]
+
+    def signal(self, face: str, mode: str, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Δ (n_pairs,) and ∂Δ/∂(u, v, s) (n_pairs, 3) of one finger at ``x`` = (u, v, s)."""
+        return self._signals[(face, mode)](x)
+
+    def masked(self, ok: np.ndarray) -> StateModel:
+        """This model on the channels where ``ok`` (n_pairs,) bool holds (the others are masked
+        in the frame), its node table rebuilt for them; cached per mask."""
+        key = np.asarray(ok, bool).tobytes()
+        if key not in self._masked:
+            sub = copy.copy(self)
+            sub.channels = self.channels[ok]
+            sub.n_pairs = int(sub.channels.size)
+            sub.untouched = self.untouched[ok]
+            sub.N = self.N[ok]
+            sub._masked = {}
+            sub._signals = {k: _restricted(sig, ok) for k, sig in self._signals.items()}
+            sub.table = sub._table(noise_pf(sub.untouched, self.noise))
+            self._masked[key] = sub
+        return self._masked[key]
+
+    def sigma(self, readout: np.ndarray, n_frames: int = 1) -> np.ndarray:
+        """σ (n_pairs,) of a readout averaged over ``n_frames`` frames."""
+        return noise_pf(readout, self.noise) / np.sqrt(n_frames)
+
+    def _table(self, sigma: np.ndarray) -> NodeTable:
+        Nw = self.N / sigma[:, None]
+        Q = np.linalg.qr(Nw)[0] if Nw.shape[1] else np.zeros((self.n_pairs, 0))
+        D, face_i, mode_i, xs, n_ss, shapes = [], [], [], [], [], []
+        for fi, face in enumerate(self.faces):
+            u, v = self.field.grid(face)
+            for mi, mode in enumerate(self.modes):
+                vals = np.asarray(self.field.node_values(face, mode), dtype=np.float64)
+                vals = vals[..., self.channels]
+                s = (np.asarray(self.field.forces_n) if mode == "contact"
+                     else np.log(np.asarray(self.field.heights_mm)))
+                U, V, S = np.meshgrid(u, v, s, indexing="ij")  # s fastest: a point's nodes in a row
+                n_ss.append(s.size)
+                shapes.append((u.size, v.size))
+                d = (vals - self.untouched).reshape(-1, self.n_pairs) / sigma
+                D.append(d - (d @ Q) @ Q.T)
+                xs.append(np.c_[U.ravel(), V.ravel(), S.ravel()])
+                face_i.append(np.full(U.size, fi))
+                mode_i.append(np.full(U.size, mi))
+        Dm = np.concatenate(D)
+        stops = np.cumsum([len(d) for d in D])
+        groups = [(int(a), int(b)) for a, b in zip(np.r_[0, stops[:-1]], stops)]
+        n_points = sum(len(d) // n_s for d, n_s in zip(D, n_ss))
+        stride = max(1, int(np.ceil(np.sqrt(n_points / PAIR_NODES))))
+        rows = []
+        for (lo, _), shape, n_s in zip(groups, shapes, n_ss):
+            iu, iv = np.meshgrid(np.arange(0, shape[0], stride), np.arange(0, shape[1], stride),
+                                 indexing="ij")
+            rows.append(lo + (iu.ravel() * shape[1] + iv.ravel()) * n_s + n_s // 2)
+        pair_rows = np.concatenate(rows)
+        sub = Dm[pair_rows]
+        gram = 2.0 * (sub @ sub.T)
+        gram[np.tril_indices(len(pair_rows))] = np.inf
+        return NodeTable(
+            D=np.ascontiguousarray(Dm), norm2=np.einsum("ij,ij->i", Dm, Dm),
+            face=np.concatenate(face_i), mode=np.concatenate(mode_i), x=np.concatenate(xs),
+            Q=Q, sigma=sigma, groups=groups,
+            pair_rows=pair_rows, gram=gram,
+        )
