@@ -35,6 +35,10 @@ def test_a_layout_breaking_a_rule_names_its_file_and_field(tmp_path, capsys):
         ),
         (("--length-mm", "50"), "--length-mm"),
         (("--sampler", "grid"), "'sampler'"),
+        (("--objective", "luck"), "'objective'"),
+        (("--bound-states", "0/0"), "--bound-states '0/0': inflation must give one volume per"),
+        (("--bound-states", "0/0/x"), "--bound-states: expected states like 0/0/0,20/20/20"),
+        (("--bound-mesh", "fine"), "'mesh'"),
     ],
 )
 def test_bad_search_options_are_one_error(tmp_path, capsys, argv, text):

@@ -26,7 +26,7 @@ from ectskin.layout import default_layout
 )
 def test_an_empty_search_space_is_one_clear_error(space, match, tmp_path, fake_score):
     with pytest.raises(EctskinError, match=match):
-        run_search(tmp_path, space=space, n_workers=0, score_fn=fake_score)
+        run_search(tmp_path, space=space, n_workers=0, objective="trained", score_fn=fake_score)
     assert not (tmp_path / "study.journal").exists()
 
 
@@ -58,7 +58,7 @@ def test_pareto_front_by_hand():
 
 def test_the_study_resumes_and_a_killed_trial_is_scored_again(tmp_path, fake_score):
     fake_score.calls.clear()
-    design = run_search(tmp_path, n_trials=2, n_workers=0, score_fn=fake_score)
+    design = run_search(tmp_path, n_trials=2, n_workers=0, objective="trained", score_fn=fake_score)
     assert fake_score.calls[0] == "paper-2x4-wires" and len(fake_score.calls) == 3
     assert design["search"]["n_complete"] == 2
     assert (tmp_path / "figures" / "front.png").is_file() and (tmp_path / "design.md").is_file()
@@ -68,7 +68,7 @@ def test_the_study_resumes_and_a_killed_trial_is_scored_again(tmp_path, fake_sco
         assert load_layout(tmp_path / e["folder"] / "layout.json").n_electrodes == e["n_electrodes"]
     # one more trial: the finished ones (and the paper) are not scored again
     fake_score.calls.clear()
-    design = run_search(tmp_path, n_trials=3, n_workers=0, score_fn=fake_score)
+    design = run_search(tmp_path, n_trials=3, n_workers=0, objective="trained", score_fn=fake_score)
     assert len(fake_score.calls) == 1 and design["search"]["n_complete"] == 3
     # a run killed while scoring trial 3 leaves it running; the rerun scores it, then trial 4
     fake_score.calls.clear()
@@ -79,9 +79,9 @@ def test_the_study_resumes_and_a_killed_trial_is_scored_again(tmp_path, fake_sco
         return fake_score(layout, out_dir, config)
 
     with pytest.raises(KeyboardInterrupt):
-        run_search(tmp_path, n_trials=5, n_workers=0, score_fn=dies)
+        run_search(tmp_path, n_trials=5, n_workers=0, objective="trained", score_fn=dies)
     fake_score.calls.clear()
-    design = run_search(tmp_path, n_trials=5, n_workers=0, score_fn=fake_score)
+    design = run_search(tmp_path, n_trials=5, n_workers=0, objective="trained", score_fn=fake_score)
     assert fake_score.calls == ["design-0003", "design-0004"]
     assert [e["name"] for e in design["layouts"]] == [
         "paper",
@@ -96,10 +96,26 @@ def test_the_study_resumes_and_a_killed_trial_is_scored_again(tmp_path, fake_sco
 
 
 def test_a_rerun_with_other_settings_is_refused(tmp_path, fake_score):
-    run_search(tmp_path, n_trials=1, n_workers=0, score_fn=fake_score)
+    run_search(tmp_path, n_trials=1, n_workers=0, objective="trained", score_fn=fake_score)
     with pytest.raises(
         EctskinError, match=r"study\.journal: the study was started with other settings \(space\)"
     ):
         run_search(
-            tmp_path, n_trials=1, n_workers=0, score_fn=fake_score, space=SearchSpace(max_wires=6)
+            tmp_path, n_trials=1, n_workers=0, objective="trained", score_fn=fake_score,
+            space=SearchSpace(max_wires=6),
         )
+
+
+def test_pareto_front_in_three_objectives_by_hand():
+    keys = ("bound_mm_p95", "n_electrodes", "wire_length_mm")
+    pts = [
+        {"name": "a", "bound_mm_p95": 1.0, "n_electrodes": 8, "wire_length_mm": 400.0},
+        {"name": "b", "bound_mm_p95": 2.0, "n_electrodes": 6, "wire_length_mm": 300.0},
+        {"name": "c", "bound_mm_p95": 2.0, "n_electrodes": 6, "wire_length_mm": 350.0},  # by b
+        {"name": "d", "bound_mm_p95": 0.5, "n_electrodes": 12, "wire_length_mm": 200.0},
+        {"name": "e", "bound_mm_p95": float("inf"), "n_electrodes": 4, "wire_length_mm": 100.0},
+        {"name": "f", "bound_mm_p95": float("inf"), "n_electrodes": 4, "wire_length_mm": 120.0},
+        {"name": "g", "bound_mm_p95": None, "n_electrodes": 2, "wire_length_mm": 50.0},  # left out
+    ]
+    # e: unresolved somewhere (inf), but the fewest electrodes and the least wire among the rest
+    assert [p["name"] for p in pareto_front(pts, keys)] == ["d", "a", "b", "e"]

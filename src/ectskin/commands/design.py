@@ -18,8 +18,9 @@ EXAMPLES = """\
   ectskin design score my_layout.json other.json --out scores   # + the paper's layout
   ectskin design score my_layout.json --out scores --workers 4
   ectskin design score my_layout.json --out scores --scheduler tcp://10.0.0.5:8786
-  ectskin design search study                    # defaults: 6 trials on 2 local workers
+  ectskin design search study                    # bound objective: 6 trials on 2 local workers
   ectskin design search study --trials 200 --scheduler tcp://10.0.0.5:8786
+  ectskin design search study --objective trained   # train and evaluate every layout
   ectskin simulate --layout study/layouts/design-0003/layout.json -o rec.h5
 """
 log = logging.getLogger(__name__)
@@ -80,6 +81,23 @@ def _common(p: argparse.ArgumentParser) -> None:
         default=0.0,
         help="manufacturing rule: conductors this far inside the skin, mm (default 0)",
     )
+    p.add_argument(
+        "--bound-states",
+        default="0/0/0,20/20/20",
+        help="information score: inflation states, ml per chamber, '/' between chambers and ',' "
+        "between states (default 0/0/0,20/20/20)",
+    )
+    p.add_argument(
+        "--bound-spacing",
+        type=number(0, above=True),
+        default=15.0,
+        help="information score: grid spacing on each face, mm (default 15)",
+    )
+    p.add_argument(
+        "--bound-mesh",
+        default="coarse",
+        help="information score: mesh of the solves, coarse (default) or default",
+    )
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -93,8 +111,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     s.add_argument("--out", required=True, help="folder for design.json, design.md/.html")
     _common(s)
-    q = sub.add_parser("search", help="Optuna study: localisation error vs electrode count")
+    s.add_argument(
+        "--no-bound", action="store_true", help="skip the information score (bound maps)"
+    )
+    s.add_argument(
+        "--seeds",
+        type=integer(1),
+        default=3,
+        help="train and evaluate every layout with this many seeds (--seed, --seed + 1, ...): "
+        "means, 95 %% intervals and the paired comparison with the paper's layout (default 3)",
+    )
+    q = sub.add_parser(
+        "search", help="Optuna study: worst-case bound (or trained error) vs electrodes and wire"
+    )
     q.add_argument("out", help="folder of the study (resumed when it exists)")
+    q.add_argument(
+        "--objective",
+        default="bound",
+        help="bound (default: minimise the worst-case position bound, the electrode count and "
+        "the total wire length) or trained (the mean localisation error and the electrode count)",
+    )
     q.add_argument("--trials", type=integer(1), default=6, help="trials to finish (default 6)")
     q.add_argument("--sampler", default="tpe", help="tpe (default) or nsga2")
     q.add_argument("--min-wires", type=int, default=2, help="wires per face, at least (default 2)")
@@ -123,6 +159,39 @@ def _config(args):
     )
 
 
+def _states(text: str) -> tuple[tuple[float, ...], ...]:
+    """``0/0/0,20/20/20`` → ((0, 0, 0), (20, 20, 20)), each a volume per chamber of the twin."""
+    from ectskin.twin.mechanics import Manipulator
+
+    states = []
+    for part in str(text).split(","):
+        try:
+            state = tuple(float(x) for x in part.split("/"))
+        except ValueError:
+            raise EctskinError(
+                f"--bound-states: expected states like 0/0/0,20/20/20 (ml per chamber, '/' "
+                f"between chambers), got {text!r}"
+            ) from None
+        try:
+            Manipulator().check_inflation(state)
+        except EctskinError as exc:
+            raise EctskinError(f"--bound-states {part!r}: {exc}") from None
+        states.append(state)
+    return tuple(states)
+
+
+def _information(args):
+    from ectskin.design.information import InformationConfig
+
+    states = _states(args.bound_states)
+    try:
+        return InformationConfig(
+            states_ml=states, spacing_mm=args.bound_spacing, mesh=args.bound_mesh
+        )
+    except EctskinError as exc:  # the one left: --bound-mesh (states and spacing checked)
+        raise EctskinError(f"--bound-mesh / --bound-states: {exc}") from None
+
+
 def run(args: argparse.Namespace) -> int:
     # imported here: dask, optuna, torch and the twin take seconds to import
     from ectskin.design.family import ManufacturingRules
@@ -132,8 +201,15 @@ def run(args: argparse.Namespace) -> int:
         raise EctskinError("design: choose a subcommand, score or search (ectskin design -h)")
     rules = ManufacturingRules(args.min_width, args.min_spacing, args.edge_margin)
     config = _config(args)
+    information = _information(args)
     if args.design_command == "score":
+        from ectskin._check import MAX_SEED
         from ectskin.design.sweep import score_layouts
+
+        if args.seed + args.seeds - 1 > MAX_SEED:
+            raise EctskinError(
+                f"--seeds {args.seeds} from --seed {args.seed}: the seeds must stay <= {MAX_SEED}"
+            )
 
         named = []
         for path in args.layouts:
@@ -148,6 +224,8 @@ def run(args: argparse.Namespace) -> int:
             n_workers=args.workers,
             scheduler=args.scheduler,
             rules=rules,
+            information=None if args.no_bound else information,
+            seeds=list(range(args.seed, args.seed + args.seeds)),
         )
         out = Path(args.out)
     else:
@@ -163,7 +241,9 @@ def run(args: argparse.Namespace) -> int:
             args.out,
             n_trials=args.trials,
             space=space,
+            objective=args.objective,
             config=config,
+            information=information,
             rules=rules,
             sampler=args.sampler,
             seed=args.seed,
@@ -172,15 +252,21 @@ def run(args: argparse.Namespace) -> int:
         )
         out = Path(args.out)
     for e in design["layouts"]:
-        log.info(
-            "%-14s %2d electrodes  loc %s mm  region acc %s  force %s N  track %s mm",
-            e["name"],
-            e["n_electrodes"],
-            _num(e["loc_mm_mean"], ".1f"),
-            _num(e["region_accuracy"], ".3f"),
-            _num(e["force_mae_n"], ".3f"),
-            _num(e["track_ad_mm"], ".2f"),
-        )
+        parts = [f"{e['name']:<14} {e['n_electrodes']:2d} electrodes"]
+        if "loc_mm_mean" in e:
+            parts.append(
+                f"loc {_num(e['loc_mm_mean'], '.1f')} mm  region acc "
+                f"{_num(e.get('region_accuracy'), '.3f')}  force {_num(e.get('force_mae_n'), '.3f')}"
+                f" N  track {_num(e.get('track_ad_mm'), '.2f')} mm"
+            )
+        if "bound_mm_p95" in e:
+            parts.append(
+                f"bound mean {_num(e['bound_mm_mean'], '.3g')} p95 {_num(e['bound_mm_p95'], '.3g')}"
+                f" mm  force share {_num(e['force_observable_share'], '.2f')}  ambiguity "
+                f"{_num(e['ambiguity_sigma'], '.3g')} sigma  wire {_num(e['wire_length_mm'], '.0f')}"
+                f" mm"
+            )
+        log.info("  ".join(parts))
     log.info("wrote %s, %s", out / "design.json", out / "design.html")
     return 0
 

@@ -1,6 +1,7 @@
-"""The design report: ``design.md`` and ``design.html`` with a table and heat maps per layout,
-and the figures (localisation-error map per face with the wires drawn on it; the trade-off
-front of a search). Figures are returned by the plot functions and saved by the writers.
+"""The design report: ``design.md`` and ``design.html`` with a table and maps per layout, and
+the figures (the localisation-error map per face with the wires drawn on it; the bound maps of
+the information score; the trade-off front of a search). Figures are returned by the plot
+functions and saved by the writers.
 """
 
 from __future__ import annotations
@@ -34,11 +35,24 @@ ROWS = (
     ("rank above 1 % of sigma_max", ("sensor", "rank_1pct"), "{:d}"),
     ("scoring time (s)", ("seconds", "total"), "{:.0f}"),
 )
+#: the information score's rows (:mod:`ectskin.design.information`)
+INFO_ROWS = (
+    ("electrodes", "n_electrodes", "{:d}"),
+    ("total wire length (mm)", "wire_length_mm", "{:.0f}"),
+    ("mean position bound (mm)", "bound_mm_mean", "{:.3g}"),
+    ("worst-case (p95) position bound (mm)", "bound_mm_p95", "{:.3g}"),
+    ("share of the skin with force bound < 0.1 N", "force_observable_share", "{:.2f}"),
+    ("ambiguity: least readout distance (noise units)", "ambiguity_sigma", "{:.3g}"),
+    ("information score time (s)", "information_seconds", "{:.0f}"),
+)
+#: what a bound search minimises, in this order
+BOUND_FRONT_KEYS = ("bound_mm_p95", "n_electrodes", "wire_length_mm")
 
 
 def _value(entry: Mapping[str, Any], key) -> Any:
     if isinstance(key, tuple):
-        return entry.get(key[0], {}).get(key[1])
+        inner = entry.get(key[0])
+        return inner.get(key[1]) if isinstance(inner, Mapping) else None
     return entry.get(key)
 
 
@@ -97,24 +111,129 @@ def plot_front(points: Sequence[Mapping[str, Any]], paper: Mapping[str, Any] | N
     return _finish(fig, show)
 
 
-def pareto_front(points: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
-    """The points not dominated in (n_electrodes, loc_mm_mean), both minimised, sorted by
-    electrode count (ties in both: the first kept)."""
-    ok = [p for p in points if p.get("loc_mm_mean") is not None and np.isfinite(p["loc_mm_mean"])]
-    front = []
+def pareto_front(
+    points: Sequence[Mapping[str, Any]], keys: Sequence[str] = ("n_electrodes", "loc_mm_mean")
+) -> list[Mapping[str, Any]]:
+    """The points not dominated in ``keys`` (all minimised; a point with a None or NaN value is
+    left out, inf counts as the worst), sorted by ``keys`` (ties in all: the first kept)."""
+    def vals(p):
+        return tuple(float(p[k]) for k in keys)
+
+    ok = [
+        p for p in points
+        if all(p.get(k) is not None and not np.isnan(float(p[k])) for k in keys)
+    ]
+    front: list[Mapping[str, Any]] = []
     for p in ok:
+        vp = vals(p)
         dominated = any(
-            q["n_electrodes"] <= p["n_electrodes"]
-            and q["loc_mm_mean"] <= p["loc_mm_mean"]
-            and (q["n_electrodes"], q["loc_mm_mean"]) != (p["n_electrodes"], p["loc_mm_mean"])
-            for q in ok
+            all(a <= b for a, b in zip(vals(q), vp)) and vals(q) != vp for q in ok
         )
-        if not dominated and not any(
-            (f["n_electrodes"], f["loc_mm_mean"]) == (p["n_electrodes"], p["loc_mm_mean"])
-            for f in front
-        ):
+        if not dominated and not any(vals(f) == vp for f in front):
             front.append(p)
-    return sorted(front, key=lambda p: (p["n_electrodes"], p["loc_mm_mean"]))
+    return sorted(front, key=vals)
+
+
+def plot_bound_front(
+    points: Sequence[Mapping[str, Any]], paper: Mapping[str, Any] | None, *, show=False
+):
+    """The trade-off of a bound search: the worst-case position bound (log scale) against the
+    electrode count per scored layout, coloured by total wire length; the Pareto-optimal ones in
+    (bound, electrodes, wire length) ringed in red and named; the paper's layout a black star.
+    Layouts with an unresolved worst case (inf or None) are triangles along the top edge."""
+    import matplotlib.pyplot as plt
+
+    fig = _new_figure(show, figsize=(6.0, 4.2), layout="constrained")
+    ax = fig.subplots()
+    points = [
+        {**p, "bound_mm_p95": np.inf if p.get("bound_mm_p95") is None else p["bound_mm_p95"]}
+        for p in points
+    ]
+    ok = [p for p in points if np.isfinite(p["bound_mm_p95"])]
+    unresolved = [p for p in points if not np.isfinite(p["bound_mm_p95"])]
+    every = points + ([paper] if paper is not None and paper.get("wire_length_mm") else [])
+    lengths = [p["wire_length_mm"] for p in every]
+    norm = plt.Normalize(min(lengths), max(lengths)) if lengths else None
+    if ok:
+        sc = ax.scatter(
+            [p["n_electrodes"] for p in ok], [p["bound_mm_p95"] for p in ok],
+            c=[p["wire_length_mm"] for p in ok], cmap="viridis", norm=norm, s=30,
+            label="proposed layouts",
+        )
+        fig.colorbar(sc, ax=ax, label="total wire length (mm)")
+    finite = [p["bound_mm_p95"] for p in ok] + (
+        [paper["bound_mm_p95"]] if paper is not None and paper.get("bound_mm_p95") else []
+    )
+    top = 2.0 * max(finite) if finite else 1.0  # where an unresolved worst case is drawn
+    if unresolved:
+        ax.scatter(
+            [p["n_electrodes"] for p in unresolved], [top] * len(unresolved), marker="^",
+            c=[p["wire_length_mm"] for p in unresolved], cmap="viridis", norm=norm, s=40,
+            edgecolors="0.3", label="worst case unresolved (drawn at the top)",
+        )
+    front = pareto_front(points, BOUND_FRONT_KEYS)
+    if front:
+        ys = [p["bound_mm_p95"] if np.isfinite(p["bound_mm_p95"]) else top for p in front]
+        ax.scatter(
+            [p["n_electrodes"] for p in front], ys,
+            s=110, facecolors="none", edgecolors="tab:red", label="trade-off front",
+        )
+        for p, y in zip(front, ys):
+            ax.annotate(p["name"], (p["n_electrodes"], y), fontsize=7,
+                        xytext=(4, 3), textcoords="offset points")
+    if paper is not None and paper.get("bound_mm_p95") is not None:
+        ax.scatter([paper["n_electrodes"]], [paper["bound_mm_p95"]], marker="*", s=180,
+                   c=[paper["wire_length_mm"]], cmap="viridis", norm=norm, edgecolors="k",
+                   label="paper")
+    ax.set_yscale("log")
+    ax.set_xlabel("electrodes")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_ylabel("worst-case (p95) position bound (mm)")
+    ax.legend(fontsize=8)
+    return _finish(fig, show)
+
+
+def plot_layout_bounds(score: Mapping[str, Any], *, show: bool = False):
+    """The information score's bound maps of one layout (position and force over each face, per
+    inflation state; every nuisance estimated), wires drawn
+    (:func:`~ectskin.viz.bound.plot_bound_maps`)."""
+    from ectskin.viz.bound import plot_bound_maps
+
+    maps = score["maps"]
+    case = maps["cases"][-1]
+    fig = plot_bound_maps(maps, cases=(case,), show=show)
+    fig.suptitle(f"{score['name']}: Cramér–Rao bounds, {case} nuisances estimated")
+    return fig
+
+
+def _about(design: Mapping[str, Any]) -> str:
+    """One paragraph on how the layouts were scored."""
+    s = design["settings"]
+    parts = []
+    if "protocol" in s:
+        proto = s["protocol"]
+        parts.append(
+            f"Trained score: protocol of {len(proto['levels_ml'])} levels {proto['levels_ml']} ml "
+            f"per chamber, {proto['touch_trials']} touch trials per state of "
+            f"{proto['duration_s']:g} s, {proto['touch_dwells']} dwells, placement "
+            f"{proto['touch_placement']!r}, seed {proto['seed']}; quick training, epochs "
+            f"{s['epochs']}. Errors are comparable between layouts of this report (the same "
+            f"touches), not with the paper's protocol."
+        )
+    info = s if "states_ml" in s else design.get("information_settings")
+    if info:
+        parts.append(
+            f"Information score: Cramér–Rao bounds of (u, v, F) at {info['force_n']:g} N on a "
+            f"{info['spacing_mm']:g} mm grid of both faces, at inflation states "
+            f"{info['states_ml']} ml, {info['mesh']} mesh, nuisances {info['nuisances']} "
+            f"estimated (priors {info['prior_sd']}); ambiguity between points more than "
+            f"{info['separation_mm']:g} mm apart."
+        )
+    parts.append(
+        f"Engine: {design['engine']['address']} with {design['engine']['n_workers']} worker(s); "
+        f"{design['sweep_seconds']:.0f} s."
+    )
+    return " ".join(parts)
 
 
 def write_report(
@@ -125,46 +244,58 @@ def write_report(
     extra_figures: Sequence[tuple[str, str]] = (),
     intro: Sequence[str] = (),
 ) -> None:
-    """Write the heat map of every layout to ``figures/<name>_errors.png`` and the report
-    ``design.md`` / ``design.html`` in ``out``. ``extra_figures`` are (caption, relative path)
-    shown first (the search's front)."""
+    """Write the maps of every layout (``figures/<name>_errors.png`` for a trained score,
+    ``figures/<name>_bound.png`` for an information score) and the report ``design.md`` /
+    ``design.html`` in ``out``. ``extra_figures`` are (caption, relative path) shown first (the
+    search's front). Rows without a value for any layout are left out."""
     out = Path(out)
-    figures = []
+    figures: list[list[tuple[str, str]]] = []
     for entry in design["layouts"]:
         name = entry["name"]
-        if scores[name].get("loc_map"):
-            fig = plot_layout_errors({**scores[name], "name": name})
-            rel = f"figures/{name}_errors.png"
-            save_figure_atomic(fig, out / rel)
-            _close(fig)
-            figures.append(rel)
-        else:
-            figures.append(None)
-    s = design["settings"]
-    proto = s["protocol"]
+        mine = []
+        for kind, key, plot, caption in (
+            ("errors", "loc_map", plot_layout_errors, "localisation error per face"),
+            ("bound", "maps", plot_layout_bounds, "Cramér–Rao bound maps"),
+        ):
+            if scores[name].get(key):
+                fig = plot({**scores[name], "name": name})
+                rel = f"figures/{name}_{kind}.png"
+                save_figure_atomic(fig, out / rel)
+                _close(fig)
+                mine.append((caption, rel))
+        figures.append(mine)
+    about = _about(design)
     lines_md = ["# Electrode layouts scored in the twin", ""]
     lines_md += list(intro)
-    about = (
-        f"Protocol: {len(proto['levels_ml'])} levels {proto['levels_ml']} ml per chamber, "
-        f"{proto['touch_trials']} touch trials per state of {proto['duration_s']:g} s, "
-        f"{proto['touch_dwells']} dwells, placement {proto['touch_placement']!r}, seed "
-        f"{proto['seed']}; quick training, epochs {s['epochs']}. Engine: "
-        f"{design['engine']['address']} with {design['engine']['n_workers']} worker(s); sweep "
-        f"{design['sweep_seconds']:.0f} s. Errors are comparable between layouts of this report "
-        f"(the same touches), not with the paper's protocol."
-    )
     lines_md += [about, ""]
     for cap, rel in extra_figures:
         lines_md += [f"![{cap}]({rel})", ""]
     names = [e["name"] for e in design["layouts"]]
     header = ["", *names]
+    present = []
+    for row in (*ROWS, *INFO_ROWS[1:]):
+        if any(_value(e, row[1]) is not None for e in design["layouts"]):
+            present.append(row)
     rows = [
         [label, *(_fmt(_value(e, key), spec) for e in design["layouts"])]
-        for label, key, spec in ROWS
+        for label, key, spec in present
     ]
     lines_md += ["## Summary", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines_md += ["| " + " | ".join(r) + " |" for r in rows]
     lines_md.append("")
+    verdicts, claims = _verdicts(design["layouts"])
+    agreement = rank_agreement(design["layouts"])
+    notes = [*claims, *([agreement] if agreement else [])]
+    if verdicts:
+        head = ["layout", "metric", "difference (layout − paper)", "95 % CI", "seeds", "verdict"]
+        lines_md += [
+            "## Against the paper's layout (paired over seeds, the same test touches)", "",
+            *notes, "",
+            "| " + " | ".join(head) + " |", "|" + "---|" * len(head),
+            *("| " + " | ".join(r) + " |" for r in verdicts), "",
+        ]
+    elif agreement:
+        lines_md += [agreement, ""]
     html_parts = [
         "<!doctype html><html><head><meta charset='utf-8'><title>ectskin design</title>"
         "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}"
@@ -183,11 +314,18 @@ def write_report(
         + "</tr>",
         *("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows),
         "</table>",
+        *(f"<p>{html.escape(t)}</p>" for t in notes),
     ]
-    for entry, rel in zip(design["layouts"], figures):
+    if verdicts:
+        html_parts.append("<h2>Against the paper's layout (paired over seeds)</h2><table>")
+        html_parts += [
+            "<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in verdicts
+        ]
+        html_parts.append("</table>")
+    for entry, mine in zip(design["layouts"], figures):
         name = entry["name"]
         per_face = entry.get("loc_mm_per_face", {})
-        table = [(label, _fmt(_value(entry, key), spec)) for label, key, spec in ROWS]
+        table = [(label, _fmt(_value(entry, key), spec)) for label, key, spec in present]
         table += [
             (f"mean localisation error, {f} face (mm)", _fmt(v, "{:.1f}"))
             for f, v in per_face.items()
@@ -206,13 +344,52 @@ def write_report(
             f"<tr><td>{html.escape(a)}</td><td>{html.escape(b)}</td></tr>" for a, b in table
         ]
         html_parts.append("</table>")
-        if rel:
-            lines_md += ["", f"![{name}: localisation error per face]({rel})"]
+        for caption, rel in mine:
+            lines_md += ["", f"![{name}: {caption}]({rel})"]
             html_parts.append(f"<img src='{html.escape(rel)}' width='520'>")
         lines_md.append("")
     html_parts.append("</body></html>")
     write_text_atomic(out / "design.md", "\n".join(lines_md) + "\n")
     write_text_atomic(out / "design.html", "\n".join(html_parts) + "\n")
+
+
+def _verdicts(layouts: Sequence[Mapping[str, Any]]) -> tuple[list[list[str]], list[str]]:
+    """Rows of the paired comparisons (``vs_paper``) and the claims they allow: a layout is
+    "better than the paper" in a metric only where the 95 % interval excludes zero."""
+    rows, claims = [], []
+    for e in layouts:
+        for metric, c in e.get("vs_paper", {}).items():
+            d = c["difference"]
+            lo, hi = d["ci"]
+            ci = f"{_fmt(lo, '{:+.3g}')} … {_fmt(hi, '{:+.3g}')}"
+            rows.append([e["name"], metric, f"{d['mean']:+.3g}", ci, str(d["n"]), c["verdict"]])
+            if c["verdict"] == "better":
+                claims.append(
+                    f"{e['name']} is better than the paper's layout in {metric}: "
+                    f"{d['mean']:+.3g} (95 % CI {ci}, {d['n']} seeds)."
+                )
+    return rows, claims
+
+
+def rank_agreement(layouts: Sequence[Mapping[str, Any]]) -> str | None:
+    """One line: do the information score (worst-case bound) and the trained score (mean
+    localisation error) rank the layouts alike (Spearman's rank correlation; at least 3 layouts
+    with both)?"""
+    both = [
+        (e["bound_mm_p95"], e["loc_mm_mean"]) for e in layouts
+        if e.get("bound_mm_p95") is not None and e.get("loc_mm_mean") is not None
+    ]
+    if len(both) < 3:
+        return None
+    from scipy.stats import spearmanr
+
+    rho = float(spearmanr([b for b, _ in both], [t for _, t in both]).statistic)
+    word = "agree on" if rho >= 0.7 else "do not agree on"
+    return (
+        f"The information score (worst-case bound) and the trained score (mean localisation "
+        f"error) {word} the ranking: Spearman rho = {rho:.2f} over {len(both)} layouts "
+        f"(agreement: rho >= 0.7)."
+    )
 
 
 def _close(fig) -> None:

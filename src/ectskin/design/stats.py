@@ -1,0 +1,120 @@
+"""Trained scores over seeds: mean ± a Student-t confidence interval, and the paired comparison
+of a layout with the paper's.
+
+A trained score (:func:`~ectskin.design.score.score_layout`) depends on its seed: the protocol's
+draws (touch points, forces, noise), the split and the models' initialisation. With the same seed
+every layout sees the same touches (the trial plan depends on the scoring regions, not on the
+electrodes), so layout A and the paper's layout scored with seeds s_1 … s_n give n paired
+differences d_i = A_i − paper_i on the same test touches. Their mean and the t-interval
+mean ± t_{n−1, (1+level)/2} · sd / sqrt(n) (the seeds are the independent replicates) say by how
+much A differs from the paper; A is called better (or worse) only when that interval excludes
+zero.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from ectskin._check import EctskinError
+
+#: the trained metrics aggregated over seeds, and whether lower is better
+METRICS: dict[str, bool] = {
+    "loc_mm_mean": True,
+    "loc_mm_median": True,
+    "loc_mm_p90": True,
+    "face_accuracy": False,
+    "region_accuracy": False,
+    "force_mae_n": True,
+    "track_ad_mm": True,
+}
+LEVEL = 0.95
+
+
+def t_interval(values: Sequence[float | None], level: float = LEVEL) -> dict[str, Any]:
+    """Mean and the two-sided Student-t interval of the mean of ``values`` (independent draws);
+    ``n``, ``sd`` (n − 1 in the denominator). One value: the interval is (−inf, inf) (no spread
+    to estimate); a None or NaN value is an error naming it."""
+    if not 0 < level < 1:
+        raise EctskinError(f"t_interval: level must be in (0, 1), got {level!r}")
+    if any(v is None for v in values):
+        raise EctskinError(f"t_interval: a value is missing (None) in {list(values)!r}")
+    x = np.asarray(values, dtype=np.float64)
+    if x.ndim != 1 or x.size == 0 or not np.all(np.isfinite(x)):
+        raise EctskinError(f"t_interval: expected one or more finite numbers, got {list(values)!r}")
+    n, mean = x.size, float(x.mean())
+    if n == 1:
+        return {"n": 1, "mean": mean, "sd": None, "ci": [-np.inf, np.inf], "level": level}
+    from scipy.stats import t
+
+    sd = float(x.std(ddof=1))
+    half = float(t.ppf(0.5 + level / 2, n - 1)) * sd / np.sqrt(n)
+    return {"n": n, "mean": mean, "sd": sd, "ci": [mean - half, mean + half], "level": level}
+
+
+def paired_comparison(
+    a: Sequence[float], b: Sequence[float], *, lower_is_better: bool = True, level: float = LEVEL
+) -> dict[str, Any]:
+    """The t-interval of the paired differences ``a − b`` (same seeds, same order) and the
+    verdict on ``a``: ``better`` / ``worse`` when the interval excludes zero, else
+    ``not shown``."""
+    if len(a) != len(b):
+        raise EctskinError(
+            f"paired_comparison: the two layouts need the same seeds, got {len(a)} and {len(b)} "
+            f"values"
+        )
+    d = t_interval([x - y for x, y in zip(a, b)], level)
+    lo, hi = d["ci"]
+    if lo > 0 or hi < 0:
+        lower = hi < 0
+        verdict = "better" if lower == lower_is_better else "worse"
+    else:
+        verdict = "not shown"
+    return {"difference": d, "verdict": verdict}
+
+
+def aggregate(per_seed: Mapping[int, Mapping[str, Any]], level: float = LEVEL) -> dict[str, Any]:
+    """Per trained metric of :data:`METRICS` over the seeds' scores (``{seed: score}``): its
+    ``values`` and ``seeds``, ``mean`` and ``ci`` (None where a seed has no value)."""
+    seeds = sorted(per_seed)
+    out: dict[str, Any] = {}
+    for m in METRICS:
+        vals = [per_seed[s].get(m) for s in seeds]
+        if all(v is None for v in vals):
+            continue
+        entry: dict[str, Any] = {"seeds": seeds, "values": vals, "mean": None, "ci": None}
+        if all(v is not None for v in vals):
+            t = t_interval([float(v) for v in vals if v is not None], level)
+            entry.update(mean=t["mean"], ci=t["ci"], sd=t["sd"])
+        out[m] = entry
+    return out
+
+
+def compare_with(
+    per_seed: Mapping[int, Mapping[str, Any]],
+    reference: Mapping[int, Mapping[str, Any]],
+    level: float = LEVEL,
+) -> dict[str, Any]:
+    """{metric: :func:`paired_comparison` of the layout's seeds against the reference's} over
+    the seeds both have a value for (at least two)."""
+    out = {}
+    for m, lower in METRICS.items():
+        seeds = [
+            s for s in sorted(per_seed)
+            if s in reference and per_seed[s].get(m) is not None and reference[s].get(m) is not None
+        ]
+        if len(seeds) < 2:
+            continue
+        out[m] = {
+            "seeds": seeds,
+            **paired_comparison(
+                [per_seed[s][m] for s in seeds], [reference[s][m] for s in seeds],
+                lower_is_better=lower, level=level,
+            ),
+        }
+    return out
+
+
+__all__ = ["LEVEL", "METRICS", "aggregate", "compare_with", "paired_comparison", "t_interval"]
