@@ -12,12 +12,14 @@ node by the Schur path and of the same hover node solved directly; and how far t
 with the electrodes left where the untouched state has them (the finger moved rigidly onto the
 undented skin) is from the direct contact solve: why contact nodes are full solves.
 
-Prints JSON (and writes it with ``--out``). Run: ``.venv/bin/python benchmarks/bench_field.py``.
+Prints JSON (and writes it with ``--out``). Run: ``.venv/bin/python benchmarks/bench_field.py``
+(the demo's grid, :data:`~ectskin.twin.field_spec.DEMO_FIELD`, by default).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import itertools
 import json
 import os
@@ -36,7 +38,12 @@ from ectskin.layout import default_layout
 from ectskin.twin import Discretisation, Touch
 from ectskin.twin.field_build import build_fields
 from ectskin.twin.field_solve import hover_row
-from ectskin.twin.field_spec import COARSE_FIELD_MESH, FieldSpec
+from ectskin.twin.field_spec import (
+    COARSE_FIELD_MESH,
+    DEMO_FIELD,
+    FieldSpec,
+    contact_field_spec,
+)
 
 #: the coarse discretisation of the field's budget runs and tests (the twin's default is finer)
 COARSE = COARSE_FIELD_MESH
@@ -178,9 +185,12 @@ def main() -> None:
     ap.add_argument("--levels", default="0,20", help="chamber levels (ml), all combinations")
     ap.add_argument("--states", default=None,
                     help="only these states instead, e.g. '0,0,0;20,20,20' (ml per chamber)")
-    ap.add_argument("--spacing", default="2,2", help="grid steps du,dv (mm)")
-    ap.add_argument("--force-nodes", type=int, default=6)
-    ap.add_argument("--height-nodes", type=int, default=6)
+    ap.add_argument("--spacing", default=",".join(f"{x:g}" for x in DEMO_FIELD.spacing_mm),
+                    help="grid steps du,dv (mm); default the demo's (DEMO_FIELD)")
+    ap.add_argument("--uniform", action="store_true",
+                    help="no graded bands (DEMO_FIELD refines beside the chambers' walls and ends)")
+    ap.add_argument("--force-nodes", type=int, default=DEMO_FIELD.force_nodes)
+    ap.add_argument("--height-nodes", type=int, default=DEMO_FIELD.height_nodes)
     ap.add_argument("--discretisation", choices=("coarse", "twin"), default="coarse")
     ap.add_argument("--window", default=None, help="u_lo,u_hi,v_lo,v_hi (mm): one area only")
     ap.add_argument("--workers", type=int, default=2)
@@ -199,11 +209,12 @@ def main() -> None:
         window = ((a, b), (c, d))
     disc = COARSE if args.discretisation == "coarse" else Discretisation()
     layout = default_layout()
-    specs = [
-        FieldSpec(layout, state, discretisation=disc, spacing_mm=(du, dv),
-                  force_nodes=args.force_nodes, height_nodes=args.height_nodes, window_mm=window)
-        for state in states
-    ]
+    grid = dataclasses.replace(
+        DEMO_FIELD, spacing_mm=(du, dv), force_nodes=args.force_nodes,
+        height_nodes=args.height_nodes, discretisation=disc,
+        fine_spacing_mm=None if args.uniform else DEMO_FIELD.fine_spacing_mm,
+    )
+    specs = [contact_field_spec(layout, state, grid, window_mm=window) for state in states]
     nodes = sum(
         s.grid(f)[0].size * s.grid(f)[1].size * (s.force_nodes + s.height_nodes)
         for s in specs for f in s.face_names
@@ -213,6 +224,7 @@ def main() -> None:
         "states": len(specs),
         "discretisation": args.discretisation,
         "spacing_mm": [du, dv],
+        "fine_spacing_mm": grid.fine_spacing_mm,
         "grid": {f: [int(a.size) for a in specs[0].grid(f)] for f in specs[0].face_names},
         "force_nodes": args.force_nodes,
         "height_nodes": args.height_nodes,

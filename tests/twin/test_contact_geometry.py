@@ -213,3 +213,60 @@ def test_a_sensor_takes_other_fingers_cheaply(sensor):
     assert np.abs(c10 - c8).max() > 1e-3
     with pytest.raises(EctskinError, match="with_fingers: expected one or more Finger"):
         sensor.with_fingers()
+
+
+def test_only_the_samples_that_weigh_are_solved_and_nothing_changes(sensor, monkeypatch):
+    """The placement solves only the skin samples whose need may come within the margin of the
+    highest (the others weigh < e⁻⁵⁰ in the smooth law), and finds a hovering finger's skin once
+    for all its heights: against the placement that solves every sample of every frame (the
+    margin infinite), the fingertips are the same to round-off (two fingers, the face's edge,
+    beside a bulge and hovering included), while far fewer samples were solved."""
+    import ectskin.twin.finger as finger
+
+    deformed = [0]
+    deform = sensor.manipulator.deform
+
+    def counting(surface, uv, *a, **kw):
+        deformed[0] += np.asarray(uv).size // 2
+        return deform(surface, uv, *a, **kw)
+
+    cases = [(p, t, FORCES, None) for p in STATES[:2] for t in POINTS[:5]]
+    cases += [(STATES[0], Touch("front", (19.5, 3.0)), FORCES, None)]  # a corner of the face
+    cases += [(STATES[0], t, np.zeros(4), np.array([0.5, 2.0, 6.0, 15.0])) for t in POINTS[:3]]
+    both = (Touch("front", (5.0, 40.0)), Touch("front", (-12.0, 75.0)))
+    cases += [(STATES[0], both, np.array([[1.0, 2.0], [2.0, 0.5]]), None)]
+    monkeypatch.setattr(sensor.manipulator, "deform", counting)
+    fast = [sensor.fingertips(p, t, f, heights_mm=h) for p, t, f, h in cases]
+    work, deformed[0] = deformed[0], 0
+    monkeypatch.setattr(finger, "_PRUNE_MARGIN_MM", math.inf)
+    hover_frames = []
+    placement = finger._placement
+
+    def one_by_one(*a, **kw):
+        hover_frames.append(len(a[6]))
+        return placement(*a, **kw)
+
+    monkeypatch.setattr(finger, "_placement", one_by_one)
+    monkeypatch.setattr(finger, "_rest_one", _every_frame(finger))
+    for (p, t, f, h), tips in zip(cases, fast):
+        for got, ref in zip(tips, sensor.fingertips(p, t, f, heights_mm=h)):
+            np.testing.assert_allclose(got.centre_mm, ref.centre_mm, rtol=0, atol=1e-12)
+            np.testing.assert_array_equal(got.axis, ref.axis)
+    assert work < 0.4 * deformed[0], (work, deformed[0])  # skin points mapped, fast / reference
+    assert 4 in hover_frames  # the reference placed the hovering frames one by one
+
+
+def _every_frame(finger):
+    """``_rest_one`` without sharing the skin between frames (the reference)."""
+
+    def rest_one(m, fg, one, inflation_ml, touch, forces, force_one, heights_one, handling):
+        contact = heights_one <= 0
+        pts, nrm, depth, cover, above = finger._placement(
+            m, fg, one, inflation_ml, touch, np.asarray(forces, dtype=np.float64), force_one,
+            contact, handling,
+        )
+        lift = np.maximum(heights_one, 0.0)
+        centre = pts + nrm * (above + cover + lift)[:, None]
+        return finger.Fingertip(fg, pts, nrm, centre, depth, cover, lift)
+
+    return rest_one

@@ -80,6 +80,7 @@ def test_the_key_is_stable_and_follows_every_input(spec):
         "height_nodes": 0,
         "faces": ("back", "front"),
         "window_mm": ((0.0, 2.0), (54.0, 57.0)),
+        "fine_spacing_mm": (1.0, 1.0),
     }
     keys = {spec.key()}
     for name, value in changes.items():
@@ -119,11 +120,88 @@ def test_a_non_finite_setting_round_trips(spec):
         ({"faces": ("top",)}, "faces"),
         ({"window_mm": ((30.0, 40.0), (54.0, 56.0))}, "leaves nothing"),
         ({"eps_r": 0.5}, "eps_r"),
+        ({"fine_spacing_mm": (3.0, 1.0)}, "fine_spacing_mm .* <= spacing_mm"),
+        ({"refine_u_mm": ((0.0, 1.0),)}, "refine_u_mm needs fine_spacing_mm"),
+        ({"fine_spacing_mm": (1.0, 1.0), "refine_v_mm": ((3.0, 1.0),)}, "refine_v_mm .* lo < hi"),
+        ({"fine_spacing_mm": (1.0, 1.0), "refine_v_mm": (3.0,)}, r"refine_v_mm must be \(\(lo"),
     ],
 )
 def test_bad_specs_are_refused(spec, change, match):
     with pytest.raises(EctskinError, match=match):
         dataclasses.replace(spec, **change)
+
+
+def test_a_graded_grid_by_hand(layout):
+    """Inside a refinement interval the coarse nodes give way to fine steps from the interval's
+    start; a fine node within half a fine step of a coarse one is left out; the key, the
+    round trip and the chunks follow the graded grid."""
+    spec = FieldSpec(
+        layout, (0.0, 20.0, 0.0), spacing_mm=(2.0, 4.0), window_mm=((-4.0, 4.0), (50.0, 62.0)),
+        fine_spacing_mm=(1.0, 1.5), refine_u_mm=((1.0, 9.0),), refine_v_mm=((53.0, 56.0),),
+    )
+    u, v = spec.grid("front")
+    np.testing.assert_allclose(u, [-4, -2, 0, 1, 2, 3, 4])
+    np.testing.assert_allclose(v, [50, 53, 54.5, 56, 58, 62])
+    again = FieldSpec.from_dict(json.loads(json.dumps(spec.to_dict())))
+    assert again.key() == spec.key() and again.refine_v_mm == ((53.0, 56.0),)
+    assert dataclasses.replace(spec, refine_u_mm=((1.0, 8.0),)).key() != spec.key()
+    assert len(chunks_of(spec)) == 1 + 2 * (2 * u.size)  # both faces, contact and hover
+
+
+def test_a_graded_field_interpolates_what_its_splines_can_hold(layout):
+    """On a graded grid the field still passes through its nodes and reproduces, between them,
+    a readout its splines hold exactly (cubic in u and v, quadratic in F through 3 force nodes,
+    quadratic in ln h): node values put on the wrong nodes would not."""
+    from ectskin.twin.field import ResponseField
+
+    spec = FieldSpec(
+        layout, (0.0, 20.0, 0.0), spacing_mm=(2.0, 4.0), faces=("front",), force_nodes=3,
+        height_nodes=3, window_mm=((-4.0, 4.0), (50.0, 70.0)), fine_spacing_mm=(0.5, 1.0),
+        refine_u_mm=((1.0, 4.0),), refine_v_mm=((55.0, 59.0),),
+    )
+    u, v = spec.grid("front")
+    assert np.ptp(np.diff(u)) > 1.0 and np.ptp(np.diff(v)) > 2.0  # graded in both
+
+    def truth(uu, vv, x):
+        base = uu**3 / 50 - uu * vv / 30 + (vv - 60) ** 2 / 40 + 1
+        return 1e-3 * (base * (1 + 0.3 * x - 0.1 * x**2))[..., None] * np.arange(1, spec.n_pairs + 1)
+
+    U, V = np.meshgrid(u, v, indexing="ij")
+    F, H = spec.forces(), np.log(spec.heights())
+    contact = truth(U[..., None], V[..., None], F[None, None])
+    hover = truth(U[..., None], V[..., None], H[None, None])
+    field = ResponseField(spec, np.zeros(spec.n_pairs), {"front": contact}, {"front": hover})
+    rng = np.random.default_rng(2)
+    pu, pv = rng.uniform(-4, 4, 20), rng.uniform(50, 70, 20)
+    pf = rng.uniform(*spec.force_range_n, 20)
+    ph = np.exp(rng.uniform(*np.log(spec.height_range_mm), 20))
+    np.testing.assert_allclose(field.readout("front", pu, pv, pf), truth(pu, pv, pf),
+                               rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(field.readout("front", pu, pv, 0.0, ph), truth(pu, pv, np.log(ph)),
+                               rtol=1e-9, atol=1e-15)
+
+
+def test_the_demo_grid_refines_beside_the_chambers(layout):
+    """The demo's spec: 2 × 4 mm steps, 1 mm within 5 mm of the chambers' side walls
+    (u = ±20 mm on the default body) and within 3 mm of their ends (z = 5, 35, 45, 75, 85,
+    115 mm; the 10-mm gaps between chambers joined), 6 force and 6 height nodes."""
+    u_bands, v_bands = field_spec.chamber_refinement(ManipulatorConfig(), 5.0, 3.0, 4.0)
+    assert u_bands == ((-25.0, -15.0), (15.0, 25.0))
+    assert v_bands == ((2.0, 8.0), (32.0, 48.0), (72.0, 88.0), (112.0, 118.0))
+    spec = field_spec.contact_field_spec(layout, (0.0, 20.0, 0.0), finger=Finger(radius_mm=9.0))
+    grid = field_spec.DEMO_FIELD
+    assert (spec.spacing_mm, spec.force_nodes, spec.height_nodes) == (
+        grid.spacing_mm, grid.force_nodes, grid.height_nodes)
+    assert spec.finger.radius_mm == 9.0 and spec.discretisation == COARSE
+    u, v = spec.grid("front")
+    assert np.diff(u).max() <= 2.0 + 1e-9 and np.diff(v).max() <= 4.0 + 1e-9
+    np.testing.assert_allclose(u[u >= 15.0], [15, 16, 17, 18, 19, 20])
+    np.testing.assert_allclose(np.diff(v[(v >= 32.0) & (v <= 47.0)]), 1.0)
+    plain = field_spec.contact_field_spec(
+        layout, (0.0, 20.0, 0.0), dataclasses.replace(grid, fine_spacing_mm=None))
+    assert plain.grid("front")[0].size == 21 and plain.refine_u_mm == ()
+    with pytest.raises(EctskinError, match="come from grid"):
+        field_spec.contact_field_spec(layout, (0.0, 20.0, 0.0), spacing_mm=(1.0, 1.0))
 
 
 # ---------------------------------------------------------------------- the cache

@@ -81,6 +81,10 @@ class FieldSpec:
     faces : the surfaces to cover (default: every skin's surface).
     window_mm : optional ((u_lo, u_hi), (v_lo, v_hi)) that limits every face's grid to a window
         inside its skin (a study of one area, a small test field).
+    fine_spacing_mm, refine_u_mm, refine_v_mm : a graded grid: inside the intervals
+        ``refine_u_mm`` of u (and ``refine_v_mm`` of v), ((lo, hi), ...) mm, the grid has nodes
+        every ``fine_spacing_mm`` = (du, dv) too (where the readout has kinks: beside the
+        bulges' edges, :func:`chamber_refinement`). Default: none, the grid is uniform.
     """
 
     layout: SensorLayout
@@ -97,6 +101,9 @@ class FieldSpec:
     height_nodes: int = 6
     faces: tuple[str, ...] | None = None
     window_mm: tuple[tuple[float, float], tuple[float, float]] | None = None
+    fine_spacing_mm: tuple[float, float] | None = None
+    refine_u_mm: tuple[tuple[float, float], ...] = ()
+    refine_v_mm: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.layout, SensorLayout):
@@ -119,6 +126,19 @@ class FieldSpec:
         if not all(s > 0 for s in spacing):
             raise EctskinError(f"FieldSpec.spacing_mm must be two steps > 0 mm, got {spacing}")
         object.__setattr__(self, "spacing_mm", spacing)
+        if self.fine_spacing_mm is not None:
+            fine = _floats("fine_spacing_mm", self.fine_spacing_mm, 2)
+            if not all(0 < f <= s for f, s in zip(fine, spacing)):
+                raise EctskinError(
+                    f"FieldSpec.fine_spacing_mm must be two steps > 0 and <= spacing_mm {spacing}, "
+                    f"got {fine}"
+                )
+            object.__setattr__(self, "fine_spacing_mm", fine)
+        for name in ("refine_u_mm", "refine_v_mm"):
+            bands = _intervals(name, getattr(self, name))
+            if bands and self.fine_spacing_mm is None:
+                raise EctskinError(f"FieldSpec.{name} needs fine_spacing_mm (the steps inside)")
+            object.__setattr__(self, name, bands)
         lo, hi = _floats("force_range_n", self.force_range_n, 2)
         if not 0 < lo < hi:
             raise EctskinError(f"FieldSpec.force_range_n must be 0 < low < high (N), got {(lo, hi)}")
@@ -182,12 +202,26 @@ class FieldSpec:
         return (float(ulo), float(uhi)), (float(vlo), float(vhi))
 
     def grid(self, face: str) -> tuple[np.ndarray, np.ndarray]:
-        """(u nodes (n_u,), v nodes (n_v,)) mm of ``face``: equal steps of at most
-        ``spacing_mm`` over :meth:`extent`, the ends included."""
+        """(u nodes (n_u,), v nodes (n_v,)) mm of ``face``, ascending: equal steps of at most
+        ``spacing_mm`` over :meth:`extent`, the ends included; inside each refinement interval
+        those nodes give way to nodes every ``fine_spacing_mm`` from the interval's start (less
+        any within half a fine step of a node kept)."""
         out = []
-        for (lo, hi), step in zip(self.extent(face), self.spacing_mm):
+        fine = self.fine_spacing_mm or (0.0, 0.0)
+        for (lo, hi), step, f, bands in zip(
+            self.extent(face), self.spacing_mm, fine, (self.refine_u_mm, self.refine_v_mm)
+        ):
             n = max(2, int(math.ceil((hi - lo) / step - 1e-9)) + 1)
-            out.append(np.linspace(lo, hi, n))
+            nodes = np.linspace(lo, hi, n)
+            for a, b in bands:
+                a, b = max(a, lo), min(b, hi)
+                if a >= b:
+                    continue
+                nodes = nodes[(nodes <= a) | (nodes >= b)]  # inside, the fine steps instead
+                for x in a + f * np.arange(int(math.floor((b - a) / f + 1e-9)) + 1):
+                    if np.min(np.abs(nodes - x)) >= 0.5 * f:
+                        nodes = np.sort(np.append(nodes, x))
+            out.append(nodes)
         return out[0], out[1]
 
     def forces(self) -> np.ndarray:
@@ -240,6 +274,15 @@ class FieldSpec:
                 "height_nodes": self.height_nodes,
                 "faces": self.faces,
                 "window_mm": self.window_mm,
+                **(
+                    {}
+                    if self.fine_spacing_mm is None
+                    else {
+                        "fine_spacing_mm": self.fine_spacing_mm,
+                        "refine_u_mm": self.refine_u_mm,
+                        "refine_v_mm": self.refine_v_mm,
+                    }
+                ),
             }
         )
 
@@ -267,8 +310,9 @@ class FieldSpec:
                 kw[name] = typ(**given)
             for name in ("inflation_ml", "spacing_mm", "force_range_n", "height_range_mm", "faces"):
                 kw[name] = _uncanon(kw[name])
-            if kw.get("window_mm") is not None:
-                kw["window_mm"] = _uncanon(kw["window_mm"])
+            for name in ("window_mm", "fine_spacing_mm", "refine_u_mm", "refine_v_mm"):
+                if kw.get(name) is not None:
+                    kw[name] = _uncanon(kw[name])
             return cls(**kw)
         except (KeyError, TypeError) as exc:
             raise EctskinError(f"{source}: not a field spec ({type(exc).__name__}: {exc})") from None
@@ -286,6 +330,83 @@ class FieldSpec:
     def key(self) -> str:
         """The cache key: SHA-256 (hex) of :meth:`canonical_json`."""
         return hashlib.sha256(self.canonical_json().encode("utf-8")).hexdigest()
+
+
+# ---------------------------------------------------------------------- the demo's grid
+@dataclass(frozen=True)
+class FieldGrid:
+    """How finely a field samples its state: the grid steps (u, v) mm, the force and height
+    nodes, the mesh of the node solves (:class:`FieldSpec`'s fields of the same names), and
+    optionally a graded grid: steps ``fine_spacing_mm`` within ``wall_band_mm`` of the chambers'
+    side walls (in u) and within ``end_band_mm`` of their ends (in v), where the bulges' edges
+    put kinks into the readout (:func:`chamber_refinement`)."""
+
+    spacing_mm: tuple[float, float]
+    force_nodes: int
+    height_nodes: int
+    discretisation: Discretisation = COARSE_FIELD_MESH
+    fine_spacing_mm: tuple[float, float] | None = None
+    wall_band_mm: float = 5.0
+    end_band_mm: float = 3.0
+
+
+#: the grid of the reproduction's contact fields (:func:`contact_field_spec`), chosen by the
+#: interpolation error against direct solves (``benchmarks/bench_field_grid.py``): 2 mm across
+#: the wires (u) and 4 mm along them, 1 mm near the chambers' side walls and ends (the errors of
+#: a uniform grid gather there: the fingertip rests against a bulge's shoulder), Chebyshev
+#: nodes: 6 in force, 6 in ln h (4 height nodes missed the bound on half the hover points)
+DEMO_FIELD = FieldGrid(
+    spacing_mm=(2.0, 4.0), force_nodes=6, height_nodes=6, fine_spacing_mm=(1.0, 1.0)
+)
+
+
+def chamber_refinement(
+    manipulator: ManipulatorConfig, wall_band_mm: float, end_band_mm: float, merge_mm: float
+) -> tuple[tuple[tuple[float, float], ...], tuple[tuple[float, float], ...]]:
+    """(u intervals, v intervals) mm of a graded grid: within ``wall_band_mm`` of the chambers'
+    side walls (u = ±chamber_size_x / 2) and within ``end_band_mm`` of every chamber end along
+    v; v intervals less than ``merge_mm`` apart are joined (the gap between two chambers)."""
+    c = manipulator
+    half = c.chamber_size_x_mm / 2
+    w = float(wall_band_mm)
+    u = ((-half - w, -half + w), (half - w, half + w))
+    ends = sorted(
+        z + s * c.chamber_size_z_mm / 2 for z in c.chamber_centres_z_mm for s in (-1.0, 1.0)
+    )
+    v: list[tuple[float, float]] = []
+    for z in ends:
+        lo, hi = z - end_band_mm, z + end_band_mm
+        if v and lo - v[-1][1] <= merge_mm:
+            v[-1] = (v[-1][0], hi)
+        else:
+            v.append((lo, hi))
+    return u, tuple(v)
+
+
+def contact_field_spec(
+    layout: SensorLayout, inflation_ml, grid: FieldGrid = DEMO_FIELD, **kw: Any
+) -> FieldSpec:
+    """The :class:`FieldSpec` of one state of the contact experiment on ``grid`` (default
+    :data:`DEMO_FIELD`); ``kw``: any other :class:`FieldSpec` field (finger, force_range_n,
+    height_range_mm, manipulator, faces, window_mm, ...)."""
+    if not isinstance(grid, FieldGrid):
+        raise EctskinError(f"contact_field_spec: grid must be a FieldGrid, got {type(grid).__name__}")
+    taken = {"spacing_mm", "force_nodes", "height_nodes", "discretisation", "fine_spacing_mm",
+             "refine_u_mm", "refine_v_mm"}
+    clash = sorted(taken & set(kw))
+    if clash:
+        raise EctskinError(f"contact_field_spec: {clash} come from grid; give a FieldGrid instead")
+    refine: dict[str, Any] = {}
+    if grid.fine_spacing_mm is not None:
+        u, v = chamber_refinement(
+            kw.get("manipulator", ManipulatorConfig()), grid.wall_band_mm, grid.end_band_mm,
+            grid.spacing_mm[1],
+        )
+        refine = {"fine_spacing_mm": grid.fine_spacing_mm, "refine_u_mm": u, "refine_v_mm": v}
+    return FieldSpec(
+        layout, inflation_ml, discretisation=grid.discretisation, spacing_mm=grid.spacing_mm,
+        force_nodes=grid.force_nodes, height_nodes=grid.height_nodes, **refine, **kw,
+    )
 
 
 # ---------------------------------------------------------------------- the physics digest
@@ -386,6 +507,16 @@ def _floats(name: str, value: Any, n: int) -> tuple[float, ...]:
         raise EctskinError(f"FieldSpec.{name} must be {n} numbers, got {value!r}") from None
     if len(out) != n or not all(math.isfinite(x) for x in out):
         raise EctskinError(f"FieldSpec.{name} must be {n} finite numbers, got {value!r}")
+    return out
+
+
+def _intervals(name: str, value: Any) -> tuple[tuple[float, float], ...]:
+    try:
+        out = tuple((float(a), float(b)) for a, b in value)
+    except (TypeError, ValueError):
+        raise EctskinError(f"FieldSpec.{name} must be ((lo, hi), ...) mm, got {value!r}") from None
+    if not all(math.isfinite(a) and math.isfinite(b) and a < b for a, b in out):
+        raise EctskinError(f"FieldSpec.{name} must be finite intervals lo < hi (mm), got {out}")
     return out
 
 

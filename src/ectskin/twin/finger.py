@@ -24,7 +24,12 @@ state and force, and above the skin (hover) too:
   pad. The centre rests at τ ln Σ exp(g_i / τ) (τ = :data:`CONTACT_SMOOTHING_MM`) plus the cover
   (and the hover height): the rest height of an exponential contact law, never below the
   highest sample's need and smooth in force and point (a lift that switches on at a threshold
-  made steps of tens of fF in the readout).
+  made steps of tens of fF in the readout). Only the samples that weigh in it are solved: a
+  sample whose need cannot come within :data:`_PRUNE_MARGIN_MM` of the highest (judged at each
+  Newton step from its lateral miss and a bound on the skin's slope) is dropped, its weight
+  below e⁻⁵⁰; the others are solved as if all were, so the rest height is the same to
+  round-off at about a third of the cost. Frames that differ only in the height above the skin
+  (a hovering finger) share one placement.
 * *Cover.* The sealing cover (``Finger.skin_cover_mm``) under the pressed pad is a bonded thin
   soft layer, a Winkler foundation: it compresses by the mean pressure F / (π a²) over the
   Hertz contact disc divided by the bonded layer's compression modulus E_c = E (1 + 2 S²), S =
@@ -71,6 +76,13 @@ _RING_POINTS = 64
 #: states and forces of the tests)
 _PLACE_STEPS = 6
 _JACOBIAN_STEPS = 2
+#: samples whose need may not come within this of the highest are not solved (they weigh less
+#: than exp(−this / CONTACT_SMOOTHING_MM) = e⁻⁵⁰ in the contact law) ...
+_PRUNE_MARGIN_MM = 0.5
+#: ... bounding the skin's slope under a fingertip (up to ~60° beside a bulge) by this ...
+_SLOPE_BOUND = 5.0
+#: ... and solving every sample that may come within this of the face's edge (mm)
+_EDGE_MARGIN_MM = 2.0
 #: the smooth bound of the pad's indentation at R / 2 (:meth:`Finger.indentation_mm`)
 _CAP_POWER = 12
 
@@ -201,11 +213,40 @@ def _rest_one(
     handling,
 ) -> Fingertip:
     """The :class:`Fingertip` of ``one`` (force (F,), height (F,) per frame) on the skin deformed
-    by all of ``touch`` (forces ``forces``)."""
+    by all of ``touch`` (forces ``forces``).
+
+    Frames that differ only in the height above the skin (the same forces, no handling: a
+    hovering finger at several heights) share the skin under the fingertip and its rest height:
+    it is found once and lifted per frame."""
+    contact = heights_one <= 0
+    f_all = np.asarray(forces, dtype=np.float64)
+    alike = (
+        handling is None
+        and len(force_one) > 1
+        and bool(np.all(f_all == f_all[:1]))
+        and bool(np.all(contact == contact[0]))
+    )
+    rows = slice(0, 1) if alike else slice(None)
+    pts, nrm, depth, cover, above = _placement(
+        m, fg, one, inflation_ml, touch, f_all[rows], force_one[rows], contact[rows], handling
+    )
+    if alike:
+        n_f = len(force_one)
+        pts, nrm, depth, cover, above = (
+            np.repeat(a, n_f, axis=0) for a in (pts, nrm, depth, cover, above)
+        )
+    lift = np.maximum(heights_one, 0.0)
+    centre = pts + nrm * (above + cover + lift)[:, None]
+    return Fingertip(fg, pts, nrm, centre, depth, cover, lift)
+
+
+def _placement(m: Manipulator, fg: Finger, one: Touch, inflation_ml, touch, forces, force_one,
+               contact, handling):
+    """(point (F, 3), axis (F, 3), pad depth (F,), cover (F,), rest height less the cover (F,))
+    of ``one``'s fingertip in contact (``contact`` (F,) True) or above the skin."""
     uv = np.asarray([one.uv_mm])
     pts = m.deform(one.surface, uv, inflation_ml, touch, forces, handling)[:, 0]  # (F, 3)
     frame = m.face_frame(one.surface, uv, inflation_ml, touch, forces, handling)[:, 0]
-    contact = heights_one <= 0
     depth = np.where(contact, fg.indentation_mm(force_one), 0.0)  # (F,)
     cover = np.where(contact, fg.cover_mm(force_one), fg.skin_cover_mm)
     rho = np.sqrt(depth * (2 * fg.radius_mm - depth))  # the flat pad's radius
@@ -221,45 +262,104 @@ def _rest_one(
     target = (radii[:, :, None, None] * np.c_[np.cos(ang), np.sin(ang)][None, None]).reshape(
         len(pts), -1, 2
     )  # (F, m, 2) lateral offsets along the face's axes
-    skin = _skin_at(m, one, target, pts, frame, inflation_ml, touch, forces, handling)
     nrm = frame[..., 2]
-    above = rest_height(skin - pts[:, None], nrm, fg.radius_mm, depth)
-    lift = np.maximum(heights_one, 0.0)
-    centre = pts + nrm * (above + cover + lift)[:, None]
-    return Fingertip(fg, pts, nrm, centre, depth, cover, lift)
+    skin, valid = _skin_at(
+        m, one, target, pts, frame, inflation_ml, touch, forces, handling, fg.radius_mm, depth
+    )
+    above = rest_height(skin - pts[:, None], nrm, fg.radius_mm, depth, valid=valid)
+    return pts, nrm, depth, cover, above
 
 
 def _skin_at(
-    m: Manipulator, one: Touch, target, pts, frame, inflation_ml, touch, forces, handling
-) -> np.ndarray:
-    """(F, m, 3) the deformed skin at the lateral offsets ``target`` (F, m, 2) from the points
-    ``pts`` (F, 3) along the face's carried axes ``frame`` (F, 3, 3) (u, v, normal): rest
-    coordinates found by Newton steps through the deformation (the skin stretches and rises
-    steeply beside a bulge; the flat face's map is the first guess), kept on the face."""
+    m: Manipulator, one: Touch, target, pts, frame, inflation_ml, touch, forces, handling,
+    radius: float | None = None, depth: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The deformed skin at the lateral offsets ``target`` (F, m, 2) from the points ``pts``
+    (F, 3) along the face's carried axes ``frame`` (F, 3, 3) (u, v, normal): rest coordinates
+    found by Newton steps through the deformation (the skin stretches and rises steeply beside
+    a bulge; the flat face's map is the first guess), kept on the face.
+
+    Returns the skin (F, k, 3) at k of the samples and a mask (F, k) of the valid ones. With
+    ``radius`` and ``depth`` (F,) (the fingertip's), a sample is dropped at any step where its
+    need cannot come within :data:`_PRUNE_MARGIN_MM` of the highest (:func:`_worth_solving`): it
+    would weigh less than exp(−margin / τ) in the smooth contact law. Each sample's steps are its
+    own, so the samples kept are solved exactly as when every sample is (k = m, all valid,
+    without ``radius``)."""
     n_f, n_m = target.shape[:2]
     e12 = frame[..., :2].transpose(0, 2, 1)  # (F, 2, 3)
     uv0 = np.asarray(one.uv_mm)
     h = 0.05  # the Jacobian's forward differences, mm
-    stencil = np.array([[0.0, 0.0], [h, 0.0], [0.0, h]])
+    steps = np.array([[h, 0.0], [0.0, h]])
+    valid = np.ones((n_f, n_m), dtype=bool)
     offset = target
     inv = np.broadcast_to(np.eye(2), (n_f, n_m, 2, 2))
     for step in range(_PLACE_STEPS):
         fresh = step < _JACOBIAN_STEPS  # a new Jacobian, or the last one (chord steps)
-        at = stencil if fresh else stencil[:1]
-        trial = (uv0 + offset)[:, None] + at[None, :, None]  # (F, 3 or 1, m, 2)
-        x = m.deform(
-            one.surface, trial.reshape(n_f, -1, 2), inflation_ml, touch, forces, handling
-        ).reshape(n_f, len(at), n_m, 3)
-        lat = np.einsum("fki,fsmi->fsmk", e12, x - pts[:, None, None])  # (F, 3 or 1, m, 2)
+        x = m.deform(one.surface, uv0 + offset, inflation_ml, touch, forces, handling)
+        lat = np.einsum("fki,fmi->fmk", e12, x - pts[:, None])  # (F, m, 2)
+        if radius is not None and depth is not None:
+            keep = valid & _worth_solving(
+                m, one.surface, uv0 + offset, x - pts[:, None], lat, target, frame[..., 2],
+                radius, depth, valid,
+            )
+            if keep.sum(axis=1).max() < target.shape[1]:
+                # each frame's kept samples first (in order), padded with its first (invalid)
+                count = keep.sum(axis=1)
+                k = max(1, int(count.max()))
+                order = np.argsort(~keep, axis=1, kind="stable")[:, :k]
+                valid = np.arange(k)[None] < count[:, None]
+                idx = np.where(valid, order, order[:, :1])[..., None]
+                target, offset, lat = (
+                    np.take_along_axis(a, idx, axis=1) for a in (target, offset, lat)
+                )
+                if not fresh:
+                    inv = np.take_along_axis(inv, idx[..., None], axis=1)
         if fresh:
-            jac = np.stack([lat[:, 1] - lat[:, 0], lat[:, 2] - lat[:, 0]], axis=-1) / h
+            trial = (uv0 + offset)[:, None] + steps[None, :, None]  # (F, 2, m, 2)
+            n_k = target.shape[1]
+            xs = m.deform(
+                one.surface, trial.reshape(n_f, -1, 2), inflation_ml, touch, forces, handling
+            ).reshape(n_f, 2, n_k, 3)
+            lat_s = np.einsum("fki,fsmi->fsmk", e12, xs - pts[:, None, None])  # (F, 2, m, 2)
+            jac = np.stack([lat_s[:, 0] - lat, lat_s[:, 1] - lat], axis=-1) / h
             # beyond the body's ends the map stops (such points are kept on the face at the
             # end): there a step takes the flat face's map
             flat = np.abs(np.linalg.det(jac)) < 0.1
             inv = np.linalg.inv(np.where(flat[..., None, None], np.eye(2), jac))
-        offset = offset + np.einsum("fmij,fmj->fmi", inv, target - lat[:, 0])
+        offset = offset + np.einsum("fmij,fmj->fmi", inv, target - lat)
     uv = _on_face(m, one.surface, uv0 + offset)
-    return m.deform(one.surface, uv, inflation_ml, touch, forces, handling)
+    return m.deform(one.surface, uv, inflation_ml, touch, forces, handling), valid
+
+
+def _worth_solving(
+    m: Manipulator, surface: str, uv_guess, rel0, lat0, target, axis, radius: float, depth,
+    valid,
+) -> np.ndarray:
+    """(F, m) the samples whose need (:func:`rest_height`) may come within
+    :data:`_PRUNE_MARGIN_MM` of the largest, judged from the current guess (``rel0`` (F, m, 3)
+    the deformed guess relative to the point, ``lat0`` its lateral offset, ``target`` the
+    wanted; ``valid`` (F, m) the samples that count).
+
+    Solved, a sample lies at lateral distance |target| (its lower-surface depth is known now)
+    and its rise along the axis differs from the guess's by at most :data:`_SLOPE_BOUND` times
+    the lateral miss |target − lat0| (the skin's slope under the fingertip is below that).
+    Samples that may leave the face (whose solve is clipped to its edge, nearer the axis) are
+    always solved."""
+    up = np.einsum("fmi,fi->fm", rel0, axis)
+    d = _lower_depth(np.linalg.norm(target, axis=2), radius, depth)
+    miss = _SLOPE_BOUND * np.linalg.norm(target - lat0, axis=2)
+    low = np.where(valid, up + d - miss, -np.inf)
+    best = np.maximum((radius - depth), low.max(axis=1))  # (F,)
+    keep = up + d + miss >= best[:, None] - _PRUNE_MARGIN_MM
+    c = m.config
+    half = (c.width_mm if surface in ("front", "back") else c.thickness_mm) / 2
+    reach = _EDGE_MARGIN_MM + miss / _SLOPE_BOUND * 2.0
+    near_edge = (
+        (np.abs(uv_guess[..., 0]) > half - reach)
+        | (uv_guess[..., 1] < reach)
+        | (uv_guess[..., 1] > c.length_mm - reach)
+    )
+    return keep | near_edge
 
 
 def _on_face(m: Manipulator, surface: str, uv: np.ndarray) -> np.ndarray:
@@ -291,24 +391,36 @@ def flatten_cap(centres, u, v, plane: float):
     return new_c, new_u, new_v
 
 
-def rest_height(rel: np.ndarray, axis: np.ndarray, radius: float, depth: np.ndarray):
+def rest_height(
+    rel: np.ndarray, axis: np.ndarray, radius: float, depth: np.ndarray,
+    valid: np.ndarray | None = None,
+):
     """(F,) how far above the finger's point a fingertip's centre rests, less the cover: the
     smooth contact law (module docstring).
 
     ``rel`` (F, m, 3): skin samples under the fingertip relative to its point; ``axis`` (F, 3)
-    the fingertip's unit axis; ``depth`` (F,) how far its pad is pressed flat. A sample at lateral
-    distance r that rises u along the axis needs the centre u + d(r) above the point, d(r) the
-    lower surface's depth below the centre: the flat pad's R − δ, then the sphere's √(R² − r²)
-    (their smooth minimum, never above either), and beyond R a steep cone (the skin there is no
-    concern; the cone keeps a sample's need continuous as it leaves from under the fingertip).
-    The point itself needs R − δ."""
+    the fingertip's unit axis; ``depth`` (F,) how far its pad is pressed flat; ``valid`` (F, m)
+    the samples to count (default all). A sample at lateral distance r that rises u along the
+    axis needs the centre u + d(r) above the point, d(r) the lower surface's depth below the
+    centre (:func:`_lower_depth`). The point itself needs R − δ."""
     up = np.einsum("fmi,fi->fm", rel, axis)  # (F, m): how far each sample rises toward the finger
     r = np.linalg.norm(rel - up[..., None] * axis[:, None], axis=2)
+    lower = _lower_depth(r, radius, depth)
+    pad = np.broadcast_to((radius - depth)[:, None], lower.shape)
+    need = lower + up
+    if valid is not None:
+        need = np.where(valid, need, -np.inf)
+    return _soft_max(np.concatenate([pad[:, :1], need], axis=1), axis=1)  # (F, 1 + m)
+
+
+def _lower_depth(r: np.ndarray, radius: float, depth: np.ndarray) -> np.ndarray:
+    """(F, m) the depth of a fingertip's lower surface below its centre at lateral distances
+    ``r`` (F, m): the flat pad's R − δ, then the sphere's √(R² − r²) (their smooth minimum, never
+    above either), and beyond R a steep cone (the skin there is no concern; the cone keeps a
+    sample's need continuous as it leaves from under the fingertip)."""
     sphere = np.sqrt(np.maximum(radius**2 - r**2, 0.0)) - _CONE_SLOPE * np.maximum(r - radius, 0)
     pad = np.broadcast_to((radius - depth)[:, None], sphere.shape)
-    lower = -_soft_max(np.stack([-pad, -sphere]), axis=0)
-    need = np.concatenate([pad[:, :1], lower + up], axis=1)  # (F, 1 + m)
-    return _soft_max(need, axis=1)
+    return -_soft_max(np.stack([-pad, -sphere]), axis=0)
 
 
 def _soft_max(values: np.ndarray, axis: int) -> np.ndarray:

@@ -278,7 +278,7 @@ class SensorModel:
     def _tip_panels(self, tip: Fingertip, sphere_n: int | None) -> list[Panels]:
         """Panels of one fingertip and its shaft, per frame."""
         fg, d = tip.finger, self.discretisation
-        out = []
+        out: list[Panels] = []
         cond = self.n_electrodes
         # the fingertip: the half of a cubed sphere facing the skin, chosen once in the sphere's
         # own frame (pole along +z) and then rotated onto the surface normal, so that the same
@@ -287,7 +287,16 @@ class SensorModel:
         # of ~0.1 % in the readout)
         unit = sphere_panels(np.zeros(3), fg.radius_mm, sphere_n or d.finger_sphere_n, cond)
         keep = unit.centres[:, 2] < -1e-6 * fg.radius_mm
-        for n, centre, depth in zip(tip.axis, tip.centre_mm, tip.pad_depth_mm):
+        for f, (n, centre, depth) in enumerate(zip(tip.axis, tip.centre_mm, tip.pad_depth_mm)):
+            if f and np.array_equal(n, tip.axis[f - 1]) and depth == tip.pad_depth_mm[f - 1]:
+                # the previous frame's finger moved along its axis (a hovering finger at
+                # another height): the same panels, translated
+                last = out[-1]
+                shift = centre - tip.centre_mm[f - 1]
+                out.append(
+                    Panels(last.centres + shift, last.u, last.v, last.conductor, last.n_conductors)
+                )
+                continue
             e1, e2 = orthonormal_frame(n)
             rot = np.stack([e1, e2, n], axis=1)  # local (x, y, z) -> world, z onto n
             c_loc, u_loc, v_loc = flatten_cap(
