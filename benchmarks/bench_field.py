@@ -13,7 +13,7 @@ with the electrodes left where the untouched state has them (the finger moved ri
 undented skin) is from the direct contact solve: why contact nodes are full solves.
 
 Prints JSON (and writes it with ``--out``). Run: ``.venv/bin/python benchmarks/bench_field.py``
-(the demo's grid, :data:`~ectskin.twin.field_spec.DEMO_FIELD`, by default).
+(the grid that meets the accuracy bar, :data:`~ectskin.twin.field_spec.FINE_FIELD`, by default).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from ectskin.twin.field_build import build_fields
 from ectskin.twin.field_solve import hover_row
 from ectskin.twin.field_spec import (
     COARSE_FIELD_MESH,
-    DEMO_FIELD,
+    FINE_FIELD,
     FieldSpec,
     contact_field_spec,
 )
@@ -185,12 +185,12 @@ def main() -> None:
     ap.add_argument("--levels", default="0,20", help="chamber levels (ml), all combinations")
     ap.add_argument("--states", default=None,
                     help="only these states instead, e.g. '0,0,0;20,20,20' (ml per chamber)")
-    ap.add_argument("--spacing", default=",".join(f"{x:g}" for x in DEMO_FIELD.spacing_mm),
-                    help="grid steps du,dv (mm); default the demo's (DEMO_FIELD)")
+    ap.add_argument("--spacing", default=",".join(f"{x:g}" for x in FINE_FIELD.spacing_mm),
+                    help="grid steps du,dv (mm); default FINE_FIELD's")
     ap.add_argument("--uniform", action="store_true",
-                    help="no graded bands (DEMO_FIELD refines beside the chambers' walls and ends)")
-    ap.add_argument("--force-nodes", type=int, default=DEMO_FIELD.force_nodes)
-    ap.add_argument("--height-nodes", type=int, default=DEMO_FIELD.height_nodes)
+                    help="no graded bands (FINE_FIELD refines beside the chambers' walls and ends)")
+    ap.add_argument("--force-nodes", type=int, default=FINE_FIELD.force_nodes)
+    ap.add_argument("--height-nodes", type=int, default=FINE_FIELD.height_nodes)
     ap.add_argument("--discretisation", choices=("coarse", "twin"), default="coarse")
     ap.add_argument("--window", default=None, help="u_lo,u_hi,v_lo,v_hi (mm): one area only")
     ap.add_argument("--workers", type=int, default=2)
@@ -210,9 +210,9 @@ def main() -> None:
     disc = COARSE if args.discretisation == "coarse" else Discretisation()
     layout = default_layout()
     grid = dataclasses.replace(
-        DEMO_FIELD, spacing_mm=(du, dv), force_nodes=args.force_nodes,
+        FINE_FIELD, spacing_mm=(du, dv), force_nodes=args.force_nodes,
         height_nodes=args.height_nodes, discretisation=disc,
-        fine_spacing_mm=None if args.uniform else DEMO_FIELD.fine_spacing_mm,
+        fine_spacing_mm=None if args.uniform else FINE_FIELD.fine_spacing_mm,
     )
     specs = [contact_field_spec(layout, state, grid, window_mm=window) for state in states]
     nodes = sum(

@@ -189,7 +189,7 @@ def test_the_demo_grid_refines_beside_the_chambers(layout):
     assert u_bands == ((-25.0, -15.0), (15.0, 25.0))
     assert v_bands == ((2.0, 8.0), (32.0, 48.0), (72.0, 88.0), (112.0, 118.0))
     spec = field_spec.contact_field_spec(layout, (0.0, 20.0, 0.0), finger=Finger(radius_mm=9.0))
-    grid = field_spec.DEMO_FIELD
+    grid = field_spec.FINE_FIELD
     assert (spec.spacing_mm, spec.force_nodes, spec.height_nodes) == (
         grid.spacing_mm, grid.force_nodes, grid.height_nodes)
     assert spec.finger.radius_mm == 9.0 and spec.discretisation == COARSE

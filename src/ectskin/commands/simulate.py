@@ -30,6 +30,7 @@ EXAMPLES = """\
   ectskin simulate -o twin.h5 --overwrite --workers 2  # replace an earlier twin.h5
   ectskin simulate -o two.h5 --second-finger 0.3       # 30 % of touch trials: two fingers
   ectskin simulate -o c.h5 --placement uniform --dwells 3 --lifts --hover  # contact training data
+  ectskin simulate -o dense.h5 --response field --placement uniform --dwells 60 --slide 0.17
 """
 log = logging.getLogger(__name__)
 
@@ -77,6 +78,35 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=1,
         help="finger placements per touch trial: it moves to a new point D-1 times (default 1)",
     )
+    p.add_argument(
+        "--slide",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="seconds at the end of each dwell in which the finger slides, in contact, to the "
+        "next point (default 0: it jumps)",
+    )
+    p.add_argument(
+        "--response",
+        choices=("solve", "field"),
+        default="solve",
+        help="touch trials by method-of-moments solves per dwell (solve), or read from the "
+        "states' response fields (field: many dwells cheaply; the fields are built once into "
+        "--field-cache, see docs/field.md)",
+    )
+    p.add_argument(
+        "--field-cache",
+        metavar="DIR",
+        help="response field cache for --response field (default $ECTSKIN_CACHE/fields or "
+        "~/.cache/ectskin/fields)",
+    )
+    p.add_argument(
+        "--field-grid",
+        choices=("quick", "fine"),
+        default="quick",
+        help="the response fields' grid for --response field: quick (minutes to build) or fine "
+        "(meets the field's accuracy bar, about 4x the build time); see docs/field.md",
+    )
     p.add_argument("--hover", action="store_true", help="the finger hovers above the skin at times")
     p.add_argument(
         "--approach", action="store_true", help="each touch starts with the finger coming down"
@@ -119,6 +149,8 @@ def run(args: argparse.Namespace) -> int:
         lifts=args.lifts,
         touch_placement=args.placement,
         touch_dwells=args.dwells,
+        dwell_slide_s=args.slide,
+        response=args.response,
         hover=args.hover,
         approach=args.approach,
         push_max_n=args.push_max,
@@ -135,9 +167,23 @@ def run(args: argparse.Namespace) -> int:
         Manipulator().check_inflation([v] * protocol.n_chambers)
     if Path(out).exists() and not args.overwrite:
         raise EctskinError(f"{out}: file exists; use --overwrite to replace it")
+    fields = None
+    if protocol.response == "field":
+        from ectskin.pipeline.field import field_cache_dir, protocol_field_specs
+        from ectskin.twin.field_build import build_fields, field_dir
+
+        specs = protocol_field_specs(protocol, layout, grid=args.field_grid)
+        cache = field_cache_dir(args.field_cache)
+        t0 = time.perf_counter()
+        build_fields(specs, cache, workers=args.workers, progress=not args.no_progress)
+        log.info("%d response field(s) in %.1f s (%s)", len(specs), time.perf_counter() - t0, cache)
+        fields = {s.inflation_ml: field_dir(s, cache) for s in specs}
+    elif args.field_cache is not None or args.field_grid != "quick":
+        raise EctskinError("--field-cache and --field-grid are for --response field")
     t0 = time.perf_counter()
     rec = simulate_experiment(
-        protocol, layout=layout, workers=args.workers, progress=not args.no_progress
+        protocol, layout=layout, workers=args.workers, progress=not args.no_progress,
+        fields=fields,
     )
     dt = time.perf_counter() - t0
     write_recording(rec, out, overwrite=args.overwrite)

@@ -17,10 +17,11 @@ run                 task     window  prior  role
 
 The contact run trains on ``contact.h5``: the paper's trials of ``data.h5`` together with the
 *contact experiment* (:meth:`ReproduceConfig.contact_protocol`): the paper's finger, forces and
-handling, with the chambers at their lowest and highest level (8 states), touches anywhere in
-their region with the finger sliding to a new point, lifting, hovering and approaching, and a
-second finger in some trials: what continuous contact models need and the paper's protocol does
-not hold.
+handling, with the chambers at their lowest and highest level (8 states), dense touches read
+from the states' response fields (:mod:`ectskin.pipeline.field`): in each trial the finger
+presses at a new point anywhere in its region every :data:`CONTACT_DWELL_S`, sliding in contact to
+it, lifting, hovering and approaching, with a second finger in some trials: what
+continuous contact models need and the paper's protocol does not hold.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from ectskin.io import Recording
 from ectskin.learn.candidates import TOUCH_MODELS
 from ectskin.learn.threads import resolve_threads
 from ectskin.twin import Protocol
+from ectskin.twin.field_spec import FIELD_GRIDS
 from ectskin.viz import DEFAULT_DPI, check_figure_options
 
 #: Training profiles of a reproduction (:data:`ectskin.learn.train.PROFILES` apply per run).
@@ -59,6 +61,16 @@ ABLATIONS = {"no_prior": "track_no_prior", "window_1": "track_window_1"}
 RUN_PROFILES = {"touch_robust": "robust"}
 #: epochs of the ablation trainings under the quick profile (the main runs use the profile's)
 QUICK_ABLATION_EPOCHS = 12
+#: how the contact experiment's touch trials are read (ReproduceConfig.contact_response)
+CONTACT_RESPONSES = ("field", "solve")
+#: the contact experiment read from the fields (ReproduceConfig.contact_protocol): touch trials
+#: per state, seconds per point (dwell: 60 points in a 30-s trial), the part of each dwell spent
+#: sliding to the next point, and its own random streams (Protocol.stream: its trials share no
+#: draw with the paper's)
+CONTACT_TOUCH_TRIALS = 9
+CONTACT_DWELL_S = 0.5
+CONTACT_SLIDE = 1 / 3
+CONTACT_STREAM = 1
 
 
 def _check_positive_int(name: str, value: Any) -> int:
@@ -120,6 +132,19 @@ class ReproduceConfig:
     figure_format, dpi : str, int
         File format (``png``, ``pdf``, ``svg``) and resolution of the evaluations' figures
         (:func:`ectskin.viz.check_figure_options`).
+    contact_response : "field" | "solve"
+        How the contact experiment's touch trials are read: from the states' response fields
+        (dense: a point every :data:`CONTACT_DWELL_S`; the fields are built once into
+        ``field_cache``), or by method-of-moments solves per point (4 touch trials per state of
+        2 points each, no field to build).
+    field_cache : path, optional
+        Where the contact experiment's response fields are cached (default:
+        :func:`ectskin.pipeline.field.field_cache_dir`, ``$ECTSKIN_CACHE/fields`` or
+        ``~/.cache/ectskin/fields``); shared by every output folder.
+    field_grid : "quick" | "fine"
+        The fields' grid (:data:`ectskin.twin.field_spec.FIELD_GRIDS`): "quick" builds the
+        demo's 8 states in minutes and misses the field's accuracy bar near the chambers'
+        walls and ends; "fine" meets it on nearly every point at about 4x the build time.
     """
 
     out_dir: Path
@@ -142,6 +167,9 @@ class ReproduceConfig:
     command: str | None = field(default=None, compare=False)
     figure_format: str = "png"
     dpi: int = DEFAULT_DPI
+    contact_response: str = "field"
+    field_cache: Path | None = field(default=None, compare=False)
+    field_grid: str = "quick"
 
     def __post_init__(self) -> None:
         check_type("out_dir", self.out_dir, (str, os.PathLike))
@@ -171,6 +199,11 @@ class ReproduceConfig:
         check_option("touch_model", self.touch_model, TOUCH_MODELS)
         resolve_threads(self.threads)  # an invalid value fails here, before any work
         check_figure_options(self.figure_format, self.dpi)
+        check_option("contact_response", self.contact_response, CONTACT_RESPONSES)
+        check_option("field_grid", self.field_grid, tuple(FIELD_GRIDS))
+        if self.field_cache is not None:
+            check_type("field_cache", self.field_cache, (str, os.PathLike))
+            object.__setattr__(self, "field_cache", Path(self.field_cache))
 
     @property
     def run_names(self) -> tuple[str, ...]:
@@ -184,24 +217,33 @@ class ReproduceConfig:
 
     def contact_protocol(self) -> Protocol | None:
         """The contact experiment: the simulated protocol with the chambers at its lowest and
-        highest level only, 4 touch trials per state placed anywhere in their region (2 points
-        per trial), lifts, hover and approach, and a second finger in 30 % of the touch trials;
-        None when a recording is given. (The contact model trains on these trials together with
-        the paper's: :func:`ectskin.pipeline.contact.with_paper_trials`.)"""
+        highest level only, touches placed anywhere in their region, with lifts, hover and
+        approach, a second finger in 30 % of the touch trials, drawn from its own random
+        streams (:data:`CONTACT_STREAM`). Read from the states' response fields
+        (``contact_response="field"``): :data:`CONTACT_TOUCH_TRIALS` touch trials per state,
+        each pressing at a new point every :data:`CONTACT_DWELL_S` (60 in a 30-s trial) and
+        sliding there in contact for :data:`CONTACT_SLIDE` of the dwell; solved
+        (``"solve"``): 4 touch trials per state of 2 points each. None when a recording is
+        given. (The contact model trains on these trials together with the paper's:
+        :func:`ectskin.pipeline.contact.with_paper_trials`.)"""
         base = self.simulation_protocol()
         if base is None:
             return None
         levels = tuple(sorted({min(base.levels_ml), max(base.levels_ml)}))
+        common: dict[str, Any] = dict(
+            levels_ml=levels, touch_placement="uniform", lifts=True, hover=True, approach=True,
+            second_finger=0.3, stream=CONTACT_STREAM,
+        )
+        if self.contact_response == "solve":
+            return replace(base, touch_trials=4, touch_dwells=2, response="solve", **common)
+        dwells = max(1, min(base.n_frames, int(round(base.duration_s / CONTACT_DWELL_S))))
         return replace(
             base,
-            levels_ml=levels,
-            touch_placement="uniform",
-            touch_trials=4,
-            touch_dwells=2,
-            lifts=True,
-            hover=True,
-            approach=True,
-            second_finger=0.3,
+            touch_trials=CONTACT_TOUCH_TRIALS,
+            touch_dwells=dwells,
+            dwell_slide_s=CONTACT_SLIDE * base.duration_s / dwells,
+            response="field",
+            **common,
         )
 
     def simulation_protocol(self) -> Protocol | None:

@@ -19,11 +19,14 @@ trials carry finger ground truth; otherwise the contact steps are skipped with a
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Mapping
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from ectskin._check import EctskinError
 from ectskin._files import read_json, save_figure_atomic, to_jsonable, write_json_atomic
@@ -31,6 +34,7 @@ from ectskin.electrostatics.reconstruct import METHODS
 from ectskin.io import Recording, read_recording, write_recording
 from ectskin.learn.evaluate import evaluate_run
 from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
+from ectskin.pipeline.field import contact_field_dirs, contact_field_specs, contact_fields
 from ectskin.pipeline.runner import StepRunner, digest
 from ectskin.pipeline.steps import DATA_FILE, recording_digest, run_settings, train_job
 from ectskin.twin import simulate_experiment
@@ -75,7 +79,11 @@ def with_paper_trials(paper: Recording, contact: Recording) -> Recording:
 def n_touch_points(rec: Recording) -> int | None:
     """How many distinct points (face, u, v) the fingers of ``rec``'s touch trials were placed
     at: the dwell points the twin planned (trial meta ``touch_uv_mm`` with ``surface``, and
-    ``second_finger``), to 0.01 mm; None when no trial says (a recording from elsewhere)."""
+    ``second_finger``), to 0.01 mm; None when no trial says (a recording from elsewhere).
+
+    A dwell counts only if the finger touched the skin in it (its equal share of the trial's
+    frames holds a frame in contact, when the trial has per-frame contact): a dwell spent
+    lifted or hovering placed no finger."""
     points: set[tuple[str, float, float]] = set()
     said = False
     for t in rec.trials:
@@ -83,13 +91,43 @@ def n_touch_points(rec: Recording) -> int | None:
         if dwells is None:
             continue
         said = True
-        for u, v in dwells:
-            points.add((str(t.meta.get("surface", "")), round(float(u), 2), round(float(v), 2)))
+        touched = _touched_dwells(t, len(dwells))
+        for (u, v), on in zip(dwells, touched):
+            if on:
+                points.add((str(t.meta.get("surface", "")), round(float(u), 2), round(float(v), 2)))
         second = t.meta.get("second_finger")
         if isinstance(second, dict) and second.get("touch_uv_mm"):
             u, v = second["touch_uv_mm"]
             points.add((str(second.get("surface", "")), round(float(u), 2), round(float(v), 2)))
     return len(points) if said else None
+
+
+def _touched_dwells(trial, n_dwells: int) -> list[bool]:
+    """Per dwell whether the first finger touched the skin in it (all True without per-frame
+    contact); the dwells split the frames in equal shares, in order, as the twin plans them."""
+    contact = getattr(trial, "contact", None)
+    if contact is None or n_dwells == 0:
+        return [True] * n_dwells
+    first = np.asarray(contact).reshape(len(contact), -1)[:, 0]
+    return [bool(first[rows].any()) for rows in np.array_split(np.arange(first.size), n_dwells)]
+
+
+def _simulate_contact(
+    protocol, config: ReproduceConfig, runner: StepRunner | None, trials=None
+) -> Recording:
+    """The contact experiment (or its ``trials``), with the states' response fields when it
+    reads them (built into the cache first; their build time goes to ``runner.timings``
+    as ``contact_fields``)."""
+    fields = None
+    if protocol.response == "field":
+        t0 = time.perf_counter()
+        contact_fields(config)
+        if runner is not None:
+            runner.timings["contact_fields"] = time.perf_counter() - t0
+        fields = contact_field_dirs(config)
+    return simulate_experiment(
+        protocol, workers=config.workers, progress=config.progress, trials=trials, fields=fields
+    )
 
 
 def contact_data(
@@ -98,7 +136,9 @@ def contact_data(
     """Step "simulate_contact": ``OUT_DIR/contact.h5``, the contact experiment together with
     the paper's trials of ``OUT_DIR/data.h5`` (made with ``paper_settings``,
     :func:`with_paper_trials`); None when a given recording lacks ground truth (then the
-    contact steps are skipped)."""
+    contact steps are skipped). A contact experiment read from response fields builds the
+    missing ones into the field cache first (:func:`ectskin.pipeline.field.contact_fields`;
+    the build's seconds are ``timings["contact_fields"]``, part of the step's)."""
     path = runner.out / CONTACT_FILE
     if config.recording is not None:
         missing = [t.name for t in config.recording.trials if t.missing_ground_truth]
@@ -126,9 +166,11 @@ def contact_data(
             "protocol": protocol.to_dict(),
             "with": {"file": DATA_FILE, "data": digest(paper_settings)},
         }
+        if protocol.response == "field":
+            settings["fields"] = [s.key() for s in contact_field_specs(config)]
 
         def make() -> None:
-            rec = simulate_experiment(protocol, workers=config.workers, progress=config.progress)
+            rec = _simulate_contact(protocol, config, runner)
             write_recording(
                 with_paper_trials(read_recording(paper_path), rec), path, overwrite=True
             )
@@ -204,12 +246,7 @@ def handling_off(
             names = [n.removeprefix(prefix) for n in test if n.startswith(prefix)]
             if not names:
                 continue
-            sim = simulate_experiment(
-                replace(protocol, push_max_n=0.0),
-                workers=config.workers,
-                progress=config.progress,
-                trials=names,
-            )
+            sim = _simulate_contact(replace(protocol, push_max_n=0.0), config, None, names)
             off.update({prefix + t.name: replace(t, name=prefix + t.name) for t in sim.trials})
         trials = [off.get(t.name, t) for t in rec.trials]
         meta = {**rec.meta, "handling_off_trials": sorted(off)}

@@ -350,14 +350,24 @@ class FieldGrid:
     end_band_mm: float = 3.0
 
 
-#: the grid of the reproduction's contact fields (:func:`contact_field_spec`), chosen by the
-#: interpolation error against direct solves (``benchmarks/bench_field_grid.py``): 2 mm across
-#: the wires (u) and 4 mm along them, 1 mm near the chambers' side walls and ends (the errors of
-#: a uniform grid gather there: the fingertip rests against a bulge's shoulder), Chebyshev
-#: nodes: 6 in force, 6 in ln h (4 height nodes missed the bound on half the hover points)
-DEMO_FIELD = FieldGrid(
+#: the grid that meets the field's accuracy bar (0.5 fF and 2 % of the finger's signal) on
+#: nearly every point, chosen by the interpolation error against direct solves
+#: (``benchmarks/bench_field_grid.py``): 2 mm across the wires (u) and 4 mm along them, 1 mm
+#: near the chambers' side walls and ends (the errors of a uniform grid gather there: the
+#: fingertip rests against a bulge's shoulder), Chebyshev nodes: 6 in force, 6 in ln h (4
+#: height nodes missed the bound on half the hover points)
+FINE_FIELD = FieldGrid(
     spacing_mm=(2.0, 4.0), force_nodes=6, height_nodes=6, fine_spacing_mm=(1.0, 1.0)
 )
+#: the reproduction's contact fields (``ReproduceConfig.field_grid="quick"``, the default): the
+#: same steps without the graded bands and 4 force nodes, about a quarter of
+#: :data:`FINE_FIELD`'s solves, so that the demo's 8 states build in minutes on 2 cores; its
+#: contact nodes miss the bar near the chambers' walls and ends (about 80 % of whole-face
+#: points within it at 6 force nodes, max 2.2 fF; docs/field.md), an error of the training
+#: data of the order of the coarse mesh's own (1-2 % of the finger's signal)
+QUICK_FIELD = FieldGrid(spacing_mm=(2.0, 4.0), force_nodes=4, height_nodes=6)
+#: the grids by name (``ReproduceConfig.field_grid``, ``ectskin simulate --field-grid``)
+FIELD_GRIDS = {"quick": QUICK_FIELD, "fine": FINE_FIELD}
 
 
 def chamber_refinement(
@@ -384,10 +394,10 @@ def chamber_refinement(
 
 
 def contact_field_spec(
-    layout: SensorLayout, inflation_ml, grid: FieldGrid = DEMO_FIELD, **kw: Any
+    layout: SensorLayout, inflation_ml, grid: FieldGrid = FINE_FIELD, **kw: Any
 ) -> FieldSpec:
     """The :class:`FieldSpec` of one state of the contact experiment on ``grid`` (default
-    :data:`DEMO_FIELD`); ``kw``: any other :class:`FieldSpec` field (finger, force_range_n,
+    :data:`FINE_FIELD`); ``kw``: any other :class:`FieldSpec` field (finger, force_range_n,
     height_range_mm, manipulator, faces, window_mm, ...)."""
     if not isinstance(grid, FieldGrid):
         raise EctskinError(f"contact_field_spec: grid must be a FieldGrid, got {type(grid).__name__}")

@@ -27,7 +27,11 @@ the frames without it, it is away from the body: no contact, force 0, point and 
 Options (the contact models need them): ``approach`` (the trial begins with the finger coming
 down from ``approach_height_mm`` and ends with it retreating), ``hover`` (periods above the skin
 at 1 to ``hover_max_mm`` instead of contact) and ``lifts`` (lift off to a few centimetres and
-press again). Frames not in contact carry force 0 and their finger height.
+press again). Frames not in contact carry force 0 and their finger height. ``touch_dwells``
+points per trial: the finger moves to the next one for each equal share of the trial; with
+``dwell_slide_s`` it slides there in contact over the end of each share
+(:func:`dwell_points`), and above the skin it hovers over its way instead of over the trial's
+mean contact point.
 
 **The fingers differ** (:func:`trial_fingers`, ``Protocol.finger_variability``, on by default):
 each trial is touched by a person's finger whose fingertip radius and pulp modulus are drawn
@@ -110,18 +114,39 @@ def _ease(x: np.ndarray) -> np.ndarray:
     return 0.5 - 0.5 * np.cos(np.pi * np.clip(x, 0.0, 1.0))
 
 
+def dwell_points(n: int, fps: float, aimed_uv: np.ndarray, slide_s: float) -> np.ndarray:
+    """(n, 2) the aimed point of each frame: the D dwells' points (D, 2), each for an equal share
+    of the frames; with ``slide_s`` > 0 the last ``slide_s`` of each dwell (at most all but its
+    first frame) moves from its point to the next one along a raised cosine, arriving at the
+    next dwell's first frame (the finger slides there in contact). No random draw."""
+    uv = np.empty((n, 2))
+    splits = np.array_split(np.arange(n), len(aimed_uv))
+    for aim, frames in zip(aimed_uv, splits):
+        uv[frames] = aim
+    if slide_s <= 0:
+        return uv
+    for k in range(len(aimed_uv) - 1):
+        frames = splits[k]
+        m = min(int(round(slide_s * fps)), frames.size - 1)
+        if m <= 0:
+            continue
+        moving = frames[-m:]
+        t = _ease((np.arange(m) + 1.0) / (m + 1.0))[:, None]
+        uv[moving] = aimed_uv[k] + t * (aimed_uv[k + 1] - aimed_uv[k])
+    return uv
+
+
 def finger_path(
     n: int, fps: float, aimed_uv: np.ndarray, lo_uv, hi_uv, protocol, rng
 ) -> FingerPath:
     """The finger over one touch trial; ``aimed_uv`` (D, 2) are the aimed points of its dwells
-    (the finger moves to the next one for each equal share of the trial), kept in [lo, hi]."""
+    (the finger moves to the next one for each equal share of the trial, sliding there for the
+    last ``protocol.dwell_slide_s`` of each: :func:`dwell_points`), kept in [lo, hi]."""
     f_lo, f_hi = protocol.force_range_n
     force = smooth_walk(n, fps, protocol.force_knot_s, f_lo, f_hi, rng)
     force = force * (1.0 + protocol.tremor_rel * tremor(n, fps, protocol.tremor_hz, rng))
     force = np.maximum(force, 0.05 * f_lo)
-    uv = np.empty((n, 2))
-    for aim, frames in zip(aimed_uv, np.array_split(np.arange(n), len(aimed_uv))):
-        uv[frames] = aim
+    uv = dwell_points(n, fps, np.asarray(aimed_uv, dtype=np.float64), protocol.dwell_slide_s)
     if protocol.slide_mm > 0:
         uv = uv + ou_walk(n, fps, protocol.slide_mm, protocol.slide_tau_s, rng)
     uv = np.clip(uv, lo_uv, hi_uv)
@@ -146,8 +171,9 @@ def finger_path(
             contact[-k:] = False
             height[-k:] = np.maximum(height[-k:], ramp[::-1])
     # above the skin the finger hovers over the trial's mean contact point (it lands within a
-    # millimetre of it: the roll and slide of the pressed pad)
-    if not contact.all():
+    # millimetre of it: the roll and slide of the pressed pad); a finger that slides between
+    # dwells (dwell_slide_s) hovers over its way instead
+    if not contact.all() and protocol.dwell_slide_s == 0:
         uv[~contact] = uv[contact].mean(axis=0) if contact.any() else np.mean(aimed_uv, axis=0)
     force = np.where(contact, force, 0.0)
     height = np.where(contact, 0.0, np.maximum(height, 0.5))

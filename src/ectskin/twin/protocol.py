@@ -25,6 +25,17 @@ their fingertip radius and pulp modulus from ``finger_radius_range_mm`` and
 ``finger_modulus_range_mpa`` (:func:`ectskin.twin.human.trial_fingers`), from the trial's own
 stream, so switching it off changes nothing else of the trial.
 
+**Dense touches** (the contact experiment, ``ectskin.pipeline.config``): many dwells per trial
+(``touch_dwells``), the finger sliding in contact from one point to the next over the last
+``dwell_slide_s`` of each (:func:`ectskin.twin.human.dwell_points`), read from the states'
+response fields (``response="field"``: :mod:`ectskin.twin.field_response`; the default
+``"solve"`` keeps the method-of-moments solves per dwell of :mod:`ectskin.twin.response`, the
+paper's protocol's documented reading).
+
+**Random streams.** Every draw comes from :meth:`Protocol.rng`, seeded by (seed, …); an
+experiment with ``stream`` > 0 draws from streams of its own (seed, :data:`STREAM_TAG`, stream,
+…), so two experiments with one seed (the paper's and the contact experiment) share no draw.
+
 **Size.** The twin holds a whole recording in memory, so one simulated experiment is bounded
 (:func:`check_recording_size`, called by :func:`plan_trials` and by ``ectskin simulate`` before
 any work): at most :data:`MAX_TRIALS` trials and :data:`MAX_RECORDING_BYTES` of recording,
@@ -57,6 +68,11 @@ MAX_RECORDING_BYTES = 4 * 2**30
 #: Per-frame values of a recording besides the readout and the markers (time, force, contact
 #: point (u, v), finger height), each 8 bytes, in :func:`recording_nbytes`.
 FRAME_VALUES = 5
+#: How a touch trial's readout is computed (``Protocol.response``).
+RESPONSES = ("solve", "field")
+#: The second seed word of the random streams of an experiment with ``Protocol.stream`` > 0 (no
+#: stream of stream 0 starts (seed, STREAM_TAG, ...): its second words are 1, 2 and 0xE5).
+STREAM_TAG = 0x5EED
 
 
 @dataclass(frozen=True)
@@ -103,6 +119,16 @@ class Protocol:
     finger_radius_range_mm: tuple[float, float] = (7.0, 10.0)
     finger_modulus_range_mpa: tuple[float, float] = (0.05, 0.2)
     force_nodes: int = 5  # MoM solves per touch trial (Chebyshev nodes in force)
+    # how a touch trial's readout is computed: "solve" = method-of-moments solves per dwell
+    # (ectskin.twin.response), "field" = read from the state's response field
+    # (ectskin.twin.field_response; simulate_experiment needs the fields)
+    response: str = "solve"
+    # seconds at the end of each dwell in which the finger slides, in contact, to the next dwell's
+    # point (a raised-cosine path); 0 = it jumps there between two frames
+    dwell_slide_s: float = 0.0
+    # which random streams the experiment draws from (Protocol.rng): 0 = (seed, ...), as always;
+    # another number gives another experiment with the same seed streams of its own
+    stream: int = 0
     # fraction of touch trials (drawn from the seed) in which a second finger also presses a
     # different region for part of the trial (see the module docstring); 0 = never
     second_finger: float = 0.0
@@ -192,6 +218,16 @@ class Protocol:
                 f"protocol: second_finger must be a fraction of the touch trials, a number from "
                 f"0 to 1, got {x!r}"
             )
+        check_option("response", self.response, RESPONSES, source="protocol")
+        v = self.dwell_slide_s
+        if isinstance(v, bool) or not isinstance(v, int | float) or not (
+            np.isfinite(v) and 0 <= v <= self.duration_s / self.touch_dwells
+        ):
+            raise EctskinError(
+                f"protocol: dwell_slide_s must be a number of seconds from 0 to duration_s / "
+                f"touch_dwells ({self.duration_s / self.touch_dwells:.4g}, one dwell), got {v!r}"
+            )
+        _check_whole("stream", self.stream, 0)
         if self.force_nodes < 2:
             raise EctskinError(f"protocol: force_nodes must be >= 2, got {self.force_nodes}")
         if self.touch_trials == 0 and not self.no_contact_trial:
@@ -213,6 +249,14 @@ class Protocol:
     @property
     def n_trials(self) -> int:
         return self.n_states * (self.touch_trials + int(self.no_contact_trial))
+
+    def rng(self, *keys: int) -> np.random.Generator:
+        """The experiment's random stream ``keys``: seeded by (seed, *keys) for ``stream`` 0,
+        by (seed, :data:`STREAM_TAG`, stream, *keys) otherwise (so an experiment of another
+        stream shares no draw with the paper's, whatever its seed)."""
+        if self.stream == 0:
+            return np.random.default_rng([self.seed, *keys])
+        return np.random.default_rng([self.seed, STREAM_TAG, self.stream, *keys])
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -394,7 +438,7 @@ def plan_trials(protocol: Protocol, layout: SensorLayout) -> list[TrialPlan]:
     """The ordered trial plan of an experiment (deterministic for ``protocol.seed``); an
     experiment over the size bounds is refused first (:func:`check_recording_size`)."""
     check_recording_size(protocol, layout)
-    rng = np.random.default_rng([protocol.seed, 0xE5])
+    rng = protocol.rng(0xE5)
     states = protocol.states()
     faces = ("front", "back")
     by_face = {f: [r for r in layout.regions if r.surface == f] for f in faces}
@@ -416,7 +460,7 @@ def plan_trials(protocol: Protocol, layout: SensorLayout) -> list[TrialPlan]:
     occluded = set(rng.choice(n_touch, size=n_occl, replace=False).tolist()) if n_touch else set()
 
     # the second finger draws from its own stream: the option leaves every other draw unchanged
-    rng2 = np.random.default_rng([protocol.seed, 0xE5, 2]) if protocol.second_finger > 0 else None
+    rng2 = protocol.rng(0xE5, 2) if protocol.second_finger > 0 else None
     plans: list[TrialPlan] = []
     counters = {f: 0 for f in faces}
     touch_idx = 0

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, fields, replace
 from typing import Any
 
@@ -35,6 +35,8 @@ from ectskin import __version__
 from ectskin._check import EctskinError
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import SensorLayout, default_layout
+from ectskin.twin.field import ResponseField
+from ectskin.twin.field_response import FieldTouchResponse, TrialFields
 from ectskin.twin.finger import Finger
 from ectskin.twin.human import finger_path, hand_push, second_finger_path, trial_fingers
 from ectskin.twin.mechanics import Handling, Manipulator, ManipulatorConfig, Touch
@@ -48,10 +50,17 @@ log = logging.getLogger(__name__)
 
 
 def simulate_trial(
-    plan: TrialPlan, protocol: Protocol, sensor: SensorModel, drift_phase: np.ndarray
+    plan: TrialPlan,
+    protocol: Protocol,
+    sensor: SensorModel,
+    drift_phase: np.ndarray,
+    fields: TrialFields | None = None,
 ) -> Trial:
-    """Simulate one planned trial: the experimenter → mechanics → MoM → readout and mocap models."""
-    rng = np.random.default_rng([protocol.seed, 1, plan.index])
+    """Simulate one planned trial: the experimenter → mechanics → MoM → readout and mocap models.
+
+    ``fields``: the states' response fields, read by a touch trial of a protocol with
+    ``response="field"`` (:class:`~ectskin.twin.field_response.FieldTouchResponse`)."""
+    rng = protocol.rng(1, plan.index)
     n = protocol.n_frames
     fps = protocol.frame_rate_hz
     t = np.arange(n) / fps
@@ -70,7 +79,7 @@ def simulate_trial(
     if plan.kind == "touch":
         assert plan.touch_uv_mm is not None  # (plan_trials gives every touch trial its points)
         fingers = trial_fingers(
-            protocol, sensor.finger, np.random.default_rng([protocol.seed, 1, plan.index, 3])
+            protocol, sensor.finger, protocol.rng(1, plan.index, 3)
         )
         trial_sensor = sensor.with_fingers(*fingers)
         reg = sensor.layout.region(plan.region)
@@ -87,12 +96,26 @@ def simulate_trial(
         c_true = np.empty((n, sensor.layout.n_pairs))
         markers_true = np.empty((n, n_markers, 3))
         n_solves = 0
+        dwells = np.array_split(np.arange(n), len(plan.touch_uv_mm))
+        if protocol.response == "field":
+            if fields is None:
+                raise EctskinError("simulate: protocol.response is 'field' but no fields given")
+            field, field_sensor = fields.get(p)
+            response = FieldTouchResponse(
+                field, field_sensor.with_fingers(*fingers), trial_sensor, p, str(plan.surface), path,
+                hand, push_dir, (lo, hi), plan.second_surface, path2,
+            )
+            c_true = response(path, hand, path2)
+            n_solves = response.n_solves
         # one readout model per dwell: the finger moves to a new point for each equal share of
         # the trial (finger_path), and each model is accurate around its own point
-        for rows in np.array_split(np.arange(n), len(plan.touch_uv_mm)):
+        for rows in dwells:
             seg = _rows(path, rows)
             seg_hand = _rows(hand, rows)
             seg2 = _rows(path2, rows) if path2 is not None else None
+            if protocol.response == "field":
+                markers_true[rows] = _touch_markers(trial_sensor, p, plan, seg, seg_hand, seg2)
+                continue
             c_true[rows], markers_true[rows], solves = _touch_segment(
                 trial_sensor, p, plan, protocol, seg, seg_hand, seg2, push_dir
             )
@@ -128,6 +151,8 @@ def simulate_trial(
         "start_s": plan.start_s,
         "mom_solves": n_solves,
     }
+    if plan.kind == "touch" and protocol.response == "field" and fields is not None:
+        meta["response_field"] = fields.get(p)[0].key
     if plan.second_surface is not None and plan.second_uv_mm is not None:
         meta["second_finger"] = {
             "surface": plan.second_surface,
@@ -164,32 +189,38 @@ def _rows(obj: Any, rows: np.ndarray) -> Any:
 
 def _touch_segment(sensor, p, plan, protocol, path, hand, path2, push_dir):
     """Readout (n, P), true markers (n, M, 3) and MoM solves of the frames of one dwell."""
-    handling = Handling(path.shear_n, hand.push, hand.push_force_n)
     response = TouchResponse(sensor, p, plan.surface, path, hand, push_dir, protocol)
     c_true = response(path, hand)
-    on = path.contact
-    one_dwell = len(plan.touch_uv_mm) == 1  # (then every frame, as before dwells had models)
-    touch = Touch(
-        plan.surface, tuple((path.uv_mm if one_dwell or not on.any() else path.uv_mm[on]).mean(0))
-    )
     solves = response.n_solves
     if path2 is not None and path2.contact.any():  # a second finger presses for a while
         second = SecondFingerResponse(response, path, plan.second_surface, path2)
         c_true = c_true + second(path, path2)
         solves = response.n_solves
+    return c_true, _touch_markers(sensor, p, plan, path, hand, path2), solves
+
+
+def _touch_markers(sensor, p, plan, path, hand, path2) -> np.ndarray:
+    """True markers (n, M, 3) of the frames of one dwell: the finger(s) at the dwell's mean point."""
+    handling = Handling(path.shear_n, hand.push, hand.push_force_n)
+    on = path.contact
+    one_dwell = len(plan.touch_uv_mm) == 1  # (then every frame, as before dwells had models)
+    touch = Touch(
+        plan.surface, tuple((path.uv_mm if one_dwell or not on.any() else path.uv_mm[on]).mean(0))
+    )
+    if path2 is not None and path2.contact.any():  # a second finger presses for a while
         uv2 = tuple(path2.uv_mm[path2.contact].mean(axis=0))
         both = (touch, Touch(plan.second_surface, uv2))
         forces = np.column_stack([path.force_n, path2.force_n])
         handling = Handling(
             np.stack([path.shear_n, path2.shear_n], axis=1), hand.push, hand.push_force_n
         )
-        return c_true, sensor.marker_positions(p, both, forces, handling), solves
-    return c_true, sensor.marker_positions(p, touch, path.force_n, handling), solves
+        return sensor.marker_positions(p, both, forces, handling)
+    return sensor.marker_positions(p, touch, path.force_n, handling)
 
 
 def _second_path(plan: TrialPlan, protocol: Protocol, sensor: SensorModel, n: int, fps: float):
     """The second finger's path, from its own random stream (the trial's other draws stay)."""
-    rng = np.random.default_rng([protocol.seed, 1, plan.index, 2])
+    rng = protocol.rng(1, plan.index, 2)
     lo, hi = region_bounds(sensor.layout.region(plan.second_region), protocol.touch_margin)
     return second_finger_path(n, fps, np.asarray(plan.second_uv_mm), lo, hi, protocol, rng)
 
@@ -199,7 +230,7 @@ _WORKER: dict = {}
 
 
 def _init_worker(layout_json: str, manip: dict, disc: dict, eps_r: float, finger: dict,
-                 protocol: dict, chamber_eps_r: float | None) -> None:
+                 protocol: dict, chamber_eps_r: float | None, fields: dict | None = None) -> None:
     """Build the worker's sensor model and protocol once (:func:`ectskin.twin.pool.run_in_workers`)."""
     layout = SensorLayout.from_json(layout_json)
     _WORKER["sensor"] = SensorModel(
@@ -211,11 +242,14 @@ def _init_worker(layout_json: str, manip: dict, disc: dict, eps_r: float, finger
         chamber_eps_r=chamber_eps_r,
     )
     _WORKER["protocol"] = Protocol.from_dict(protocol)
+    _WORKER["fields"] = None if fields is None else TrialFields(fields)  # read on first use
 
 
 def _run_trial(args) -> Trial:
     plan, drift_phase = args
-    return simulate_trial(plan, _WORKER["protocol"], _WORKER["sensor"], drift_phase)
+    return simulate_trial(
+        plan, _WORKER["protocol"], _WORKER["sensor"], drift_phase, _WORKER["fields"]
+    )
 
 
 def _only(plans: list[TrialPlan], names: Sequence[str]) -> list[TrialPlan]:
@@ -241,13 +275,17 @@ def simulate_experiment(
     workers: int | None = None,
     progress: bool = True,
     trials: Sequence[str] | None = None,
+    fields: Mapping[tuple[float, ...], ResponseField | str | os.PathLike] | None = None,
 ) -> Recording:
     """Simulate ``protocol`` (default: the paper's) and return the recording.
 
     ``workers`` processes run trials in parallel (default: all cores); the result is identical
     for any worker count. ``trials``: only the planned trials of these names, in plan order,
     each the same as in the whole experiment (its random numbers come from the seed and its
-    index in the plan); a name not in the plan is an error.
+    index in the plan); a name not in the plan is an error. ``fields``: for a protocol with
+    ``response="field"``, the response field of every inflation state with touch trials (state
+    → :class:`~ectskin.twin.field.ResponseField`, or better the path of its saved file or cache
+    folder, which each worker reads once); they must be of this layout, body and permittivities.
     """
     from tqdm.auto import tqdm
 
@@ -259,7 +297,10 @@ def simulate_experiment(
     plans = plan_trials(protocol, layout)
     if trials is not None:
         plans = _only(plans, trials)
-    drift_phase = np.random.default_rng([protocol.seed, 2]).uniform(0, 2 * np.pi, layout.n_pairs)
+    trial_fields = _check_fields(
+        protocol, plans, fields, layout, manipulator, float(eps_r), chamber_eps_r
+    )
+    drift_phase = protocol.rng(2).uniform(0, 2 * np.pi, layout.n_pairs)
     workers = max(1, min(workers or os.cpu_count() or 1, len(plans)))
     initargs = (
         layout.to_json(),
@@ -269,6 +310,7 @@ def simulate_experiment(
         asdict(finger),
         protocol.to_dict(),
         chamber_eps_r,
+        None if trial_fields is None else trial_fields.sources(),
     )
     log.info("simulating %d trials x %d frames with %d worker(s)", len(plans), protocol.n_frames, workers)
     jobs = [(p, drift_phase) for p in plans]
@@ -292,3 +334,48 @@ def simulate_experiment(
     if trials is not None:
         meta["only_trials"] = [p.name for p in plans]
     return Recording(layout=layout, trials=simulated, frame_rate_hz=protocol.frame_rate_hz, meta=meta)
+
+
+def _check_fields(protocol, plans, fields, layout, manipulator, eps_r, chamber_eps_r):
+    """The fields of a ``response="field"`` protocol as :class:`TrialFields`, checked at the
+    door: one per state with touch trials, of this layout, body and permittivities, covering the
+    touched faces; None for ``response="solve"`` (which refuses fields)."""
+    if protocol.response != "field":
+        if fields is not None:
+            raise EctskinError(
+                "simulate: fields were given, but protocol.response is 'solve' (set "
+                "response='field' to read them)"
+            )
+        return None
+    if fields is None:
+        raise EctskinError(
+            "simulate: protocol.response is 'field'; give the states' response fields (fields=, "
+            "e.g. from ectskin.pipeline.field.contact_fields)"
+        )
+    out = TrialFields(fields)
+    faces: dict[tuple[float, ...], set] = {}
+    for plan in plans:
+        if plan.kind == "touch":
+            used = faces.setdefault(tuple(plan.inflation), set())
+            used.update(f for f in (plan.surface, plan.second_surface) if f is not None)
+    for state, used in faces.items():
+        spec = out.get(state)[0].spec
+        same = {
+            "layout": spec.layout.to_json() == layout.to_json(),
+            "manipulator": spec.manipulator == manipulator,
+            "eps_r": spec.eps_r == eps_r,
+            "chamber_eps_r": spec.chamber_eps_r == chamber_eps_r,
+        }
+        differ = [k for k, ok in same.items() if not ok]
+        if differ:
+            raise EctskinError(
+                f"simulate: the response field of state {list(state)} ml differs from the "
+                f"simulation in {differ}; build the fields for this layout and body"
+            )
+        missing = sorted(used - set(spec.face_names))
+        if missing:
+            raise EctskinError(
+                f"simulate: the response field of state {list(state)} ml covers the faces "
+                f"{list(spec.face_names)}, the trials touch {missing} as well"
+            )
+    return out
