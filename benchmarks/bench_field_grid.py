@@ -19,6 +19,7 @@ import argparse
 import dataclasses
 import json
 import time
+from pathlib import Path
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -48,6 +49,7 @@ def main() -> None:
     ap.add_argument("--points", type=int, default=150, help="random points per part")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--cache", default="/tmp/bench_field_grid")
+    ap.add_argument("--out", default=None, help="also write the JSON here")
     args = ap.parse_args()
     state = tuple(float(x) for x in args.state.split(","))
     vlo, vhi = (float(x) for x in args.v_window.split(","))
@@ -121,7 +123,10 @@ def main() -> None:
                 rows.append(row)
                 print(json.dumps(row), flush=True)
     out["candidates"] = rows
-    print(json.dumps(out, indent=1))
+    text = json.dumps(out, indent=1)
+    print(text)
+    if args.out:
+        Path(args.out).write_text(text + "\n")
 
 
 if __name__ == "__main__":

@@ -14,8 +14,15 @@ to about one frame); the ``paced`` section gives the live latency, with frames a
 ``--paced-rate`` (below capacity) under the live policy ``skip-to-newest``, with every head.
 
 Heads: ``end_to_end`` runs touch + tracking; ``all_heads`` adds the contact head (ContactNet on
-its window) and the ECT image head every ``--ect-every`` frames (default 1: every frame). The
-``stages_ms`` section also times the frame's JSON message with the ECT image (what ``--jsonl``
+its window) and the ECT image head every ``--ect-every`` frames (default 1: every frame). With
+``--fields`` (response fields, or ``synthetic``) the replayed readouts are a field's (one finger,
+none, two fingers in turn) and ``all_heads_inversion`` adds the physical-inversion head
+(:mod:`ectskin.live.inversion_head`, every ``--inversion-every`` frames) to every head,
+``inversion_only`` runs it alone::
+
+    python benchmarks/bench_live.py --frames 5000 --fields synthetic --out bench_live.json
+
+The ``stages_ms`` section also times the frame's JSON message with the ECT image (what ``--jsonl``
 and the dashboard encode, outside the inference loop).
 
 Soak::
@@ -57,6 +64,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_inversion (--fields)
 
 
 def _rss_mb() -> float:
@@ -180,9 +190,10 @@ def _predictors(layout, touch_run, track_run, tmp: Path):
     return TouchPredictor.from_run(touch_run), TrackPredictor.from_run(track_run)
 
 
-def _recording(layout, n_frames: int, frame_rate_hz: float, seed: int = 0):
+def _recording(layout, n_frames: int, frame_rate_hz: float, seed: int = 0, field=None):
     """A synthetic recording: one trial of slowly varying readouts with markers, after one second
-    at rest (where the engine captures its reference, as a session should begin)."""
+    at rest (where the engine captures its reference, as a session should begin). With a
+    ``field`` the readouts are the field's (``bench_inversion.field_readouts``), of its state."""
     from ectskin.io.recording import Recording, Trial
 
     rng = np.random.default_rng(seed)
@@ -194,11 +205,18 @@ def _recording(layout, n_frames: int, frame_rate_hz: float, seed: int = 0):
         + 0.1 * np.sin(2 * np.pi * 0.3 * moving)[:, None]
         + 0.001 * rng.standard_normal((n_frames, layout.n_pairs))
     )
+    state: tuple[float, ...] = ()
+    if field is not None:
+        from bench_inversion import field_readouts
+
+        cap = field_readouts(field, n_frames, frame_rate_hz, rng)
+        state = tuple(field.spec.inflation_ml)
     markers = np.zeros((n_frames, layout.n_markers, 3))
     markers[:, :, 2] = np.linspace(24, 120, layout.n_markers)
     markers[:, :, 0] = 25 + np.sin(2 * np.pi * 0.2 * moving)[:, None]
     labels = (np.arange(n_frames) // 90) % layout.n_classes
-    return Recording(layout, [Trial("bench", cap, t, labels, markers=markers)], frame_rate_hz)
+    trial = Trial("bench", cap, t, labels, markers=markers, inflation=state)
+    return Recording(layout, [trial], frame_rate_hz)
 
 
 def _pct(a: np.ndarray) -> dict[str, float]:
@@ -256,18 +274,32 @@ def _stage_costs(heads, layout, n: int = 2000) -> dict[str, dict[str, float]]:
     return out
 
 
-def throughput(args, layout, heads) -> dict:
-    from ectskin.live import LiveEngine, ReplaySource
+def throughput(args, layout, heads, inversion=None) -> dict:
+    """``inversion``: (fields, rest field) or None; with it every configuration replays the rest
+    field's readouts, and ``all_heads_inversion`` / ``inversion_only`` add the inversion head."""
+    from ectskin.live import InversionHead, LiveEngine, ReplaySource
 
-    rec = _recording(layout, args.frames, 30.0)
+    field = None if inversion is None else inversion[1]
+    rec = _recording(layout, args.frames, 30.0, field=field)
     result = {"mode": "throughput", "frames": args.frames, "ect_every": args.ect_every}
     paper = {"touch": heads["touch"], "track": heads["track"]}
-    configs = (("engine_only", {}), ("end_to_end", paper), ("all_heads", heads))
+    configs: list[tuple[str, dict]] = [("engine_only", {}), ("end_to_end", paper), ("all_heads", heads)]
+    if inversion is not None:
+        configs += [("all_heads_inversion", {**heads, "inversion": True}),
+                    ("inversion_only", {"inversion": True})]
+
+    def head(models: dict) -> dict:
+        """A fresh inversion head per engine (a head keeps its stream's last answer)."""
+        if not models.get("inversion"):
+            return {k: v for k, v in models.items() if k != "inversion"}
+        return {**models, "inversion": InversionHead.from_fields(
+            inversion[0], layout, every=args.inversion_every)}
+
     for label, models in configs:
         src = ReplaySource(rec, speed=math.inf)
         eng = LiveEngine(
             src,
-            **models,
+            **head(models),
             ect_every=args.ect_every,
             policy="block",
             queue_size=args.queue_size,
@@ -285,6 +317,7 @@ def throughput(args, layout, heads) -> dict:
         wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
         lat = lat[: n[0]]
         result[label] = {
+            "heads": [h.key for h in eng.heads],
             "fps": stats["processed"] / wall,
             "wall_s": wall,
             # CPU time of the whole process (reader, engine, this callback) per frame: what one
@@ -306,8 +339,10 @@ def throughput(args, layout, heads) -> dict:
         )
     # live latency: frames paced at --paced-rate (below capacity), live policy skip-to-newest
     n_paced = int(args.paced_rate * args.paced_seconds)
-    src = ReplaySource(_recording(layout, n_paced, 30.0), speed=args.paced_rate / 30.0)
-    eng = LiveEngine(src, **heads, ect_every=args.ect_every, policy="skip-to-newest")
+    src = ReplaySource(_recording(layout, n_paced, 30.0, field=field),
+                       speed=args.paced_rate / 30.0)
+    every = {**heads, "inversion": inversion is not None}
+    eng = LiveEngine(src, **head(every), ect_every=args.ect_every, policy="skip-to-newest")
     lat = []
     stats = eng.run(on_output=lambda o: lat.append(o.latency_ms))
     result["paced"] = {
@@ -316,7 +351,7 @@ def throughput(args, layout, heads) -> dict:
         "processed": stats["processed"],
         "dropped": stats["dropped"],
         "latency_ms": _pct(np.asarray(lat)),
-        "heads": "all",
+        "heads": [h.key for h in eng.heads],
     }
     logging.info(
         "paced %.0f frames/s: %d dropped of %d, latency p50 %.3f ms p99 %.3f ms",
@@ -330,6 +365,8 @@ def throughput(args, layout, heads) -> dict:
     result["target_fps"] = 300
     result["meets_target"] = result["end_to_end"]["fps"] >= 300
     result["all_heads_meet_target"] = result["all_heads"]["fps"] >= 300
+    if inversion is not None:
+        result["all_heads_inversion_meet_target"] = result["all_heads_inversion"]["fps"] >= 300
     return result
 
 
@@ -476,9 +513,21 @@ def main(argv=None) -> int:
         default="onnx",
         help="what runs the models on each frame (default onnx, as ectskin live)",
     )
+    ap.add_argument(
+        "--fields",
+        nargs="+",
+        metavar="DIR",
+        help="throughput: add the physical-inversion head over these response fields (field "
+        "folders, field.npz files or a folder of cached fields; one must be of the rest state), "
+        "replaying the rest field's readouts of one and two fingers; 'synthetic': "
+        "bench_inversion.py's field of the contact experiment's size",
+    )
+    ap.add_argument("--inversion-every", type=int, default=1, help="--fields: fit every N-th frame")
     ap.add_argument("--no-pin", action="store_true", help="do not pin to one CPU core")
     ap.add_argument("--out", type=Path, help="write the results as JSON here")
     args = ap.parse_args(argv)
+    if args.fields and args.soak_seconds is not None:
+        ap.error("--fields is for the throughput run, not the soak")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", datefmt="%H:%M:%S")
     if args.soak_seconds is not None and not args.rate:
         ap.error("--soak-seconds needs --rate")
@@ -510,7 +559,13 @@ def main(argv=None) -> int:
         if args.soak_seconds is not None:
             result = soak(args, layout, heads)
         else:
-            result = throughput(args, layout, heads)
+            inversion = None
+            if args.fields:
+                from bench_inversion import live_fields
+
+                inversion = live_fields(args.fields, layout)
+            with threadpool_limits(limits=1):  # as `ectskin live --fields`
+                result = throughput(args, layout, heads, inversion)
     result["runtime"] = args.runtime
     if stages_torch is not None:
         result["stages_ms_torch"] = stages_torch
@@ -529,6 +584,7 @@ def main(argv=None) -> int:
         "track": str(args.track_run or "random C2DT (paper size)"),
         "contact": str(args.contact_run or "random ContactNet (train default size, window 10)"),
         "ect": ect_name,
+        "inversion": None if not args.fields else " ".join(args.fields),
     }
     text = json.dumps(result, indent=1)
     print(text)

@@ -30,7 +30,12 @@ BENCHMARKS = {
         [],
         ["--touch-epochs", "2", "--touch-frames", "5000", "--c2dt-steps", "3", "--calls", "50"],
     ),
-    "bench_live": ("bench_live.py", [], ["--frames", "500", "--paced-seconds", "1"]),
+    "bench_live": (
+        "bench_live.py", [], ["--frames", "500", "--paced-seconds", "1", "--fields", "synthetic"]
+    ),
+    "bench_inversion": (
+        "bench_inversion.py", [], ["--frames", "10", "--streams", "1", "--stream", "5"]
+    ),
     "bench_ect": ("bench_ect.py", [], ["--states", "1", "--frames", "200"]),
     "bench_design": ("bench_design.py", [], ["--layouts", "1", "--workers", "1"]),
     "bench_candidates": (
@@ -39,6 +44,12 @@ BENCHMARKS = {
         ["--calls", "200", "--batch", "2000", "--max-train", "2000"],
     ),
     "bench_import": ("bench_import.py", [], ["--rows", "2000", "--repeat", "1"]),
+    "bench_field_grid": (
+        "bench_field_grid.py",
+        [],
+        ["--v-window", "50,54", "--fine", "2,2", "--du", "2,4", "--dv", "2,4", "--nodes", "4",
+         "--points", "3", "--workers", "1"],
+    ),
     "bench_field": (
         "bench_field.py",
         [],

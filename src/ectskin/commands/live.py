@@ -1,4 +1,5 @@
-"""``ectskin live --source SPEC``: touch recognition, tracking, contact and ECT imaging live.
+"""``ectskin live --source SPEC``: touch recognition, tracking, contact, ECT imaging and the
+physical inversion (``--fields``) live.
 
 Prints a status line every second (or serves the web dashboard with ``--dashboard``), optionally
 records every frame (``--record``) and writes every output as JSON lines (``--jsonl``). Every
@@ -17,12 +18,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ectskin._check import EctskinError
 from ectskin.commands._options import add_overwrite
 from ectskin.dashboard import serve
 from ectskin.layout import SensorLayout, default_layout, load_layout
 from ectskin.live.engine import POLICIES, LiveEngine
+from ectskin.live.inversion_head import READOUTS, InversionHead, load_fields
 from ectskin.live.output import JsonLinesWriter, status_line
 from ectskin.live.recorder import Recorder
 from ectskin.live.reference import reference_line
@@ -38,6 +41,8 @@ EXAMPLES = """\
       --jsonl rig.jsonl
   ectskin live --source replay:crashed.h5 --allow-partial --jsonl - --max-frames 100
   ectskin live --source sim --contact-model runs/contact --ect --ect-every 3 --dashboard
+  ectskin live --source replay:session.h5 --fields ~/.cache/ectskin/fields --jsonl out.jsonl
+  ectskin live --source tcp:192.168.1.20:5000 --fields field_rest/ --state 0 0 0
 
 the reference: the first --reference-frames frames (default 30 = 1 s) are the reference that
 every later frame is calibrated against (paper Eq. 2). Keep the skin UNTOUCHED and UNINFLATED
@@ -69,6 +74,43 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=3,
         metavar="N",
         help="--ect: image every N-th processed frame (default 3: 10 images/s at 30 fps)",
+    )
+    p.add_argument(
+        "--fields",
+        nargs="+",
+        metavar="DIR",
+        help="the physical inversion (no trained model): response fields, one per inflation "
+        "state the skin visits (field folders, field.npz files, or a folder of cached fields); "
+        "each frame is fitted through the field of its state",
+    )
+    p.add_argument(
+        "--state",
+        nargs="+",
+        type=float,
+        metavar="ML",
+        help="--fields: the inflation (ml per chamber) of frames that carry none (a source "
+        "without the pump's state); a frame's own state wins",
+    )
+    p.add_argument(
+        "--inversion-every",
+        type=int,
+        default=1,
+        metavar="N",
+        help="--fields: fit every N-th processed frame (default 1)",
+    )
+    p.add_argument(
+        "--inversion-readout",
+        choices=READOUTS,
+        default="absolute",
+        help="--fields: fit the raw frame in pF (absolute, default: a source calibrated like "
+        "the twin) or its change against the touch reference (difference)",
+    )
+    p.add_argument(
+        "--inversion-fingers",
+        type=int,
+        choices=(0, 1, 2),
+        default=2,
+        help="--fields: the most fingers fitted (default 2)",
     )
     p.add_argument("--dashboard", action="store_true", help="serve the web dashboard")
     p.add_argument("--port", type=int, default=8765, help="dashboard port (default 8765)")
@@ -200,12 +242,20 @@ def run(args: argparse.Namespace) -> int:
         raise EctskinError(f"--threads must be >= 1, got {args.threads}")
     if args.ect_every < 1:
         raise EctskinError(f"--ect-every must be >= 1 (frames), got {args.ect_every}")
+    if args.inversion_every < 1:
+        raise EctskinError(f"--inversion-every must be >= 1 (frames), got {args.inversion_every}")
+    if not args.fields and args.state is not None:
+        raise EctskinError("--state is the inflation state of the inversion's frames: give --fields")
     _check_outputs(args)
     ref_markers = None
     if args.reference_markers:
         ref_markers = _load_markers(args.reference_markers)
         _check_markers(ref_markers, args.reference_markers, _known_layout(args))
+    # the fields are read (and the --state checked against them) before the source is opened
+    fields = load_fields(args.fields) if args.fields else None
     with contextlib.ExitStack() as stack:
+        if fields is not None:  # the inversion's products are tiny: BLAS threads only cost
+            stack.enter_context(threadpool_limits(limits=1))
         touch = track = contact = None
         if args.touch_model or args.track_model or args.contact_model:
             # torch is imported only when a model is given: a run without models, and every
@@ -229,7 +279,9 @@ def run(args: argparse.Namespace) -> int:
                 contact = ContactPredictor.from_run(args.contact_model, layout=layout)
             _use_runtime(args.runtime, [touch, track, contact])
         with stop_on_signals("closing the recording" if args.record else "stopping"):
-            return _run(args, {"touch": touch, "track": track, "contact": contact}, ref_markers)
+            return _run(
+                args, {"touch": touch, "track": track, "contact": contact}, ref_markers, fields
+            )
 
 
 def _use_runtime(runtime: str, predictors: list) -> None:
@@ -255,9 +307,19 @@ def _ect_imager(layout: SensorLayout):
 
 
 # ---------------------------------------------------------------------------- the run
-def _run(args: argparse.Namespace, models: dict, ref_markers) -> int:
+def _inversion(args: argparse.Namespace, fields, layout: SensorLayout) -> InversionHead | None:
+    """``--fields``: the inversion head over the loaded fields, bound to the source's layout."""
+    if fields is None:
+        return None
+    return InversionHead.from_fields(
+        fields, layout, max_fingers=args.inversion_fingers, state=args.state,
+        every=args.inversion_every, readout=args.inversion_readout,
+    )
+
+
+def _run(args: argparse.Namespace, models: dict, ref_markers, fields=None) -> int:
     """The command with its models loaded (``models``: touch, track, contact; each may be
-    None)."""
+    None) and its response fields (``fields``: state → field, or None)."""
     layout = load_layout(args.layout) if args.layout else None
     source = open_source(
         args.source,
@@ -272,6 +334,7 @@ def _run(args: argparse.Namespace, models: dict, ref_markers) -> int:
     try:
         if ref_markers is not None:  # a replay's layout is known only now
             _check_markers(ref_markers, args.reference_markers, source.layout)
+        inversion = _inversion(args, fields, source.layout)
         if args.record:
             recorder = Recorder(
                 args.record,
@@ -284,6 +347,8 @@ def _run(args: argparse.Namespace, models: dict, ref_markers) -> int:
                     "track_model": args.track_model,
                     "contact_model": args.contact_model,
                     "ect_every": args.ect_every if args.ect else None,
+                    "fields": list(args.fields) if args.fields else None,
+                    "state": args.state,
                     "runtime": args.runtime,
                 },
                 trial_info=getattr(source, "trial_info", None),
@@ -294,6 +359,7 @@ def _run(args: argparse.Namespace, models: dict, ref_markers) -> int:
             **models,
             imager=_ect_imager(source.layout) if args.ect else None,
             ect_every=args.ect_every,
+            inversion=inversion,
             policy=args.policy,
             reference_frames=args.reference_frames,
             recorder=recorder,

@@ -5,16 +5,27 @@ For a frame y (n_pairs,) pF of a known state (the model of :mod:`ectskin.inversi
 1. **No finger**: y − c_u = N β + e, weighted linear least squares (closed form).
 2. **One finger**: a coarse search over the node table (the noise-weighted distance of the
    frame, projected off the nuisance columns, to every node's signal, one matrix-vector
-   product), then Levenberg–Marquardt (``scipy.optimize.least_squares``, MINPACK's ``lm``, the
-   analytic Jacobian ∂Δ/∂(u, v, s) of the field and the nuisance columns) over (u, v, s, β)
+   product), then Levenberg–Marquardt (MINPACK's ``lmder``, the analytic Jacobian
+   ∂Δ/∂(u, v, s) of the field and the nuisance columns) over (u, v, s, β)
    from the nearest node of each face and mode, best first; the face and the mode (pressing or
    hovering) are those of the start. The field's ranges bound (u, v, s) (``_fit_fingers``).
+   ``lmder`` is called through ``scipy.optimize.leastsq``: the algorithm and options of
+   ``least_squares(method="lm")``, the same iterates, without that wrapper's cost per call
+   (about 0.2 ms per fit); its warning when a fit runs out of evaluations is silenced (the
+   result's ``converged`` says so).
 3. **Two fingers**: a coarse search over pairs of nodes (:meth:`NodeTable.pairs`), and the
    one-finger solution with the node nearest what it leaves (y − c_u − Δ₁); from each, one fit
    of both fingers and β together (and their coupling ρ with ``two_fingers="coupled"``).
 
 Counts and starts are tried in turn while the fits so far do not explain the frame within the
 noise (the gate, ``gate_p``): a one-finger frame costs one fit, a two-finger frame two.
+
+**Warm start** (``fit(..., warm=previous)``, a live stream): the fit of the previous frame's
+count starts from the previous frame's fingers instead of the coarse search; while that fit
+passes the gate the coarse search of that count is skipped. Otherwise the count is fitted from
+its cold starts too and the better fit kept. Every other count is fitted as without ``warm``
+(a two-finger stream still fits one finger from its coarse search: the count is chosen by BIC
+against the same one-finger fit as a cold fit's), so a warm fit only ever adds a start.
 
 Each fit's Gaussian log-likelihood ℓ = −½ χ² − Σ ln σ − (n/2) ln 2π, with the same σ for all
 three (the noise at the frame's readout), and its BIC = k ln n − 2 ℓ (k: 3 per finger, + 1 for a
@@ -32,12 +43,13 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import leastsq
 from scipy.stats import chi2
 
 from ectskin._check import EctskinError
@@ -58,8 +70,11 @@ STATE_TOL_ML = 1e-6
 BOUND_WEIGHT = 1e4
 #: the most residual evaluations of one Levenberg–Marquardt fit
 MAX_NFEV = 50
-#: the optimiser's scaling and tolerances
-LM_OPTIONS: dict[str, Any] = {"x_scale": "jac", "ftol": 1e-6, "xtol": 1e-6, "gtol": 1e-8}
+#: the optimiser's tolerances (MINPACK's lmder; its scaling by the Jacobian's column norms,
+#: ``diag=None``, is ``least_squares``' ``x_scale="jac"``)
+LM_OPTIONS: dict[str, Any] = {"ftol": 1e-6, "xtol": 1e-6, "gtol": 1e-8}
+#: lmder's exit codes that mean it stopped on a tolerance (5: the evaluation budget ran out)
+LM_CONVERGED = (1, 2, 3, 4)
 
 
 @dataclass(frozen=True)
@@ -276,9 +291,12 @@ class Inversion:
 
     # ------------------------------------------------------------------ one frame
     def fit(self, readouts: Any, state: Any, *, kind: str = "absolute",
-            reference: Any = None) -> InversionResult:
-        """Invert one frame (or a window of frames, averaged) of ``state``."""
+            reference: Any = None, warm: InversionResult | None = None) -> InversionResult:
+        """Invert one frame (or a window of frames, averaged) of ``state``; ``warm``: the
+        result of the previous frame of a stream (of the same state), the start of the fit of
+        its count (module docstring)."""
         m = self.model(state)
+        warm_start = self._warm_start(m, warm)
         y, w = self.observed(readouts, state, kind, reference)
         ok = np.isfinite(y)
         if not ok.all():  # masked channels (NaN in any frame of the window) are left out
@@ -301,8 +319,17 @@ class Inversion:
         for k in range(1, self.max_fingers + 1):
             if passed[-1]:
                 break
+            hot = None
+            if warm_start is not None and len(warm_start) == k:
+                hot = self._fit_fingers(m, delta, sigma, warm_start, self.coupled)
+                if self._passes(hot, k, nb, n):  # explained: no coarse search for this count
+                    starts.append([])
+                    fits.append(hot)
+                    passed.append(True)
+                    continue
             starts.append(self._starts(m, delta, k, fits[1] if k > 1 else None))
-            fits.append(self._fit_fingers(m, delta, sigma, starts[k][0], self.coupled))
+            cold = self._fit_fingers(m, delta, sigma, starts[k][0], self.coupled)
+            fits.append(hot if hot is not None and hot.chi2 < cold.chi2 else cold)
             passed.append(self._passes(fits[k], k, nb, n))
             if k == self.max_fingers:
                 for j in range(k, 0, -1):
@@ -325,6 +352,27 @@ class Inversion:
         if chosen is None:  # never: the no-finger fit always exists and has a finite BIC
             raise RuntimeError("inversion: no fit to choose")
         return self._result(m, chosen, y, w, lls[best_k], bics)
+
+    @staticmethod
+    def _warm_start(m: StateModel, warm: InversionResult | None
+                    ) -> list[tuple[int, int, np.ndarray]] | None:
+        """The fingers of a previous result as a start (face index, mode index, (u, v, s)), or
+        None (no result, no finger, or a face or mode this state's model lacks)."""
+        if warm is None:
+            return None
+        if not isinstance(warm, InversionResult):
+            raise EctskinError(
+                f"Inversion: warm must be the InversionResult of the previous frame or None, got "
+                f"{type(warm).__name__}"
+            )
+        start = []
+        for f in warm.fingers:
+            mode = "contact" if f.contact else "hover"
+            if f.face not in m.faces or mode not in m.modes:
+                return None
+            s = f.force_n if f.contact else math.log(f.height_mm)
+            start.append((m.faces.index(f.face), MODES.index(mode), np.array([f.u_mm, f.v_mm, s])))
+        return start or None
 
     def _passes(self, fit: _Fit | None, k: int, nb: int, n: int) -> bool:
         """Whether the k-finger fit explains the frame of n channels within the noise (the
@@ -425,16 +473,18 @@ class Inversion:
         # β from the linear fit at the start, so that the optimiser begins near its valley
         r0 = evaluate(np.concatenate([x0, np.zeros(nb)]))[0][:n]
         beta0 = np.linalg.lstsq(Nw, r0, rcond=None)[0] if nb else np.zeros(0)
-        sol = least_squares(
-            lambda p: evaluate(p)[0], np.concatenate([x0, beta0]), jac=lambda p: evaluate(p)[1],
-            method="lm", max_nfev=MAX_NFEV, **LM_OPTIONS,
-        )
-        p = sol.x.copy()
+        with warnings.catch_warnings():  # out of evaluations: `converged` says so
+            warnings.simplefilter("ignore", RuntimeWarning)
+            p, status = leastsq(
+                lambda p: evaluate(p)[0], np.concatenate([x0, beta0]),
+                Dfun=lambda p: evaluate(p)[1], maxfev=MAX_NFEV, **LM_OPTIONS,
+            )
+        p = np.array(p, dtype=np.float64, ndmin=1)
         p[:nx] = np.clip(p[:nx], lo, hi)
         res = evaluate(p)[0]
         r = np.concatenate([res[:n], res[n + nx:]])  # the channels and the priors
         fingers = [(fi, mi, p[3 * j: 3 * j + 3].copy()) for j, (fi, mi, _) in enumerate(start)]
-        return _Fit(fingers, p[nx:].copy(), float(r @ r), bool(sol.status > 0),
+        return _Fit(fingers, p[nx:].copy(), float(r @ r), status in LM_CONVERGED,
                     rho=float(p[6]) if with_rho else math.nan)
 
     def _result(self, m: StateModel, fit: _Fit, y: np.ndarray, w: int, ll: float,

@@ -8,7 +8,9 @@
 * :mod:`ectskin.live.engine` — :class:`LiveEngine`: reference capture
   (:mod:`~ectskin.live.reference`), calibration (paper Eq. 2), the heads
   (:mod:`~ectskin.live.heads`: :class:`TouchHead`, :class:`TrackHead`, :class:`ContactHead`,
-  :class:`EctHead`, giving an :class:`EctFrame`), latency and drop accounting
+  :class:`EctHead`, giving an :class:`EctFrame`; :mod:`~ectskin.live.inversion_head`:
+  :class:`InversionHead`, the physical inversion, giving an :class:`InversionFrame`), latency
+  and drop accounting
   (:mod:`~ectskin.live.meter`); emits :class:`Output`.
 * :mod:`ectskin.live.output` — :class:`Output` and its JSON message, :class:`JsonLinesWriter`
   (every output as a JSON line, ``ectskin live --jsonl``).
@@ -18,7 +20,8 @@ Optional dependencies (pyserial, pylsl) are imported only when such a source is 
 
 from ectskin.live.engine import POLICIES, LiveEngine
 from ectskin.live.heads import ContactHead, EctHead, Head, TouchHead, TrackHead
-from ectskin.live.output import EctFrame, JsonLinesWriter, Output
+from ectskin.live.inversion_head import InversionHead, load_fields
+from ectskin.live.output import EctFrame, InversionFrame, JsonLinesWriter, Output
 from ectskin.live.recorder import Recorder, record_stream
 from ectskin.live.sources import (
     Frame,
@@ -41,6 +44,8 @@ __all__ = [
     "Frame",
     "FrameSource",
     "Head",
+    "InversionFrame",
+    "InversionHead",
     "JsonLinesWriter",
     "LiveEngine",
     "LslSource",
@@ -53,6 +58,7 @@ __all__ = [
     "TrackHead",
     "TwinSource",
     "TwinStep",
+    "load_fields",
     "open_source",
     "parse_line",
     "record_stream",

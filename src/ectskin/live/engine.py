@@ -1,7 +1,8 @@
 """The live engine: source → reference capture → calibration (Eq. 2) → heads → outputs.
 
 Heads (:mod:`ectskin.live.heads`), each optional: touch (TouchMLP, one frame), tracking (C2DT, a
-window), contact (ContactNet, a window) and the ECT image (every N-th frame). The engine keeps the
+window), contact (ContactNet, a window), the ECT image (every N-th frame) and the physical
+inversion (:mod:`ectskin.live.inversion_head`, every N-th frame). The engine keeps the
 raw frames and the references; every head is run the same way, on every processed frame whose
 reference exists, with the newest frames it reads.
 
@@ -73,7 +74,8 @@ POLICIES = ("skip-to-newest", "block")
 
 
 class LiveEngine:
-    """Runs the heads (touch recognition, tracking, contact, ECT image) on a live source.
+    """Runs the heads (touch recognition, tracking, contact, ECT image, inversion) on a live
+    source.
 
     Parameters
     ----------
@@ -89,6 +91,9 @@ class LiveEngine:
     imager, ect_every
         An ECT imager (``faces``, ``grid_extent``, ``image(delta_c)``, ``locate(delta_c)``) run
         on every ``ect_every``-th processed frame that has a reference, or None.
+    inversion
+        An :class:`~ectskin.live.inversion_head.InversionHead` (the physical inversion through
+        response fields; it runs after the other heads), or None.
     reference_frames
         Frames averaged into a reference (30 = 1 s at 30 fps).
     policy
@@ -115,6 +120,7 @@ class LiveEngine:
         contact=None,
         imager=None,
         ect_every: int = 1,
+        inversion=None,
         reference_frames: int = 30,
         policy: str = "skip-to-newest",
         recorder=None,
@@ -152,6 +158,14 @@ class LiveEngine:
         self.heads: tuple[Head, ...] = build_heads(
             layout, touch=touch, track=track, contact=contact, imager=imager, ect_every=ect_every
         )
+        if inversion is not None:
+            if inversion.layout.n_pairs != n_pairs:
+                raise EctskinError(
+                    f"the inversion head reads {inversion.layout.n_pairs} pairs, layout "
+                    f"{layout.name!r} has {n_pairs}"
+                )
+            inversion.bind(source)  # a replay visiting a state without a field is refused here
+            self.heads += (inversion,)
         by_key = {h.key: h for h in self.heads}
         self.n_classes = getattr(by_key.get("touch"), "n_classes", layout.n_classes)
         self._tracks = any(h.reference == "tracking" for h in self.heads)
@@ -237,7 +251,8 @@ class LiveEngine:
         """The engine's part of the dashboard's ``meta`` message (the dashboard adds the layout:
         ``ectskin.dashboard.build_meta``): per head key (:data:`~ectskin.live.heads.HEAD_KEYS`)
         the head's ``meta()`` or None without that head, and ``touch_model``, ``track_model``,
-        ``contact_model`` saying which models run."""
+        ``contact_model`` saying which models run; ``inversion`` the inversion head's
+        ``meta()`` or None."""
         by_key = {h.key: h for h in self.heads}
         return {
             "reference_markers": json_list(self.reference_markers),
@@ -245,7 +260,8 @@ class LiveEngine:
             "policy": self.policy,
             "reference_frames": self.reference_frames,
             **{f"{key}_model": key in by_key for key in ("touch", "track", "contact")},
-            **{key: by_key[key].meta() if key in by_key else None for key in HEAD_KEYS},
+            **{key: by_key[key].meta() if key in by_key else None
+               for key in (*HEAD_KEYS, "inversion")},
             "source": str(getattr(self.source, "name", type(self.source).__name__)),
         }
 

@@ -81,6 +81,48 @@ class EctFrame:
         }
 
 
+@dataclass
+class InversionFrame:
+    """The physical-inversion head's result for one frame (:mod:`ectskin.live.inversion_head`):
+    the inflation ``state`` (ml) whose field it was fitted through; ``n_fingers`` (0, 1 or 2,
+    chosen by BIC) and per finger its ``FingerEstimate`` (:mod:`ectskin.inversion.fit`: face,
+    pressing or hovering, u, v mm, force N, height mm and their standard errors);
+    ``bic_by_count`` (index = count, inf where not tried); whether the chosen fit
+    ``converged``; whether it started ``warm`` from the previous frame's answer; ``fit_ms``
+    the fit's wall time."""
+
+    state: tuple[float, ...]
+    n_fingers: int
+    fingers: tuple[Any, ...]
+    bic_by_count: tuple[float, ...]
+    converged: bool
+    warm: bool
+    fit_ms: float
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """``{"state", "n_fingers", "fingers": [{"face", "contact", "u_mm", "v_mm", "force_n",
+        "height_mm", "u_se_mm", "v_se_mm", "force_se_n", "height_se_mm"}], "bic_by_count",
+        "converged", "warm", "fit_ms"}`` (non-finite → None)."""
+        return {
+            "state": [float(v) for v in self.state],
+            "n_fingers": int(self.n_fingers),
+            "fingers": [
+                {"face": str(f.face), "contact": bool(f.contact),
+                 **{k: _number(getattr(f, k)) for k in FINGER_NUMBERS}}
+                for f in self.fingers
+            ],
+            "bic_by_count": [_number(b) for b in self.bic_by_count],
+            "converged": bool(self.converged),
+            "warm": bool(self.warm),
+            "fit_ms": _number(self.fit_ms),
+        }
+
+
+#: the numbers of one fitted finger in a message (:class:`InversionFrame`)
+FINGER_NUMBERS = ("u_mm", "v_mm", "force_n", "height_mm",
+                  "u_se_mm", "v_se_mm", "force_se_n", "height_se_mm")
+
+
 def _number(v: float) -> float | None:
     v = float(v)
     return v if math.isfinite(v) else None
@@ -94,9 +136,10 @@ class Output:
     a reference exists); ``touch_probs`` (n_classes,) and ``touch_cls``; ``markers_pred``,
     ``markers_reference``, ``markers_true`` (n_markers, 3) mm; ``label``, ``trial`` and
     ``inflation`` (ml) as the frame carried them (None when the source does not know);
-    ``contact`` the contact head's ``ContactReading`` (:mod:`ectskin.learn.predict.contact`) and
-    ``ect`` the ECT head's :class:`EctFrame` (None without the head, before a reference exists,
-    and for the ECT head on frames between its images); ``latency_ms`` from the frame's arrival
+    ``contact`` the contact head's ``ContactReading`` (:mod:`ectskin.learn.predict.contact`),
+    ``ect`` the ECT head's :class:`EctFrame` and ``inversion`` the physical-inversion head's
+    :class:`InversionFrame` (None without the head, before a reference exists, and for the ECT
+    and inversion heads on frames between their ``every``-th); ``latency_ms`` from the frame's arrival
     to this output; ``stats`` a snapshot of :attr:`LiveEngine.stats`.
     """
 
@@ -114,6 +157,7 @@ class Output:
     inflation: tuple[float, ...] | None = None
     contact: Any = None
     ect: EctFrame | None = None
+    inversion: InversionFrame | None = None
     latency_ms: float = 0.0
     stats: dict[str, Any] = field(default_factory=dict)
 
@@ -139,6 +183,7 @@ class Output:
             "markers": markers,
             "contact": None if self.contact is None else to_jsonable(self.contact.to_dict()),
             "ect": None if self.ect is None else self.ect.to_json_dict(),
+            "inversion": None if self.inversion is None else self.inversion.to_json_dict(),
             "label": None if self.label is None else int(self.label),
             "trial": self.trial,
             "inflation": None if self.inflation is None else [float(v) for v in self.inflation],
@@ -228,8 +273,8 @@ class JsonLinesWriter:
 
 def status_line(out: Output) -> str:
     """One line of text on an output and its ``stats``: the touch class, how far the markers
-    moved from the reference (the largest, mm), the contact reading, the touch reference's state,
-    the rate, latency and counters."""
+    moved from the reference (the largest, mm), the contact reading, the inversion's fingers, the
+    touch reference's state, the rate, latency and counters."""
     s = out.stats
     touch = "-" if out.touch_cls is None else f"class {out.touch_cls:2d}"
     moved = "-"
@@ -238,6 +283,8 @@ def status_line(out: Output) -> str:
         moved = f"{np.nanmax(d):5.2f} mm"
     ref = s.get("reference", {}).get("touch", {}).get("state", "-")
     contact = "" if out.contact is None else f" | {_contact_text(out.contact)}"
+    if out.inversion is not None:
+        contact += f" | {_inversion_text(out.inversion)}"
     return (
         f"t {out.t:9.3f} s | touch {touch} | markers moved {moved}{contact} | "
         f"reference {ref} | "
@@ -257,3 +304,13 @@ def _contact_text(reading: Any) -> str:
         + (f": {fingers}" if fingers else "")
         + (f" hover {reading.p_hover:.2f}")
     )
+
+
+def _inversion_text(inv: InversionFrame) -> str:
+    """An :class:`InversionFrame` in a few words."""
+    fingers = ", ".join(
+        f"{f.face} ({f.u_mm:.1f}, {f.v_mm:.1f}) mm "
+        + (f"{f.force_n:.2f} N" if f.contact else f"hover {f.height_mm:.1f} mm")
+        for f in inv.fingers
+    )
+    return f"inversion {inv.n_fingers}" + (f": {fingers}" if fingers else "") + f" {inv.fit_ms:.1f} ms"

@@ -1,0 +1,302 @@
+"""The physical-inversion head: frames made from a response field give its points back through
+the live engine (each frame through the field of its state), a stream of a state without a
+field is refused, a warm start gives a cold fit's answer while skipping the coarse search, and
+the messages (and ``ectskin live --fields``) carry the fitted fingers.
+
+The fields are tiny (a 16 × 20 mm window of the front face, the paper's 28 pairs) with closed-form
+node values (each electrode a wire, a fingertip a grounded point coupled to the wires), so no
+direct solve is needed; frames are the field's own readouts at points between its nodes plus the
+readout's noise, so the truth of every frame is known independently of the inversion.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from ectskin._check import EctskinError
+from ectskin.cli import main
+from ectskin.inversion import Inversion
+from ectskin.inversion import fit as fit_module
+from ectskin.io.hdf5 import write_recording
+from ectskin.io.recording import Recording, Trial
+from ectskin.layout import default_layout
+from ectskin.live import inversion_head
+from ectskin.live.engine import LiveEngine
+from ectskin.live.inversion_head import InversionHead, load_fields
+from ectskin.live.output import InversionFrame, JsonLinesWriter, Output, status_line
+from ectskin.live.sources import ReplaySource
+from ectskin.twin.field import ResponseField
+from ectskin.twin.field_spec import FieldSpec
+from ectskin.twin.readout import ReadoutConfig, noise_pf
+
+LAYOUT = default_layout()
+P = LAYOUT.n_pairs
+WINDOW = ((-8.0, 8.0), (40.0, 60.0))
+REST, INFLATED, UNKNOWN = (0.0, 0.0, 0.0), (0.0, 20.0, 0.0), (20.0, 0.0, 0.0)
+NOISE = ReadoutConfig()
+
+
+def tiny_field(state, seed: int) -> ResponseField:
+    """A field over ``WINDOW`` of the front face, 2 mm steps, 4 forces, 3 heights; pair (i, j)
+    loses α k_i k_j with k_i the segment kernel of wire i (a random u, from a random start to a
+    random end along v) at the fingertip, 6 − 1.2 F^(2/3) mm above the face pressing with F and
+    6 + h hovering h."""
+    spec = FieldSpec(LAYOUT, state, spacing_mm=(2.0, 2.0), faces=("front",), window_mm=WINDOW,
+                     force_nodes=4, height_nodes=3, height_range_mm=(1.0, 8.0))
+    rng = np.random.default_rng(seed)
+    n_e = LAYOUT.n_electrodes
+    i, j = np.triu_indices(n_e, 1)
+    untouched = rng.uniform(0.5, 3.0, P)
+    x = rng.uniform(-10, 10, n_e)
+    a, b = rng.uniform(30, 48, n_e), rng.uniform(52, 70, n_e)
+    u, v = spec.grid("front")
+
+    def values(z):
+        U, V, Z = (g[..., None] for g in np.meshgrid(u, v, z, indexing="ij"))
+        rho = np.sqrt((U - x) ** 2 + Z**2)
+        k = np.arcsinh((b - V) / rho) - np.arcsinh((a - V) / rho)
+        return untouched - 2e-2 * k[..., i] * k[..., j]
+
+    return ResponseField(
+        spec, untouched, {"front": values(6.0 - 1.2 * spec.forces() ** (2 / 3))},
+        {"front": values(6.0 + spec.heights())},
+    )
+
+
+@pytest.fixture(scope="module")
+def fields():
+    return {REST: tiny_field(REST, 1), INFLATED: tiny_field(INFLATED, 2)}
+
+
+@pytest.fixture(scope="module")
+def field_dirs(fields, tmp_path_factory):
+    """The fields as a field cache: one folder per field, each with its field.npz."""
+    root = tmp_path_factory.mktemp("fields")
+    for n, f in enumerate(fields.values()):
+        f.save(root / f"field{n}" / "field.npz")
+    return root
+
+
+def frame(field, fingers, rng) -> np.ndarray:
+    """The field's readout of ``fingers`` [(u, v, force, height)] plus the readout's noise."""
+    c = field.untouched.copy()
+    for u, v, f, h in fingers:
+        c = c + field.delta("front", u, v, f, h)
+    return c + rng.standard_normal(P) * noise_pf(c, NOISE)
+
+
+def slide(n: int, start=(-3.3, 44.1), step=(0.31, 0.27), force=(0.7, 0.02)):
+    """n points of a finger sliding: (u, v, force, 0) per frame."""
+    return [(start[0] + t * step[0], start[1] + t * step[1], force[0] + t * force[1], 0.0)
+            for t in range(n)]
+
+
+def _recording(fields, trials) -> Recording:
+    """A rest trial (the touch reference) and ``trials`` [(name, state, points)]."""
+    rng = np.random.default_rng(3)
+    out = [Trial("rest", np.stack([frame(fields[REST], [], rng) for _ in range(6)]),
+                 np.arange(6) / 30.0, np.zeros(6), inflation=REST)]
+    for name, state, points in trials:
+        fld = fields.get(state, fields[REST])
+        cap = np.stack([frame(fld, [p], rng) for p in points])
+        out.append(Trial(name, cap, np.arange(len(points)) / 30.0, np.ones(len(points)),
+                         inflation=state, region=1))
+    return Recording(LAYOUT, out, 30.0)
+
+
+def test_the_head_gives_back_the_points_of_frames_made_from_the_field(fields):
+    """Each frame is fitted through the field of its own state: frames of the inflated state's
+    field come back right only through that field (the rest field's wires lie elsewhere)."""
+    pts = {"press": slide(12), "inflated": slide(12, start=(4.2, 57.3), step=(-0.4, -0.3))}
+    rec = _recording(fields, [("press", REST, pts["press"]), ("inflated", INFLATED, pts["inflated"])])
+    head = InversionHead(Inversion(fields, NOISE), LAYOUT, fields=fields)
+    outs: list[Output] = []
+    engine = LiveEngine(ReplaySource(rec, speed=math.inf), LAYOUT, inversion=head,
+                        reference_frames=6, policy="block")
+    stats = engine.run(on_output=outs.append)
+    assert stats["errors"] == 0 and stats["processed"] == 30
+    assert all(o.inversion is None for o in outs[:5])  # before the reference exists
+    assert outs[5].inversion.n_fingers == 0  # the last rest frame: nobody touches
+    got = {"press": outs[6:18], "inflated": outs[18:]}
+    for name, truth in pts.items():
+        for o, (u, v, f, _) in zip(got[name], truth):
+            inv = o.inversion
+            assert inv.state == tuple(o.inflation)
+            assert inv.n_fingers == 1 and inv.fingers[0].face == "front" and inv.fingers[0].contact
+            g = inv.fingers[0]
+            # within 5 standard errors of the truth (the bound at the fit)
+            assert abs(g.u_mm - u) < 5 * g.u_se_mm + 1e-3, (name, g, u)
+            assert abs(g.v_mm - v) < 5 * g.v_se_mm + 1e-3, (name, g, v)
+            assert abs(g.force_n - f) < 5 * g.force_se_n + 1e-3, (name, g, f)
+        # the stream is continuous: every fit after a trial's first starts from the last answer
+        assert [o.inversion.warm for o in got[name][1:]] == [True] * 11
+    assert not got["inflated"][0].inversion.warm  # a new state starts cold
+    # the same frames through the wrong field are not explained
+    wrong = Inversion({INFLATED: fields[REST]}, NOISE).fit(got["inflated"][3].raw, INFLATED)
+    g = wrong.fingers[0] if wrong.fingers else None
+    assert g is None or math.hypot(g.u_mm - pts["inflated"][3][0], g.v_mm - pts["inflated"][3][1]) > 1.0
+
+
+def test_a_stream_of_a_state_without_a_field_is_refused(fields):
+    inv = Inversion(fields, NOISE)
+    rec = _recording(fields, [("press", REST, slide(3)), ("odd", UNKNOWN, slide(3))])
+    head = InversionHead(inv, LAYOUT)
+    with pytest.raises(EctskinError, match=r"without a response field: \[20.0, 0.0, 0.0\] ml"):
+        LiveEngine(ReplaySource(rec, speed=math.inf), LAYOUT, inversion=head)
+    with pytest.raises(EctskinError, match=r"no response field for --state \[20.0, 0.0, 0.0\]"):
+        InversionHead(inv, LAYOUT, state=UNKNOWN)
+    # a live frame of such a state (a source that does not say its states in advance)
+    out = Output(seq=7, t=0.0, raw=fields[REST].untouched, inflation=UNKNOWN)
+    with pytest.raises(EctskinError, match=r"no response field for the frame's inflation"):
+        head.state_of(out)
+    # a frame without a state: --state, else refused
+    bare = Output(seq=8, t=0.0, raw=fields[REST].untouched)
+    with pytest.raises(EctskinError, match="carries no inflation state and no --state"):
+        head.state_of(bare)
+    assert InversionHead(inv, LAYOUT, state=INFLATED).state_of(bare) == INFLATED
+    # the head tells states apart as the inversion does
+    assert inversion_head.STATE_TOL_ML == fit_module.STATE_TOL_ML
+    assert head.state_of(Output(seq=9, t=0.0, raw=bare.raw, inflation=(0.0, 20.0 + 5e-7, 0.0))) == (
+        0.0, 20.0 + 5e-7, 0.0)
+
+
+def test_a_warm_start_gives_the_cold_answer_and_skips_the_coarse_search(fields, monkeypatch):
+    field = fields[REST]
+    inv = Inversion({REST: field}, NOISE)
+    rng = np.random.default_rng(5)
+    one = [frame(field, [p], rng) for p in slide(8)]
+    two_pts = [[(-5.0 + 0.3 * t, 43.0, 1.2, 0.0), (5.0, 57.0 - 0.3 * t, 0.9, 0.0)] for t in range(6)]
+    two = [frame(field, p, rng) for p in two_pts]
+    searched = []
+    table = type(inv.model(REST).table)
+    for name in ("starts", "pairs"):
+        real = getattr(table, name)
+        monkeypatch.setattr(table, name, lambda self, *a, _f=real, _n=name, **k: (
+            searched.append(_n), _f(self, *a, **k))[1])
+    for frames, k in ((one, 1), (two, 2)):
+        prev = inv.fit(frames[0], REST)
+        assert prev.n_fingers == k
+        for y in frames[1:]:
+            cold = inv.fit(y, REST)
+            searched.clear()
+            warm = inv.fit(y, REST, warm=prev)
+            # the warm fit skips the search of its own count (two fingers: the pairs; the one-
+            # finger fit a BIC needs is still searched)
+            assert searched == ([] if k == 1 else ["starts"])
+            assert warm.n_fingers == cold.n_fingers == k
+            for a, b in zip(sorted(warm.fingers, key=lambda f: f.u_mm),
+                            sorted(cold.fingers, key=lambda f: f.u_mm)):
+                assert (a.face, a.contact) == (b.face, b.contact)
+                np.testing.assert_allclose([a.u_mm, a.v_mm, a.force_n], [b.u_mm, b.v_mm, b.force_n],
+                                           atol=2e-3)
+                np.testing.assert_allclose([a.u_se_mm, a.force_se_n], [b.u_se_mm, b.force_se_n],
+                                           rtol=1e-2)
+            prev = warm
+    # a start that no longer fits (the finger jumped 10 mm) falls back to the coarse search
+    jumped = frame(field, [(5.0, 55.0, 1.0, 0.0)], rng)
+    searched.clear()
+    r = inv.fit(jumped, REST, warm=inv.fit(one[0], REST))
+    assert searched == ["starts"]
+    assert r.n_fingers == 1 and abs(r.fingers[0].u_mm - 5.0) < 0.3 and abs(r.fingers[0].v_mm - 55.0) < 0.3
+    # the finger lifted: no finger, whatever the start
+    assert inv.fit(frame(field, [], rng), REST, warm=r).n_fingers == 0
+    with pytest.raises(EctskinError, match="warm must be the InversionResult"):
+        inv.fit(one[0], REST, warm="last")
+
+
+def test_difference_readout_takes_per_channel_offsets_off_with_the_reference(fields):
+    """A source that reads the field's changes with a stray capacitance of its own per channel:
+    against the touch reference (captured untouched, so it holds the strays) the difference
+    readout gives the point back; the absolute readout cannot explain the strays."""
+    field = fields[REST]
+    rng = np.random.default_rng(9)
+    stray = rng.uniform(0.2, 0.8, P)
+    u, v, f = 2.3, 48.6, 1.2
+    raw = frame(field, [(u, v, f, 0.0)], rng) + stray
+    c0 = field.untouched + stray
+    inv = Inversion({REST: field}, NOISE)
+    g = InversionHead(inv, LAYOUT, readout="difference")(raw, c0, REST).fingers[0]
+    assert abs(g.u_mm - u) < 5 * g.u_se_mm and abs(g.v_mm - v) < 5 * g.v_se_mm
+    assert abs(g.force_n - f) < 5 * g.force_se_n
+    bad = InversionHead(inv, LAYOUT)(raw, c0, REST)
+    assert bad.n_fingers != 1 or math.hypot(bad.fingers[0].u_mm - u, bad.fingers[0].v_mm - v) > 1.0
+    # a channel the reference could not read (NaN) is left out of the fit
+    c0[3] = np.nan
+    g = InversionHead(inv, LAYOUT, readout="difference")(raw, c0, REST).fingers[0]
+    assert abs(g.u_mm - u) < 5 * g.u_se_mm and abs(g.v_mm - v) < 5 * g.v_se_mm
+
+
+def test_the_message_carries_the_fitted_fingers(fields):
+    field = fields[REST]
+    inv = Inversion({REST: field}, NOISE)
+    r = inv.fit(frame(field, [(1.1, 50.3, 1.0, 0.0)], np.random.default_rng(0)), REST)
+    out = Output(seq=1, t=0.5, raw=field.untouched)
+    out.inversion = InversionFrame(REST, r.n_fingers, r.fingers, r.bic_by_count, r.converged,
+                                   False, 0.8)
+    msg = json.loads(json.dumps(out.to_json_dict(), allow_nan=False))["inversion"]
+    f = r.fingers[0]
+    assert msg["state"] == [0.0, 0.0, 0.0] and msg["n_fingers"] == 1
+    assert msg["fingers"] == [{
+        "face": "front", "contact": True, "u_mm": f.u_mm, "v_mm": f.v_mm, "force_n": f.force_n,
+        "height_mm": 0.0, "u_se_mm": f.u_se_mm, "v_se_mm": f.v_se_mm, "force_se_n": f.force_se_n,
+        "height_se_mm": 0.0,
+    }]
+    # counts not tried have BIC inf: null in strict JSON
+    assert msg["bic_by_count"] == [None if math.isinf(b) else b for b in r.bic_by_count]
+    assert msg["fit_ms"] == 0.8 and msg["warm"] is False and msg["converged"] is True
+    out.stats = {"fps_out": 30.0, "latency_ms_p50": 1.0, "latency_ms_p99": 2.0, "dropped": 0,
+                 "malformed": 0, "reconnects": 0}
+    assert f"inversion 1: front ({f.u_mm:.1f}, {f.v_mm:.1f}) mm {f.force_n:.2f} N" in status_line(out)
+    assert json.loads(json.dumps(Output(seq=2, t=0.0, raw=field.untouched).to_json_dict())
+                      )["inversion"] is None
+
+
+def test_load_fields_reads_a_field_cache_and_refuses_two_of_one_state(fields, field_dirs, tmp_path):
+    got = load_fields(field_dirs)
+    assert sorted(got) == sorted(fields)
+    np.testing.assert_array_equal(got[INFLATED].untouched, fields[INFLATED].untouched)
+    assert sorted(load_fields([field_dirs / "field0", field_dirs / "field1" / "field.npz"])) == sorted(fields)
+    with pytest.raises(EctskinError, match=r"both fields of state \[0.0, 0.0, 0.0\]"):
+        load_fields([field_dirs, field_dirs / "field0"])
+    with pytest.raises(EctskinError, match="neither a response field"):
+        load_fields(tmp_path)
+
+
+def test_cli_live_with_fields(fields, field_dirs, tmp_path, capsys):
+    pts = slide(10)
+    src = write_recording(_recording(fields, [("press", REST, pts)]), tmp_path / "in.h5")
+    jsonl = tmp_path / "out.jsonl"
+    argv = ["live", "--source", f"replay:{src}", "--speed", "inf", "--policy", "block",
+            "--fields", str(field_dirs), "--inversion-every", "2", "--reference-frames", "6",
+            "--jsonl", str(jsonl)]
+    assert main(argv) == 0
+    lines = [json.loads(x) for x in jsonl.read_text().splitlines()]
+    assert len(lines) == 16
+    fitted = [m["seq"] for m in lines if m["inversion"] is not None]
+    assert fitted == list(range(5, 16, 2))  # every 2nd frame from the reference on
+    for m in lines[6:]:
+        if m["inversion"] is None:
+            continue
+        (u, v, f, _), g = pts[m["seq"] - 6], m["inversion"]["fingers"][0]
+        assert abs(g["u_mm"] - u) < 5 * g["u_se_mm"] + 1e-3
+        assert abs(g["v_mm"] - v) < 5 * g["v_se_mm"] + 1e-3
+        assert abs(g["force_n"] - f) < 5 * g["force_se_n"] + 1e-3
+    assert main(["live", "--source", "sim", "--state", "0", "0", "0"]) == 2
+    assert "--state is the inflation state of the inversion's frames: give --fields" in (
+        capsys.readouterr().err)
+    assert main(argv[:-1] + [str(tmp_path / "b.jsonl"), "--state", "20", "0", "0"]) == 2
+    assert "no response field for --state [20.0, 0.0, 0.0]" in capsys.readouterr().err
+
+
+def test_jsonl_writer_writes_the_inversion(fields, tmp_path):
+    out = Output(seq=0, t=0.0, raw=fields[REST].untouched)
+    out.inversion = InversionFrame(REST, 0, (), (1.0, math.inf, math.inf), True, False, 0.1)
+    out.stats = {}
+    with JsonLinesWriter(tmp_path / "o.jsonl") as w:
+        w(out)
+    msg = json.loads((tmp_path / "o.jsonl").read_text())
+    assert msg["inversion"]["fingers"] == [] and msg["inversion"]["bic_by_count"] == [1.0, None, None]
