@@ -391,9 +391,15 @@ def test_demo_and_reproduce_defaults():
 @pytest.mark.slow
 def test_reproduce_tiny_twin_experiment(tmp_path, monkeypatch):
     """The real chain: the digital twin simulates a tiny protocol (levels 0/20 ml, one touch trial
-    per state, 2-s trials), characterises the skin, trains, evaluates and reports (~30 s)."""
+    per state, 2-s trials), characterises the skin, trains, evaluates and reports. The contact
+    experiment's response fields are built coarse (a 10 × 27.5 mm grid) into a cache of the
+    test's own (~30 s each), and the bound and the inversion run on them."""
+    from ectskin.pipeline import field as pfield
     from ectskin.twin import Protocol
+    from ectskin.twin.field_spec import FieldGrid
 
+    small = FieldGrid(spacing_mm=(10.0, 27.5), force_nodes=4, height_nodes=4)
+    monkeypatch.setitem(pfield.FIELD_GRIDS, "quick", small)
     out = tmp_path / "tiny"
     protocol = Protocol(levels_ml=(0.0, 20.0), touch_trials=1, duration_s=2.0, seed=0)
     config = ReproduceConfig(
@@ -403,8 +409,21 @@ def test_reproduce_tiny_twin_experiment(tmp_path, monkeypatch):
         profile="quick",
         epochs={"touch": 5, "track": 1},
         progress=False,
+        field_cache=tmp_path / "fields",
     )
     m = reproduce(config)
+    assert len(list((tmp_path / "fields").iterdir())) == 8  # one field per contact state
+    # the physical limit and the training-free inversion, on the contact run's test frames
+    assert m["bound"]["test"]["n_points"] > 0 and m["bound"]["per_state"]
+    inv = m["inversion"]
+    split = json.loads((out / "runs" / "contact" / "split.json").read_text())
+    assert inv["n_test_trials"] == len(split["test"])
+    assert inv["n_frames"] > 0 and inv["n_frames_without_field"] >= 0
+    assert 0 <= inv["count_accuracy"] <= 1 and inv["ms_per_frame_median"] > 0
+    assert set(inv["per_state"]) <= set(m["bound"]["per_state"]) | set(
+        inv["frames_without_field"])
+    assert (out / "inversion" / "metrics.json").is_file()
+    assert {"bound", "inversion"} <= set(m["timings_s"])
     assert m["data"]["trials"] == protocol.n_trials == 16
     assert m["protocol"]["levels_ml"] == [0.0, 20.0]
     for rel in (
@@ -427,6 +446,7 @@ def test_reproduce_tiny_twin_experiment(tmp_path, monkeypatch):
     off = m["contact"]["handling_off"]
     assert off["loc_mm_mean"] > 0 and set(off["baselines"]) == {"region_centre", "knn", "ridge"}
     assert "Manual handling on and off" in md
+    assert "The physical inversion (no training)" in md and "Cramér–Rao bound" in md
     test = json.loads((out / "runs" / "contact" / "split.json").read_text())["test"]
     on_rec, off_rec = (
         read_recording(out / "contact.h5"),

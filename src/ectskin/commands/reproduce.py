@@ -71,6 +71,28 @@ def add_common_arguments(p: argparse.ArgumentParser, *, default_profile: str) ->
         help="skip the contact experiment, the contact model and the ECT images (docs/contact.md)",
     )
     p.add_argument(
+        "--contact-response",
+        choices=("field", "solve"),
+        default="field",
+        help="how the contact experiment is read: from the states' response fields (default: "
+        "dense, a new point every 0.5 s; the fields are built once and cached) or solved per "
+        "point (4 trials per state of 2 points each)",
+    )
+    p.add_argument(
+        "--field-grid",
+        choices=("quick", "fine"),
+        default="quick",
+        help="the response fields' grid: quick (default, minutes to build) or fine (meets the "
+        "field's accuracy bar, about 4x the build time); docs/field.md",
+    )
+    p.add_argument(
+        "--field-cache",
+        metavar="DIR",
+        default=None,
+        help="where response fields are cached (default $ECTSKIN_CACHE/fields or "
+        "~/.cache/ectskin/fields)",
+    )
+    p.add_argument(
         "--no-robust",
         action="store_true",
         help="skip the TouchMLP trained with the robust recipe (runs/touch_robust)",
@@ -129,6 +151,9 @@ def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
         command=" ".join(["ectskin", *map(shlex.quote, sys.argv[1:])]) if sys.argv[1:] else None,
         figure_format=args.figure_format,
         dpi=args.dpi,
+        contact_response=args.contact_response,
+        field_grid=args.field_grid,
+        field_cache=args.field_cache,
     )
     m = reproduce(config)
     for metric, paper, this, base in results_table(m):

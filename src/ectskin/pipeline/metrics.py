@@ -4,7 +4,8 @@
 there): the paper runs' metrics under ``touch`` and ``track``; the robust TouchMLP under
 ``touch.robust``, with ``recipe_description``, its training recipe in words; the ablations under
 ``track.ablations``; the contact run's blocks (:func:`contact_blocks`); the physical limit under
-``bound`` (:func:`bound_block`, from the bound step's bound.json); then the data, the protocol,
+``bound`` (:func:`bound_block`, from the bound step's bound.json); the training-free inversion
+under ``inversion`` (:func:`inversion_block`, from the inversion step's metrics); then the data, the protocol,
 the step timings, the reused steps and the machine.
 """
 
@@ -183,10 +184,12 @@ def combine_metrics(
     data_path: Path,
     contact: Mapping[str, Any] | None = None,
     bound: Mapping[str, Any] | None = None,
+    inversion: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The OUT_DIR/metrics.json dict from ``results`` ({run: its metrics.json}), the contact
-    run's metrics.json (``contact``, None when it did not run) and the bound step's bound.json
-    (``bound``, None when it did not run)."""
+    run's metrics.json (``contact``, None when it did not run), the bound step's bound.json
+    (``bound``) and the inversion step's metrics (``inversion``; each None when it did not
+    run)."""
     m: dict[str, Any] = {
         "format": METRICS_FORMAT,
         "version": 1,
@@ -215,6 +218,8 @@ def combine_metrics(
         m.update(contact_blocks(contact))
     if bound is not None:
         m["bound"] = bound_block(bound, m.get("contact"))
+    if inversion is not None:
+        m["inversion"] = inversion_block(inversion, m.get("contact"), m.get("bound"))
     try:
         n_trials = len(list_trials(data_path))
     except EctskinError:
@@ -310,6 +315,91 @@ def bound_block(bound: Mapping[str, Any], contact: Mapping[str, Any] | None) -> 
             "force_threshold_n", "near_wire_mm", "position")},
         "nuisance_columns": bound.get("nuisance_columns"),
         "timing_s": (bound.get("timing") or {}).get("total_s"),
+    }
+
+
+#: the inversion's metrics copied into metrics.json's ``inversion`` (as ContactNet's in
+#: ``contact``)
+INVERSION_KEYS = CONTACT_KEYS + ("count_accuracy", "sigma_mm_median", "converged_share",
+                                 "n_frames", "n_frames_in_field_states", "n_frames_without_field",
+                                 "share_without_field", "frames_without_field", "n_test_trials")
+#: the inversion's per-state metrics copied into ``inversion.per_state``
+INVERSION_STATE_KEYS = ("loc_mm_mean", "loc_mm_median", "loc_mm_p90", "face_accuracy",
+                        "force_mae_n", "count_accuracy", "hover_detect_mm",
+                        "n_single_contact_frames", "n_frames")
+
+
+def same_states(per_state: Mapping[str, Any] | None, states: list[str],
+                key: str = "loc_mm_mean") -> float | None:
+    """The mean of ``key`` over the frames of ``states``, from per-state means weighted by their
+    ``n_frames`` (a contact report's ``per_state``, whose ``n_frames`` are its one-finger
+    frames): a model's error on the states the inversion covers. None when a state lacks it."""
+    num = den = 0.0
+    for name in states:
+        v = (per_state or {}).get(name) or {}
+        x, n = v.get(key), v.get("n_frames")
+        if not isinstance(x, int | float) or not isinstance(n, int):
+            return None
+        num += x * n
+        den += n
+    return num / den if den else None
+
+
+def beside(contact: Mapping[str, Any] | None, inversion: Mapping[str, Any]) -> dict[str, Any]:
+    """ContactNet's (``contact``: metrics.json's ``contact`` or the run's ``contact`` block) and
+    each baseline's mean point error over the inflation states in which the inversion scored a
+    one-finger frame: {"loc_mm_mean", "baselines": {name: mm}, "states"}."""
+    c = contact or {}
+    states = [s for s, v in (inversion.get("per_state") or {}).items()
+              if (v.get("n_single_contact_frames") or 0) > 0]
+    return {
+        "loc_mm_mean": same_states(c.get("per_state"), states),
+        "baselines": {b: same_states(v.get("per_state"), states)
+                      for b, v in (c.get("baselines") or {}).items()},
+        "states": states,
+    }
+
+
+def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
+                    bound: Mapping[str, Any] | None) -> dict[str, Any]:
+    """metrics.json's ``inversion`` from the inversion step's metrics (``docs/reproduce.md``):
+    its contact metrics (:data:`INVERSION_KEYS`), the count by true count, force where its
+    standard error says it is observable, the time per frame, and per state its numbers beside
+    ContactNet's, the baselines' and the bound's at the same state's test frames; ``contact``
+    and ``bound``: metrics.json's blocks (or None)."""
+    timing = inv.get("timing") or {}
+    fo = inv.get("force_observable") or {}
+    near = beside(contact, inv)
+    bound_states = (bound or {}).get("per_state") or {}
+    per_state = {}
+    for name, v in (inv.get("per_state") or {}).items():
+        b = (bound_states.get(name) or {}).get("test") or {}
+        per_state[name] = {
+            **{k: v.get(k) for k in INVERSION_STATE_KEYS},
+            "contact_loc_mm_mean": same_states((contact or {}).get("per_state"), [name]),
+            "baseline_loc_mm_mean": {
+                k: same_states(x.get("per_state"), [name])
+                for k, x in ((contact or {}).get("baselines") or {}).items()},
+            "bound_loc_mm_mean": b.get("loc_mm_mean"),
+            "bound_force_n_mean": b.get("force_n_mean"),
+        }
+    btest = (bound or {}).get("test") or {}
+    return {
+        **{k: inv.get(k) for k in INVERSION_KEYS},
+        "count_accuracy_by_true": (inv.get("multi") or {}).get("count_accuracy_by_true"),
+        "force_mae_n_observable": fo.get("force_mae_n"),
+        "force_observable_share": fo.get("share"),
+        "force_observable_threshold_n": fo.get("threshold_n"),
+        "ms_per_frame_median": timing.get("ms_per_frame_median"),
+        "ms_per_frame_p95": timing.get("ms_per_frame_p95"),
+        "per_state": per_state,
+        "contact_loc_mm_mean": near["loc_mm_mean"],
+        "baseline_loc_mm_mean": near["baselines"],
+        "bound_loc_mm_mean": btest.get("loc_mm_mean"),
+        "bound_force_n_mean": btest.get("force_n_mean"),
+        "push": inv.get("push"),
+        "settings": inv.get("settings"),
+        "timing_s": {k: timing.get(k) for k in ("total_s", "invert_s", "push_basis_s")},
     }
 
 

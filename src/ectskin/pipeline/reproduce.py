@@ -7,6 +7,10 @@
     characterize/                 Fig. 3, Fig. 4 and characterize.json of the twin
     runs/<run>/                   one training per run of :data:`ectskin.pipeline.config.RUNS`
                                   (model.pt, metrics.csv, split.json, metrics.json, figures)
+    bound/                        the physical limit of the contact states (bound.json, figures;
+                                  ectskin.pipeline.bound)
+    inversion/metrics.json        the training-free inversion on the contact run's test frames
+                                  (ectskin.pipeline.inversion)
     figures/                      copies of the figures shown in the report
     metrics.json, report.md, report.html
     reproduce.json                what each step was run with, whether it finished, its time
@@ -28,12 +32,14 @@ from __future__ import annotations
 import logging
 import shutil
 import time
+from pathlib import Path
 from typing import Any
 
 from ectskin._check import EctskinError, check_type
 from ectskin._files import read_json, write_json_atomic
 from ectskin.io.hdf5 import read_recording
 from ectskin.learn.threads import torch_threads
+from ectskin.pipeline.bound import bound_step
 from ectskin.pipeline.config import ReproduceConfig
 from ectskin.pipeline.contact import (
     contact_data,
@@ -43,6 +49,8 @@ from ectskin.pipeline.contact import (
     handling_off,
     n_touch_points,
 )
+from ectskin.pipeline.field import contact_fields
+from ectskin.pipeline.inversion import inversion_step
 from ectskin.pipeline.metrics import combine_metrics, copy_figures, handling_block
 from ectskin.pipeline.runner import StepRunner
 from ectskin.pipeline.steps import characterise, evaluate_runs, simulate_or_load, train_runs
@@ -67,6 +75,26 @@ def reproduce(config: ReproduceConfig) -> dict[str, Any]:
         return _run(config, n_threads)
 
 
+def _physics_steps(
+    runner: StepRunner, config: ReproduceConfig, found: tuple[Path, dict[str, Any]],
+    contact: dict[str, Any],
+) -> tuple[dict[str, Any] | None, dict[str, Any] | None]:
+    """Steps "bound" and "inversion" on the contact experiment's response fields (those the
+    contact step built, read back from the cache); (None, None) when the contact experiment is
+    not read from fields (a given recording, or ``contact_response="solve"``)."""
+    if config.recording is not None or config.contact_response != "field":
+        log.info("bound, inversion: skipped (the contact data were not made from response fields)")
+        return None, None
+    t0 = time.perf_counter()
+    fields = contact_fields(config)
+    runner.timings["contact_fields_load"] = time.perf_counter() - t0
+    if not fields:
+        return None, None
+    bound = bound_step(runner, config, fields, found)
+    inversion = inversion_step(runner, config, fields, found, contact)
+    return bound, inversion
+
+
 def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
     out = config.out_dir
     out.mkdir(parents=True, exist_ok=True)
@@ -78,13 +106,14 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
         characterise(runner, config)
     train_runs(runner, config, data_path, data_settings, threads)
     results = evaluate_runs(runner, config, data_path, data_settings)
-    contact = ect = off = found = None
+    contact = ect = off = found = bound = inversion = None
     if config.contact:
         found = contact_data(runner, config, data_settings)
         if found is not None:
             contact = contact_run(runner, config, *found, threads)
             off = handling_off(runner, config, *found)
             ect = ect_images(runner, config, *found)
+            bound, inversion = _physics_steps(runner, config, found, contact)
 
     metrics = combine_metrics(
         results,
@@ -95,6 +124,8 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
         data_settings=data_settings,
         data_path=data_path,
         contact=contact,
+        bound=bound,
+        inversion=inversion,
     )
     if found is not None and "contact" in metrics:
         metrics["contact"]["n_touch_points"] = n_touch_points(read_recording(found[0]))

@@ -24,6 +24,9 @@ The metrics dict is the one ``ectskin reproduce`` writes to ``metrics.json``
                "baselines": {"no_motion": {"ad_mm_mean", "ad_mm_std"}, ...},
                "ablations": {"no_prior": {...}, "window_1": {...}},
                "training": {...}},
+     "contact": {...}, "multi": {...}, "bound": {...}, "ect_image": {...}  (report.contact),
+     "inversion": {"loc_mm_mean", "force_mae_n", "count_accuracy", "per_state", ...}
+                                                                   (report.inversion),
      "timings_s": {step: seconds}, "reused": [step, ...], "machine": {...},
      "profile": "quick" | "paper", "protocol": {...}, "created_utc": "..."}
 """

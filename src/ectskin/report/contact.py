@@ -3,7 +3,8 @@
 Each number stands beside the goal of issue 10, beside the strongest baseline scored on the
 same test frames, with the margin, and, where metrics.json carries a ``bound`` block, beside the
 physical limit (the Cramér–Rao bound at the test frames' true points); nothing here computes a
-metric, it only words metrics.json's ``contact``, ``multi``, ``bound`` and ``ect_image`` blocks.
+metric, it only words metrics.json's ``contact``, ``multi``, ``bound`` and ``ect_image`` blocks
+(and, through :mod:`ectskin.report.inversion`, ``inversion``).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from ectskin.report.inversion import inversion_sections
 from ectskin.report.wording import DASH, baseline_name, lookup, pct
 
 #: the goals of the contact work (issue 10), beside each number
@@ -319,6 +321,7 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
             multi_on = lookup(metrics, "multi") or {}
             s.append(("table", (head, handling_table(c, multi_on, off))))
     s.extend(bound_sections(metrics))
+    s.extend(inversion_sections(metrics))
     multi = lookup(metrics, "multi")
     if isinstance(multi, Mapping) and multi and multi.get("count_accuracy") is not None:
         s.append(("h2", "Two fingers"))

@@ -1,0 +1,324 @@
+"""The reproduction's inversion step: the training-free physical inversion on the contact run's
+test frames, scored as ContactNet is.
+
+::
+
+    inversion   OUT_DIR/inversion/metrics.json   the inversion (ectskin.inversion) of every
+                                                 test frame of the contact run (runs/contact/
+                                                 split.json) in a state with a response field,
+                                                 with ContactNet's metrics, per state, and its
+                                                 time per frame
+
+The inversion reads each frame's absolute readouts (pF) alone (``window`` 1), fits 0, 1 or 2
+fingers through the state's field (:class:`ectskin.inversion.Inversion`, the contact
+protocol's readout noise) and needs no training data. Its answers are put in the columns of
+ContactNet's predictions (:func:`prediction_columns`) and scored by the same function
+(:func:`ectskin.learn.tasks.contact.contact_report`) on the same frames: the point error over
+the skin of the frames with one finger on it, the force MAE there, the finger count, hover
+detection. A frame of a state without a field is not inverted; it is counted
+(``frames_without_field``).
+
+The hand's push as a nuisance (:func:`ectskin.inversion.push_basis`, direct solves per state):
+``push="auto"`` inverts up to :data:`PUSH_CHOICE_FRAMES` one-finger frames of the *validation*
+trials with and without it and keeps the one with the lower mean point error (no test frame is
+used to choose); ``"on"`` / ``"off"`` force it.
+
+:func:`ectskin.pipeline.metrics.inversion_block` turns the step's metrics into metrics.json's
+``inversion``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ectskin._check import EctskinError, check_option
+from ectskin._files import read_json, to_jsonable, write_json_atomic
+from ectskin.inversion import Inversion, fit_frames, push_basis, results_to_arrays
+from ectskin.io import Recording, read_recording
+from ectskin.learn.data.contact import HOVER_MAX_MM, MAX_FINGERS, ContactData, contact_dataset
+from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
+from ectskin.learn.tasks.contact import contact_report
+from ectskin.pipeline.bound import state_key
+from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
+from ectskin.pipeline.metrics import beside
+from ectskin.pipeline.runner import StepRunner, digest
+from ectskin.twin.field import ResponseField
+from ectskin.twin.readout import ReadoutConfig
+
+log = logging.getLogger(__name__)
+
+INVERSION_DIR = "inversion"
+METRICS_FILE = "metrics.json"
+#: how the hand's push enters the inversion (module docstring)
+PUSH_CHOICES = ("auto", "on", "off")
+#: validation frames with one finger on the skin (at most, evenly spread) that choose the push
+PUSH_CHOICE_FRAMES = 240
+#: test frames inverted (at most, evenly spread over the test trials' frames in order): the
+#: inversion takes about 10-20 ms a frame, and a quick reproduction holds some 35 000 test frames
+MAX_FRAMES = 3000
+#: force is called observable at a frame whose fitted force's standard error (the Cramér–Rao
+#: bound at the solution) is below this (N), as the bound step's ``force_threshold_n``
+FORCE_OBSERVABLE_N = 0.1
+#: two states are the same when their volumes differ by less than this (ml)
+STATE_TOL_ML = 1e-6
+#: the metrics of a contact report kept per state
+STATE_KEYS = ("loc_mm_mean", "loc_mm_median", "loc_mm_p90", "face_accuracy", "force_mae_n",
+              "hover_detect_mm", "contact_accuracy", "count_accuracy", "n_single_contact_frames")
+
+
+def _field_of(fields: Mapping[tuple[float, ...], Any], state: Sequence[float]) -> Any:
+    s = np.asarray(state, float)
+    for k, f in fields.items():
+        if len(k) == s.size and np.all(np.abs(np.asarray(k, float) - s) < STATE_TOL_ML):
+            return f
+    return None
+
+
+def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
+                       extent: Mapping[str, Any]) -> np.ndarray:
+    """The inversion's answers (:func:`ectskin.inversion.results_to_arrays`, F frames) as
+    ContactNet's prediction array (F, 3 + S · 5) (:data:`~ectskin.learn.models.contact.
+    PRED_COLUMNS`, then per slot :data:`~ectskin.learn.models.contact.SLOT_COLUMNS`).
+
+    ``count``: the fitted fingers that press; ``p_contact``: 1 when one does; ``p_hover``: 1
+    when none presses and one hovers at most ``HOVER_MAX_MM`` high. The pressing fingers take
+    the slots in the fitted order; a frame where none presses gives slot 0 the point of the
+    hovering finger, or, with no finger at all, the middle of the first face (an answer is
+    needed wherever a finger is on the skin, and that one is charged its full error).
+    ``sigma_mm``: the point's standard error, √(σ_u² + σ_v²); ``face``: the index in ``faces``.
+    """
+    n = len(arrays["n_fingers"])
+    S, nc = MAX_FINGERS, len(SLOT_COLUMNS)
+    pred = np.zeros((n, len(PRED_COLUMNS) + S * nc))
+    (u0, u1), (v0, v1) = extent[faces[0]]
+    col = {name: i for i, name in enumerate(SLOT_COLUMNS)}
+    face_of = {f: i for i, f in enumerate(faces)}
+    for i in range(n):
+        fitted = [k for k in range(S) if arrays["face"][i, k]]
+        pressing = [k for k in fitted if arrays["contact"][i, k]]
+        hovering = [k for k in fitted if not arrays["contact"][i, k]]
+        pred[i, 0] = len(pressing)
+        pred[i, 1] = float(bool(pressing))
+        pred[i, 2] = float(not pressing and any(
+            arrays["height_mm"][i, k] <= HOVER_MAX_MM for k in hovering))
+        order = (pressing + hovering)[:S]
+        for slot in range(S):
+            a = len(PRED_COLUMNS) + slot * nc
+            if slot < len(order):
+                k = order[slot]
+                uv, se = arrays["uv_mm"][i, k], arrays["uv_se_mm"][i, k]
+                pred[i, a + col["face"]] = face_of.get(str(arrays["face"][i, k]), 0)
+                pred[i, a + col["u_mm"]], pred[i, a + col["v_mm"]] = uv
+                pred[i, a + col["sigma_mm"]] = float(np.hypot(*se))
+                pred[i, a + col["force_n"]] = (arrays["force_n"][i, k]
+                                               if arrays["contact"][i, k] else 0.0)
+            else:
+                pred[i, a + col["u_mm"]] = (u0 + u1) / 2
+                pred[i, a + col["v_mm"]] = (v0 + v1) / 2
+                pred[i, a + col["sigma_mm"]] = np.nan
+    return pred
+
+
+def _frames(data: ContactData, single_only: bool, limit: int | None) -> np.ndarray:
+    """Rows of ``data`` to invert: all, or those with one finger on the skin, at most ``limit``
+    evenly spread."""
+    rows = np.flatnonzero(data.count == 1) if single_only else np.arange(data.n_samples)
+    if limit is not None and rows.size > limit:
+        rows = rows[np.unique(np.linspace(0, rows.size - 1, limit).round().astype(int))]
+    return rows
+
+
+def invert_rows(inv: Inversion, rec: Recording, data: ContactData,
+                rows: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Invert the frames ``rows`` of ``data`` (samples of ``rec``'s trials, window 1): the
+    arrays of :func:`ectskin.inversion.results_to_arrays` and each frame's seconds."""
+    groups = np.unique(data.group[rows])
+    # rows grouped by trial in the order of np.unique: the rows must come in that order
+    if not np.array_equal(np.concatenate([rows[data.group[rows] == g] for g in groups])
+                          if rows.size else rows, rows):
+        raise EctskinError("invert_rows: rows must be sorted by trial, then frame")
+    results, seconds = [], []
+    for g in groups:
+        t = rec.trial(data.group_names[g])
+        frames = data.frame[rows[data.group[rows] == g]]
+        res, sec = fit_frames(inv, t.capacitance[frames], t.inflation)
+        results += res
+        seconds.append(sec)
+    return results_to_arrays(results), np.concatenate(seconds) if seconds else np.zeros(0)
+
+
+def score(data: ContactData, arrays: Mapping[str, np.ndarray], seconds: np.ndarray
+          ) -> dict[str, Any]:
+    """The inversion's contact metrics on ``data`` (all its rows inverted, in order): those of
+    :func:`~ectskin.learn.tasks.contact.contact_report`, per state (:data:`STATE_KEYS` with
+    ``n_frames``), the force MAE where the fitted force's standard error is below
+    :data:`FORCE_OBSERVABLE_N`, and the time per frame."""
+    pred = prediction_columns(arrays, data.faces, data.face_extent)
+    report = contact_report(data, pred, with_maps=False)
+    out: dict[str, Any] = {k: report.get(k) for k in (
+        "loc_mm_mean", "loc_mm_median", "loc_mm_p90", "face_accuracy", "force_mae_n",
+        "force_rel", "hover_detect_mm", "contact_accuracy", "count_accuracy",
+        "n_single_contact_frames", "per_face", "force", "hover", "multi", "sigma_mm_median")}
+    per_state = {}
+    for s, state in enumerate(data.states):
+        rows = np.flatnonzero(data.state == s)
+        if rows.size == 0:
+            continue
+        sub = contact_report(data.take(rows), pred[rows], with_maps=False)
+        per_state[state_key(state)] = {**{k: sub.get(k) for k in STATE_KEYS},
+                                       "n_frames": int(rows.size)}
+    out["per_state"] = per_state
+    single = data.count == 1
+    se = np.asarray(arrays["force_se_n"])[:, 0]
+    ok = single & (pred[:, 0] >= 1) & np.isfinite(se) & (se < FORCE_OBSERVABLE_N)
+    err = np.abs(pred[:, len(PRED_COLUMNS) + SLOT_COLUMNS.index("force_n")] - data.force[:, 0])
+    out["force_observable"] = {
+        "threshold_n": FORCE_OBSERVABLE_N,
+        "share": float(ok.sum() / single.sum()) if single.any() else None,
+        "force_mae_n": float(err[ok].mean()) if ok.any() else None,
+        "force_mae_n_not_observable": (float(err[single & ~ok].mean())
+                                       if (single & ~ok).any() else None),
+        "n_frames": int(ok.sum()),
+    }
+    ms = 1e3 * np.asarray(seconds, float)
+    out["timing"] = {
+        "ms_per_frame_median": float(np.median(ms)) if ms.size else None,
+        "ms_per_frame_p95": float(np.percentile(ms, 95)) if ms.size else None,
+        "ms_per_frame_mean": float(ms.mean()) if ms.size else None,
+        "invert_s": float(ms.sum() / 1e3),
+    }
+    out["n_frames"] = int(data.n_samples)
+    out["converged_share"] = float(np.mean(arrays["converged"])) if data.n_samples else None
+    return out
+
+
+def _dataset(rec: Recording, trials: Sequence[str]) -> ContactData | None:
+    return contact_dataset(rec, window=1, trials=list(trials)) if trials else None
+
+
+def _choose_push(rec: Recording, fields: Mapping[tuple[float, ...], ResponseField],
+                 noise: ReadoutConfig, val: Sequence[str], push: Mapping[Any, np.ndarray]
+                 ) -> dict[str, Any]:
+    """The validation frames' mean point error with and without the push columns, and which is
+    lower (ties and no validation frame: without, the smaller model)."""
+    data = _dataset(rec, val)
+    rows = _frames(data, True, PUSH_CHOICE_FRAMES) if data is not None else np.zeros(0, int)
+    if rows.size == 0:
+        return {"use": False, "why": "no validation frame with one finger in a field state",
+                "n_frames": 0}
+    assert data is not None
+    sub = data.take(rows)
+    errors = {}
+    for name, cols in (("off", None), ("on", push)):
+        arrays, _ = invert_rows(Inversion(fields, noise, push=cols), rec, data, rows)
+        errors[name] = contact_report(sub, prediction_columns(arrays, sub.faces, sub.face_extent),
+                                      with_maps=False)["loc_mm_mean"]
+    return {"use": bool(errors["on"] < errors["off"]), "val_loc_mm_mean": errors,
+            "n_frames": int(rows.size), "why": "lower validation point error"}
+
+
+def inversion_step(
+    runner: StepRunner,
+    config: ReproduceConfig,
+    fields: Mapping[tuple[float, ...], ResponseField],
+    found: tuple[Path, Mapping[str, Any]],
+    contact_metrics: Mapping[str, Any] | None = None,
+    *,
+    push: str = "auto",
+    max_frames: int | None = MAX_FRAMES,
+) -> dict[str, Any]:
+    """Step "inversion": OUT_DIR/inversion/metrics.json (module docstring); returns it.
+
+    ``fields``: {inflation: field} of the contact states; ``found``: (contact.h5, its settings)
+    of the contact step; the test and validation trials are those of runs/contact/split.json.
+    ``contact_metrics``: the contact run's metrics.json; given, the result's ``contact_run``
+    holds ContactNet's and its baselines' point error on the states inverted
+    (:func:`ectskin.pipeline.metrics.beside`, not stored: the run may change).
+    ``max_frames``: the test frames inverted at most, evenly spread over them (None: every
+    one). ``push``: "auto", "on" or "off" (module docstring).
+    """
+    if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
+        raise EctskinError(f"inversion_step: max_frames must be an integer >= 1 or None, got "
+                           f"{max_frames!r}")
+    if not fields:
+        raise EctskinError("inversion_step: no response fields given")
+    check_option("push", push, PUSH_CHOICES)
+    fields = {tuple(float(x) for x in s): f for s, f in fields.items()}
+    data_path, data_settings = found
+    split_file = runner.out / "runs" / CONTACT_RUN / "split.json"
+    if not split_file.is_file():
+        raise EctskinError(f"inversion_step: {split_file} is missing; train the contact run first")
+    split = read_json(split_file, "contact run split")
+    test, val = list(split.get("test") or []), list(split.get("val") or [])
+    if not test:
+        raise EctskinError(f"{split_file}: the contact run has no test trials (key 'test')")
+    protocol = config.contact_protocol()
+    noise = protocol.readout if protocol is not None else ReadoutConfig()
+    out_dir = runner.out / INVERSION_DIR
+    settings = {
+        "fields": {state_key(s): f.key for s, f in fields.items()},
+        "data": digest(dict(data_settings)), "test_trials": test, "val_trials": val,
+        "push": push, "push_choice_frames": PUSH_CHOICE_FRAMES, "noise": noise,
+        "window": 1, "force_observable_n": FORCE_OBSERVABLE_N, "max_frames": max_frames,
+    }
+
+    def make() -> None:
+        t0 = time.perf_counter()
+        rec = read_recording(data_path)
+        has = {t.name: _field_of(fields, t.inflation) is not None for t in rec.trials}
+        unknown = [n for n in test + val if n not in has]
+        if unknown:
+            raise EctskinError(f"{split_file}: trial {unknown[0]!r} is not in {data_path}")
+        without: dict[str, int] = {}
+        for name in test:
+            if not has[name]:
+                t = rec.trial(name)
+                without[state_key(t.inflation)] = without.get(state_key(t.inflation), 0) + t.n_frames
+        cols: dict[Any, np.ndarray] | None = None
+        choice: dict[str, Any] = {"use": push == "on", "why": f"push={push!r}"}
+        t_push = 0.0
+        if push != "off":
+            t1 = time.perf_counter()
+            cols = {s: push_basis(f, noise=noise) for s, f in fields.items()}
+            t_push = time.perf_counter() - t1
+            if push == "auto":
+                choice = _choose_push(rec, fields, noise, [n for n in val if has[n]], cols)
+        inv = Inversion(fields, noise, push=cols if choice["use"] else None)
+        data = _dataset(rec, [n for n in test if has[n]])
+        n_without = sum(without.values())
+        if data is None:
+            result: dict[str, Any] = {"n_frames": 0, "per_state": {}}
+        else:
+            rows = _frames(data, False, max_frames)
+            test_data = data.take(rows)
+            arrays, seconds = invert_rows(inv, rec, test_data, np.arange(rows.size))
+            result = score(test_data, arrays, seconds)
+            result["timing"]["push_basis_s"] = t_push
+            result["n_frames_in_field_states"] = int(data.n_samples)
+        total = result.get("n_frames_in_field_states", 0) + n_without
+        result.update(
+            frames_without_field=without, n_frames_without_field=n_without,
+            share_without_field=(n_without / total) if total else None,
+            n_test_trials=len(test), push=choice,
+            settings={"window": 1, "kind": "absolute", "noise": to_jsonable(noise),
+                      "push": push, "max_fingers": inv.max_fingers,
+                      "fields": settings["fields"]},
+        )
+        result["timing"] = {**result.get("timing", {}), "total_s": time.perf_counter() - t0}
+        out_dir.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(out_dir / METRICS_FILE, result)
+        log.info("inversion: %d test frames, %.2f mm mean point error, %.1f ms per frame "
+                 "(median)", result["n_frames"], result.get("loc_mm_mean") or float("nan"),
+                 (result.get("timing") or {}).get("ms_per_frame_median") or float("nan"))
+
+    runner.step("inversion", settings, [out_dir], make)
+    result = read_json(out_dir / METRICS_FILE, "inversion metrics")
+    if contact_metrics is not None:  # the run's numbers as they are now (not stored: it may change)
+        result["contact_run"] = beside(contact_metrics.get("contact", contact_metrics), result)
+    return result

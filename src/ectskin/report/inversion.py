@@ -1,0 +1,161 @@
+"""The report's section on the training-free physical inversion: its errors beside ContactNet's,
+the strongest baseline's and the physical limit's, overall and per inflation state, where force
+is observable, and its time per frame. It only words metrics.json's ``inversion`` block (with
+``contact``, ``multi`` and ``bound`` for the comparisons); nothing here computes a metric.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from ectskin.report.wording import DASH, baseline_name, lookup, pct
+
+#: the live engine's budget per frame (ms, one core; issue 20)
+LIVE_MS = 2.0
+
+
+def _mm(v: Any) -> str:
+    return f"{v:.2f} mm" if isinstance(v, int | float) else DASH
+
+
+def _n(v: Any) -> str:
+    return f"{v:.3f} N" if isinstance(v, int | float) else DASH
+
+
+def _pct(v: Any) -> str:
+    return pct(v) if isinstance(v, int | float) else DASH
+
+
+def _best(values: Mapping[str, Any], lower: bool = True) -> str:
+    """"k-NN 3.10 mm" of the best of {baseline: number}, "—" without one."""
+    found: list[tuple[str, float]] = [
+        (k, float(v)) for k, v in (values or {}).items() if isinstance(v, int | float)]
+    if not found:
+        return DASH
+    k, v = min(found, key=lambda kv: kv[1]) if lower else max(found, key=lambda kv: kv[1])
+    return f"{baseline_name(k)} {_mm(v)}"
+
+
+def _best_of(baselines: Mapping[str, Any], key: str, fmt, lower: bool) -> str:
+    found: list[tuple[str, float]] = [
+        (b, float(v[key])) for b, v in (baselines or {}).items()
+        if isinstance(v, Mapping) and isinstance(v.get(key), int | float)]
+    if not found:
+        return DASH
+    k, v = min(found, key=lambda kv: kv[1]) if lower else max(found, key=lambda kv: kv[1])
+    return f"{baseline_name(k)} {fmt(v)}"
+
+
+def inversion_table(metrics: Mapping[str, Any]) -> tuple[tuple[str, ...], list[tuple[str, ...]]]:
+    """(header, rows) "metric · inversion · ContactNet · strongest baseline · bound (CRB)". The
+    point error of ContactNet and the baselines is theirs on the states the inversion covers;
+    force, count and hover are theirs over all test frames (the same when every test state has a
+    field)."""
+    inv = lookup(metrics, "inversion") or {}
+    c = lookup(metrics, "contact") or {}
+    multi = lookup(metrics, "multi") or {}
+    base = c.get("baselines") or {}
+    hover = inv.get("hover_detect_mm")
+    rows: list[tuple[str, ...]] = [
+        ("Contact point: mean error", _mm(inv.get("loc_mm_mean")),
+         _mm(inv.get("contact_loc_mm_mean")), _best(inv.get("baseline_loc_mm_mean") or {}),
+         _mm(inv.get("bound_loc_mm_mean"))),
+        ("Force: mean absolute error", _n(inv.get("force_mae_n")), _n(c.get("force_mae_n")),
+         _best_of(base, "force_mae_n", _n, True), _n(inv.get("bound_force_n_mean"))),
+        ("Finger count (0, 1, 2) right", _pct(inv.get("count_accuracy")),
+         _pct(multi.get("count_accuracy")),
+         _best_of(multi.get("baselines") or {}, "count_accuracy", _pct, False), DASH),
+        ("Hover detected up to (≥ 90 % of frames)", _mm(hover),
+         _mm(c.get("hover_detect_mm")), _best_of(base, "hover_detect_mm", _mm, False), DASH),
+    ]
+    head: tuple[str, ...] = ("metric", "inversion (no training)", "ContactNet",
+                             "strongest baseline", "bound (CRB)")
+    return head, rows
+
+
+def inversion_state_table(inv: Mapping[str, Any]) -> tuple[tuple[str, ...], list[tuple[str, ...]]]:
+    """(header, rows) per inflation state: the point error of the inversion, ContactNet, the
+    strongest baseline and the bound at the state's test frames; the inversion's and the
+    bound's force; the inversion's count; its one-finger frames."""
+    rows: list[tuple[str, ...]] = []
+    for name, v in (inv.get("per_state") or {}).items():
+        rows.append((
+            str(name), _mm(v.get("loc_mm_mean")), _mm(v.get("contact_loc_mm_mean")),
+            _best(v.get("baseline_loc_mm_mean") or {}), _mm(v.get("bound_loc_mm_mean")),
+            _n(v.get("force_mae_n")), _n(v.get("bound_force_n_mean")),
+            _pct(v.get("count_accuracy")), str(v.get("n_single_contact_frames", DASH)),
+        ))
+    head: tuple[str, ...] = ("state", "inversion", "ContactNet", "strongest baseline",
+                             "bound (CRB)", "inversion force MAE", "force bound", "count right",
+                             "one-finger frames")
+    return head, rows
+
+
+def force_line(inv: Mapping[str, Any], bound: Mapping[str, Any] | None) -> str | None:
+    """One sentence on where force is observable: at the inversion's own frames (its force's
+    standard error below the threshold) and, with the bound, on the faces near and away from
+    the wires; None without the numbers."""
+    share = inv.get("force_observable_share")
+    thr = inv.get("force_observable_threshold_n") or 0.1
+    if not isinstance(share, int | float):
+        return None
+    text = (f"Force is observable (the fitted force's standard error, the bound at the solution, "
+            f"below {thr:g} N) at {pct(share)} of the one-finger test frames"
+            + (f"; there the inversion's force MAE is {_n(inv.get('force_mae_n_observable'))}"
+               if isinstance(inv.get("force_mae_n_observable"), int | float) else ""))
+    near = (bound or {}).get("force_observable_share_near_wires")
+    away = (bound or {}).get("force_observable_share_away_from_wires")
+    if isinstance(near, int | float) and isinstance(away, int | float):
+        text += (f"; over the faces, the bound puts it within reach on {pct(near)} of the cells "
+                 f"near a wire and on {pct(away)} of those away from every wire")
+    return text + "."
+
+
+def inversion_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
+    """The report's items for metrics.json's ``inversion``; [] without it (or with no frame)."""
+    inv = lookup(metrics, "inversion")
+    if not isinstance(inv, Mapping) or not inv.get("n_frames"):
+        return []
+    s: list[tuple[str, Any]] = [("h2", "The physical inversion (no training)")]
+    push = inv.get("push") or {}
+    val = push.get("val_loc_mm_mean") or {}
+    push_text = (
+        f" The hand's push is {'a' if push.get('use') else 'not a'} nuisance of the fit"
+        + (f", chosen on {push.get('n_frames')} validation frames ({_mm(val.get('on'))} with it, "
+           f"{_mm(val.get('off'))} without)" if val else "")
+        + "."
+    )
+    n, n_all = inv.get("n_frames"), inv.get("n_frames_in_field_states")
+    sub = (f" {n} of its {n_all} test frames in states with a field, evenly spread, were "
+           "inverted." if isinstance(n_all, int) and isinstance(n, int) and n < n_all else "")
+    s.append((
+        "p",
+        "Each test frame of the contact run is fitted, alone, through the twin's response field "
+        "of its inflation state (docs/inversion.md): 0, 1 or 2 fingers, each finger's face, "
+        "point, force or hover height, with drift as a nuisance, the count chosen by BIC. No "
+        "training data. It is scored by ContactNet's metric function on the same test trials; "
+        "ContactNet's and the baselines' point errors beside it are theirs on the same states."
+        + sub + push_text,
+    ))
+    s.append(("table", inversion_table(metrics)))
+    head, rows = inversion_state_table(inv)
+    if rows:
+        s.append(("p", "Per inflation state (point error mean; force MAE of the one-finger "
+                       "frames):"))
+        s.append(("table", (head, rows)))
+    line = force_line(inv, lookup(metrics, "bound"))
+    if line:
+        s.append(("p", line))
+    med, p95 = inv.get("ms_per_frame_median"), inv.get("ms_per_frame_p95")
+    if isinstance(med, int | float):
+        s.append(("p", f"Time per frame on one core (this run, on its machine): median "
+                       f"{med:.1f} ms, 95th percentile {p95:.1f} ms (live target ≤ {LIVE_MS:g} ms)."
+                  if isinstance(p95, int | float) else
+                  f"Time per frame on one core: median {med:.1f} ms."))
+    missing = inv.get("frames_without_field") or {}
+    if missing:
+        s.append(("p", "Test frames in states without a response field (not inverted): "
+                       + ", ".join(f"{k} ({v} frames)" for k, v in missing.items())
+                       + f", {_pct(inv.get('share_without_field'))} of the test frames."))
+    return s

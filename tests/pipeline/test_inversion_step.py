@@ -1,0 +1,225 @@
+"""The reproduction's inversion step (ectskin.pipeline.inversion) on a tiny contact experiment read
+from a coarse response field: the metrics against a hand computation from the inversion's own
+fits of each frame and the trials' ground truth, the frames of states without a field, the cap
+on frames, the push chosen on validation frames, resuming through the runner, and metrics.json's
+``inversion`` block."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from ectskin import EctskinError
+from ectskin.inversion import Inversion
+from ectskin.io import Recording, read_recording, write_recording
+from ectskin.layout.geometry import on_skin_distance
+from ectskin.pipeline import ReproduceConfig
+from ectskin.pipeline import field as pfield
+from ectskin.pipeline import inversion as pinv
+from ectskin.pipeline.contact import _simulate_contact
+from ectskin.pipeline.metrics import inversion_block
+from ectskin.pipeline.runner import StepRunner
+from ectskin.twin import Protocol
+from ectskin.twin.field_spec import FieldGrid
+from ectskin.twin.mechanics import recording_manipulator
+
+#: a grid of few nodes: the step's code path and its scoring, not the inversion's accuracy
+SMALL_GRID = FieldGrid(spacing_mm=(10.0, 27.5), force_nodes=4, height_nodes=4)
+TEST = ["trial_0001", "trial_0002", "far_0003"]
+VAL = ["trial_0004", "trial_0005"]
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory):
+    """One state (0/0/0 ml), its field on a 10 × 27.5 mm grid, 2-s trials; ``far_0003`` is a copy
+    of trial_0003 at a state without a field."""
+    root = tmp_path_factory.mktemp("inversion_step")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(pfield.FIELD_GRIDS, "quick", SMALL_GRID)
+        protocol = Protocol(levels_ml=(0.0,), touch_trials=1, duration_s=2.0)
+        config = ReproduceConfig(root / "out", protocol=protocol, workers=1, progress=False,
+                                 field_cache=root / "cache")
+        rec = _simulate_contact(config.contact_protocol(), config, None)
+        fields = pfield.contact_fields(config)
+    far = replace(rec.trial("trial_0003"), name="far_0003", inflation=(20.0, 0.0, 0.0))
+    rec = Recording(rec.layout, list(rec.trials) + [far], rec.frame_rate_hz, meta=rec.meta)
+    write_recording(rec, root / "contact.h5", overwrite=True)
+    return config, fields, root / "contact.h5"
+
+
+def _out(tmp_path, config, test=TEST, val=VAL):
+    out = tmp_path / "out"
+    (out / "runs" / "contact").mkdir(parents=True)
+    (out / "runs" / "contact" / "split.json").write_text(
+        json.dumps({"train": [], "val": val, "test": test}))
+    return replace(config, out_dir=out)
+
+
+def _by_hand(fields, path, noise, trials):
+    """Each frame fitted by Inversion.fit itself, scored from the trials' ground truth: the
+    point error over the skin and the force error of the frames with one finger on the skin,
+    and whether the count of pressing fingers is right, frame by frame."""
+    rec = read_recording(path)
+    body, _ = recording_manipulator(rec.meta)
+    faces = [s.surface for s in rec.layout.skins]
+    inv = Inversion(fields, noise)
+    loc, force, count = [], [], []
+    for name in trials:
+        t = rec.trial(name)
+        for i in range(t.n_frames):
+            r = inv.fit(t.capacitance[i], t.inflation)
+            pressing = [f for f in r.fingers if f.contact]
+            count.append(len(pressing) == t.n_contacts[i])
+            if t.n_contacts[i] != 1:
+                continue
+            k = next(k for k in range(t.n_fingers) if t.finger(k).contact[i])
+            truth = t.finger(k)
+            guess = (pressing or [f for f in r.fingers if not f.contact] or [None])[0]
+            if guess is None:  # no finger: the middle of the first face
+                ext = next(s for s in rec.layout.skins if s.surface == faces[0])
+                face, uv = faces[0], (np.mean(ext.u_mm), np.mean(ext.v_mm))
+            else:
+                face, uv = guess.face, (guess.u_mm, guess.v_mm)
+            loc.append(float(on_skin_distance(truth.surface, truth.uv_mm[i], face, uv,
+                                              body.width_mm, body.thickness_mm)))
+            force.append(abs((guess.force_n if guess is not None and guess.contact else 0.0)
+                             - truth.force[i]))
+    return np.array(loc), np.array(force), np.array(count)
+
+
+def test_the_step_scores_the_test_frames_as_a_hand_computation(world, tmp_path):
+    config, fields, path = world
+    config = _out(tmp_path, config)
+    runner = StepRunner(config.out_dir, force=False)
+    m = pinv.inversion_step(runner, config, fields, (path, {"x": 1}), push="off", max_frames=None)
+    noise = config.contact_protocol().readout
+    loc, force, count = _by_hand(fields, path, noise, TEST[:2])
+    assert loc.size > 5 and m["n_single_contact_frames"] == loc.size
+    assert m["loc_mm_mean"] == pytest.approx(loc.mean(), rel=1e-6)  # float32 labels
+    assert m["loc_mm_median"] == pytest.approx(np.median(loc), rel=1e-6)
+    assert m["force_mae_n"] == pytest.approx(force.mean(), rel=1e-6)
+    assert m["count_accuracy"] == pytest.approx(count.mean(), rel=1e-12)
+    # one state with a field: its numbers are the overall ones; the other state is counted only
+    assert list(m["per_state"]) == ["0/0/0 ml"]
+    s = m["per_state"]["0/0/0 ml"]
+    assert s["loc_mm_mean"] == m["loc_mm_mean"] and s["n_frames"] == m["n_frames"] == 120
+    assert m["frames_without_field"] == {"20/0/0 ml": 60} and m["n_frames_without_field"] == 60
+    assert m["share_without_field"] == pytest.approx(60 / 180)
+    t = m["timing"]
+    assert 0 < t["ms_per_frame_median"] <= t["ms_per_frame_p95"]
+    assert m["push"]["use"] is False and m["n_test_trials"] == 3
+    saved = json.loads((config.out_dir / "inversion" / "metrics.json").read_text())
+    assert saved["loc_mm_mean"] == m["loc_mm_mean"]
+    # the step is reused with the same settings, refused with others
+    monkey = pytest.MonkeyPatch()
+    monkey.setattr(Inversion, "fit", lambda *a, **k: pytest.fail("inverted again"))
+    again = StepRunner(config.out_dir, force=False)
+    assert pinv.inversion_step(again, config, fields, (path, {"x": 1}), push="off",
+                               max_frames=None)["loc_mm_mean"] == m["loc_mm_mean"]
+    assert again.reused == ["inversion"]
+    monkey.undo()
+    with pytest.raises(EctskinError, match="step 'inversion' would overwrite.*max_frames"):
+        pinv.inversion_step(again, config, fields, (path, {"x": 1}), push="off", max_frames=50)
+
+
+def test_the_frame_cap_spreads_over_the_test_frames(world, tmp_path):
+    config, fields, path = world
+    config = _out(tmp_path, config, test=TEST[:2])
+    m = pinv.inversion_step(StepRunner(config.out_dir, False), config, fields, (path, {}),
+                            push="off", max_frames=30)
+    assert m["n_frames"] == 30 and m["n_frames_in_field_states"] == 120
+    assert m["n_frames_without_field"] == 0 and m["share_without_field"] == 0
+    # with a trial of a state without a field: its share is of all test frames, not of those
+    # inverted
+    config = _out(tmp_path / "b", world[0])
+    m = pinv.inversion_step(StepRunner(config.out_dir, False), config, fields, (path, {}),
+                            push="off", max_frames=30)
+    assert m["n_frames"] == 30 and m["share_without_field"] == pytest.approx(60 / 180)
+
+
+def test_the_push_is_chosen_on_the_validation_frames(world, tmp_path, monkeypatch):
+    """The choice inverts the validation trials' one-finger frames only (never a test frame)
+    and keeps the lower error; the test frames are then inverted with that choice."""
+    config, fields, path = world
+    config = _out(tmp_path, config)
+    seen = []
+    real = pinv.invert_rows
+
+    def spy(inv, rec, data, rows):
+        seen.append((set(np.asarray(data.group_names)[np.unique(data.group[rows])]),
+                     inv.model((0.0, 0.0, 0.0)).N.shape[1]))
+        return real(inv, rec, data, rows)
+
+    monkeypatch.setattr(pinv, "invert_rows", spy)
+    m = pinv.inversion_step(StepRunner(config.out_dir, False), config, fields, (path, {}),
+                            push="auto", max_frames=None)
+    rec = read_recording(path)
+    n_val = sum(int(np.sum(rec.trial(n).n_contacts == 1)) for n in VAL)
+    p = m["push"]
+    assert p["n_frames"] == min(n_val, pinv.PUSH_CHOICE_FRAMES)
+    off, on = p["val_loc_mm_mean"]["off"], p["val_loc_mm_mean"]["on"]
+    assert p["use"] is bool(on < off)
+    # two validation passes (2 drift columns, then + 3 push columns), then the test with the choice
+    val_trials = {n for n in VAL if np.any(rec.trial(n).n_contacts == 1)}
+    assert val_trials and [s for s, _ in seen] == [val_trials, val_trials, set(TEST[:2])]
+    assert [n for _, n in seen] == [2, 5, 5 if p["use"] else 2]
+
+
+def test_bad_input_is_refused(world, tmp_path):
+    config, fields, path = world
+    runner = StepRunner(tmp_path, False)
+    with pytest.raises(EctskinError, match="split.json is missing"):
+        pinv.inversion_step(runner, replace(config, out_dir=tmp_path), fields, (path, {}))
+    config = _out(tmp_path, config)
+    runner = StepRunner(config.out_dir, False)
+    with pytest.raises(EctskinError, match="push"):
+        pinv.inversion_step(runner, config, fields, (path, {}), push="maybe")
+    with pytest.raises(EctskinError, match="max_frames must be an integer >= 1"):
+        pinv.inversion_step(runner, config, fields, (path, {}), max_frames=0)
+    with pytest.raises(EctskinError, match="no response fields"):
+        pinv.inversion_step(runner, config, {}, (path, {}))
+    bad = _out(tmp_path / "b", world[0], test=["trial_0001", "nope"])
+    with pytest.raises(EctskinError, match="trial 'nope' is not in"):
+        pinv.inversion_step(StepRunner(bad.out_dir, False), bad, fields, (path, {}))
+
+
+def test_the_metrics_block_sets_contactnet_and_the_bound_beside_each_state():
+    """ContactNet's and a baseline's error on the inverted states are their per-state means
+    weighted by their one-finger frames; a state the inversion did not score is left out."""
+    inv = {
+        "loc_mm_mean": 1.0, "force_mae_n": 0.2, "count_accuracy": 0.9, "n_frames": 50,
+        "multi": {"count_accuracy_by_true": {"0": 1.0, "1": 0.8, "2": None}},
+        "force_observable": {"share": 0.25, "force_mae_n": 0.05, "threshold_n": 0.1},
+        "timing": {"ms_per_frame_median": 4.0, "ms_per_frame_p95": 9.0, "total_s": 1.0},
+        "per_state": {"0/0/0 ml": {"loc_mm_mean": 0.5, "n_single_contact_frames": 3},
+                      "20/0/0 ml": {"loc_mm_mean": 1.5, "n_single_contact_frames": 1},
+                      "0/20/0 ml": {"loc_mm_mean": None, "n_single_contact_frames": 0}},
+    }
+    contact = {"per_state": {"0/0/0 ml": {"loc_mm_mean": 2.0, "n_frames": 30},
+                             "20/0/0 ml": {"loc_mm_mean": 6.0, "n_frames": 10},
+                             "20/20/20 ml": {"loc_mm_mean": 100.0, "n_frames": 10}},
+               "baselines": {"knn": {"per_state": {"0/0/0 ml": {"loc_mm_mean": 4.0, "n_frames": 30},
+                                                   "20/0/0 ml": {"loc_mm_mean": 8.0,
+                                                                 "n_frames": 10}}},
+                             "ridge": {"per_state": {"0/0/0 ml": {"loc_mm_mean": 1.0,
+                                                                  "n_frames": 30}}}}}
+    bound = {"test": {"loc_mm_mean": 0.1, "force_n_mean": 0.3},
+             "per_state": {"0/0/0 ml": {"test": {"loc_mm_mean": 0.05, "force_n_mean": 0.2}}}}
+    b = inversion_block(inv, contact, bound)
+    for key in ("loc_mm_mean", "force_mae_n", "count_accuracy", "per_state",
+                "ms_per_frame_median", "ms_per_frame_p95", "n_frames"):
+        assert key in b, key
+    assert (b["ms_per_frame_median"], b["ms_per_frame_p95"], b["n_frames"]) == (4.0, 9.0, 50)
+    assert b["contact_loc_mm_mean"] == pytest.approx((2.0 * 30 + 6.0 * 10) / 40)
+    assert b["baseline_loc_mm_mean"] == {"knn": pytest.approx(5.0), "ridge": None}
+    assert b["count_accuracy_by_true"]["1"] == 0.8 and b["force_mae_n_observable"] == 0.05
+    assert (b["bound_loc_mm_mean"], b["bound_force_n_mean"]) == (0.1, 0.3)
+    s = b["per_state"]["0/0/0 ml"]
+    assert (s["contact_loc_mm_mean"], s["bound_loc_mm_mean"], s["bound_force_n_mean"]) == (
+        2.0, 0.05, 0.2)
+    assert s["baseline_loc_mm_mean"] == {"knn": 4.0, "ridge": 1.0}
+    assert b["per_state"]["20/0/0 ml"]["bound_loc_mm_mean"] is None
+    assert inversion_block(inv, None, None)["contact_loc_mm_mean"] is None

@@ -1,0 +1,96 @@
+"""The report sets the training-free inversion beside ContactNet, the strongest baseline and the
+bound when metrics.json carries an ``inversion`` block, and says nothing of it when not."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ectskin.report import render_markdown
+from ectskin.report.contact import contact_sections
+from ectskin.report.inversion import inversion_sections
+
+
+def _metrics():
+    return {
+        "contact": {
+            "loc_mm_mean": 4.0, "force_mae_n": 0.36, "hover_detect_mm": 3.0,
+            "baselines": {"knn": {"loc_mm_mean": 5.0, "force_mae_n": 0.30, "hover_detect_mm": 2.0},
+                          "ridge": {"loc_mm_mean": 6.0, "force_mae_n": 0.34}},
+        },
+        "multi": {"count_accuracy": 0.7,
+                  "baselines": {"knn": {"count_accuracy": 0.6}, "ridge": {"count_accuracy": 0.65}}},
+        "bound": {"force_observable_share_near_wires": 0.6,
+                  "force_observable_share_away_from_wires": 0.05},
+        "inversion": {
+            "loc_mm_mean": 1.25, "force_mae_n": 0.125, "count_accuracy": 0.875,
+            "hover_detect_mm": 6.0, "n_frames": 40, "n_frames_in_field_states": 400,
+            "contact_loc_mm_mean": 3.5, "baseline_loc_mm_mean": {"knn": 4.5, "ridge": 4.25},
+            "bound_loc_mm_mean": 0.25, "bound_force_n_mean": 0.0625,
+            "force_observable_share": 0.25, "force_mae_n_observable": 0.03125,
+            "force_observable_threshold_n": 0.1,
+            "ms_per_frame_median": 9.5, "ms_per_frame_p95": 21.0,
+            "push": {"use": False, "val_loc_mm_mean": {"on": 2.5, "off": 2.0}, "n_frames": 30},
+            "frames_without_field": {"10/10/10 ml": 90}, "share_without_field": 0.1875,
+            "per_state": {"0/20/0 ml": {
+                "loc_mm_mean": 1.5, "contact_loc_mm_mean": 3.0,
+                "baseline_loc_mm_mean": {"knn": 5.5, "ridge": None},
+                "bound_loc_mm_mean": 0.125, "force_mae_n": 0.25, "bound_force_n_mean": 0.5,
+                "count_accuracy": 0.75, "n_single_contact_frames": 12}},
+        },
+    }
+
+
+def _tables(items):
+    return {p[0]: p[1] for k, p in items if k == "table"}
+
+
+def test_the_inversion_stands_beside_contactnet_the_baselines_and_the_bound():
+    items = inversion_sections(_metrics())
+    tables = _tables(items)
+    head = next(h for h in tables if h[0] == "metric")
+    rows = {r[0]: dict(zip(head, r)) for r in tables[head]}
+    loc = rows["Contact point: mean error"]
+    assert (loc["inversion (no training)"], loc["ContactNet"], loc["strongest baseline"],
+            loc["bound (CRB)"]) == ("1.25 mm", "3.50 mm", "ridge regression 4.25 mm", "0.25 mm")
+    force = rows["Force: mean absolute error"]
+    assert (force["inversion (no training)"], force["ContactNet"], force["strongest baseline"],
+            force["bound (CRB)"]) == ("0.125 N", "0.360 N", "k-NN 0.300 N", "0.062 N")
+    count = rows["Finger count (0, 1, 2) right"]
+    assert (count["inversion (no training)"], count["ContactNet"], count["strongest baseline"]) == (
+        "87.50 %", "70.00 %", "ridge regression 65.00 %")
+    assert rows["Hover detected up to (≥ 90 % of frames)"]["strongest baseline"] == "k-NN 2.00 mm"
+    state_head = next(h for h in tables if h[0] == "state")
+    s = dict(zip(state_head, tables[state_head][0]))
+    assert (s["state"], s["inversion"], s["ContactNet"], s["strongest baseline"],
+            s["bound (CRB)"], s["inversion force MAE"], s["force bound"], s["count right"],
+            s["one-finger frames"]) == ("0/20/0 ml", "1.50 mm", "3.00 mm", "k-NN 5.50 mm",
+                                        "0.12 mm", "0.250 N", "0.500 N", "75.00 %", "12")
+    text = " ".join(p for k, p in items if k == "p")
+    assert "40 of its 400 test frames" in text
+    assert "is not a nuisance of the fit, chosen on 30 validation frames (2.50 mm with it, " \
+           "2.00 mm without)" in text
+    assert "below 0.1 N) at 25.00 % of the one-finger test frames; there the inversion's " \
+           "force MAE is 0.031 N" in text
+    assert "60.00 % of the cells near a wire and on 5.00 % of those away" in text
+    assert "median 9.5 ms, 95th percentile 21.0 ms" in text
+    assert "10/10/10 ml (90 frames), 18.75 % of the test frames" in text
+    # the contact sections carry it, and so do the rendered report's
+    assert ("h2", "The physical inversion (no training)") in contact_sections(_metrics())
+    assert "The physical inversion (no training)" in render_markdown(_metrics(), [], Path("."))
+
+
+def test_without_an_inversion_the_report_says_nothing_of_it():
+    m = _metrics()
+    del m["inversion"]
+    assert inversion_sections(m) == []
+    md = render_markdown(m, [], Path("."))
+    assert "inversion" not in md.lower()
+    m["inversion"] = {"n_frames": 0}  # a step that inverted nothing
+    assert inversion_sections(m) == []
+    # nothing claimed where a number is missing: dashes, no sentence on force or time
+    bare = {"inversion": {"n_frames": 10, "loc_mm_mean": 2.0}}
+    items = inversion_sections(bare)
+    text = " ".join(p for k, p in items if k == "p")
+    assert "observable" not in text and "ms" not in text and "validation" not in text
+    rows = {r[0]: r for r in next(iter(_tables(items).values()))}
+    assert rows["Contact point: mean error"][1:] == ("2.00 mm", "—", "—", "—")
