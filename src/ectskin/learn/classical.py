@@ -275,39 +275,14 @@ def load_classical(path: str | Path, *, layout: Any = None) -> ClassicalModel:
     stored ones (and with ``layout``, a SensorLayout, when given). Every refusal is an
     EctskinError naming the file.
     """
-    import skops.io
     from sklearn.pipeline import Pipeline
     from sklearn.preprocessing import StandardScaler
 
     path = Path(path)
-    if not path.is_file():
-        raise EctskinError(f"{path}: no such model file")
-    try:
-        untrusted = skops.io.get_untrusted_types(file=path)
-    except Exception as exc:  # noqa: BLE001 - not a zip, no schema, damaged...
-        raise EctskinError(f"{path}: not a readable skops model file ({_why(exc)})") from None
-    refused = sorted(set(untrusted) - set(SKOPS_TRUSTED))
-    if refused:
-        raise EctskinError(
-            f"{path}: holds type(s) outside the trusted list: {', '.join(refused)}; ectskin "
-            "loads only the four touch classifiers from a model file, and nothing in it was run"
-        )
-    try:
-        payload = skops.io.load(path, trusted=list(SKOPS_TRUSTED))
-    except Exception as exc:  # noqa: BLE001 - refused or damaged content
-        raise EctskinError(f"{path}: not a readable skops model file ({_why(exc)})") from None
-    if not isinstance(payload, dict) or payload.get("format") != SKOPS_FORMAT:
-        found = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
-        raise EctskinError(
-            f"{path}: not an ectskin touch model (expected format {SKOPS_FORMAT!r}, found "
-            f"{found!r})"
-        )
-    version = payload.get("version")
-    if not isinstance(version, int) or version > SKOPS_VERSION:
-        raise EctskinError(
-            f"{path}: model file version {version!r} is newer than this ectskin reads "
-            f"(<= {SKOPS_VERSION}); upgrade ectskin"
-        )
+    payload = read_skops_payload(
+        path, SKOPS_TRUSTED, SKOPS_FORMAT, SKOPS_VERSION, what="touch model",
+        refusal="ectskin loads only the four touch classifiers from a model file",
+    )
     name = payload.get("name")
     if name not in CLASSICAL:
         raise EctskinError(f"{path}: field 'name' is {name!r}, expected one of {CLASSICAL}")
@@ -356,6 +331,47 @@ def _describe(obj: Any) -> str:
     if hasattr(obj, "steps"):
         return "Pipeline(" + ", ".join(type(s).__name__ for _, s in obj.steps) + ")"
     return type(obj).__name__
+
+
+def read_skops_payload(
+    path: Path, trusted: tuple[str, ...], fmt: str, version: int, *, what: str, refusal: str = ""
+) -> dict[str, Any]:
+    """The payload dict of an ectskin ``model.skops`` at ``path``: only skops' default types and
+    ``trusted`` are loaded (a file holding any other type is refused before anything in it is
+    run), and its ``format`` must be ``fmt`` with a ``version`` of at most ``version``. Every
+    refusal is an EctskinError naming the file; ``what`` names the model kind in them,
+    ``refusal`` says what is loaded when a type is refused."""
+    import skops.io
+
+    if not path.is_file():
+        raise EctskinError(f"{path}: no such model file")
+    try:
+        untrusted = skops.io.get_untrusted_types(file=path)
+    except Exception as exc:  # noqa: BLE001 - not a zip, no schema, damaged...
+        raise EctskinError(f"{path}: not a readable skops model file ({_why(exc)})") from None
+    refused = sorted(set(untrusted) - set(trusted))
+    if refused:
+        raise EctskinError(
+            f"{path}: holds type(s) outside the trusted list: {', '.join(refused)}; "
+            + (f"{refusal}, and " if refusal else "")
+            + "nothing in it was run"
+        )
+    try:
+        payload = skops.io.load(path, trusted=list(trusted))
+    except Exception as exc:  # noqa: BLE001 - refused or damaged content
+        raise EctskinError(f"{path}: not a readable skops model file ({_why(exc)})") from None
+    if not isinstance(payload, dict) or payload.get("format") != fmt:
+        found = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
+        raise EctskinError(
+            f"{path}: not an ectskin {what} (expected format {fmt!r}, found {found!r})"
+        )
+    got = payload.get("version")
+    if not isinstance(got, int) or got > version:
+        raise EctskinError(
+            f"{path}: model file version {got!r} is newer than this ectskin reads "
+            f"(<= {version}); upgrade ectskin"
+        )
+    return payload
 
 
 def _why(exc: BaseException) -> str:

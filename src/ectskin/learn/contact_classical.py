@@ -52,6 +52,7 @@ from ectskin._check import EctskinError, check_option
 from ectskin._files import atomic_write, to_jsonable
 from ectskin.learn.baselines.base import subsample
 from ectskin.learn.checkpoint import check_layout
+from ectskin.learn.classical import read_skops_payload
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
 
 __all__ = [
@@ -343,34 +344,10 @@ def load_contact_classical(path: str | Path, *, layout: Any = None) -> ContactCl
     """Load a ``model.skops`` written by :func:`save_contact_classical`; refuse anything else
     (an EctskinError naming the file). Only skops' default types and :data:`SKOPS_TRUSTED` are
     loaded; ``layout`` (a SensorLayout) refuses a model of another skin."""
-    import skops.io
-
     path = Path(path)
-    if not path.is_file():
-        raise EctskinError(f"{path}: no such model file")
-    try:
-        untrusted = skops.io.get_untrusted_types(file=path)
-    except Exception as exc:  # noqa: BLE001 - not a zip, no schema, damaged...
-        raise EctskinError(f"{path}: not a readable skops model file ({exc})") from None
-    refused = sorted(set(untrusted) - set(SKOPS_TRUSTED))
-    if refused:
-        raise EctskinError(
-            f"{path}: holds type(s) outside the trusted list: {', '.join(refused)}; nothing in "
-            "it was run"
-        )
-    try:
-        payload = skops.io.load(path, trusted=list(SKOPS_TRUSTED))
-    except Exception as exc:  # noqa: BLE001 - refused or damaged content
-        raise EctskinError(f"{path}: not a readable skops model file ({exc})") from None
-    if not isinstance(payload, dict) or payload.get("format") != SKOPS_FORMAT:
-        found = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
-        raise EctskinError(
-            f"{path}: not an ectskin contact model (expected format {SKOPS_FORMAT!r}, found "
-            f"{found!r})"
-        )
-    version = payload.get("version")
-    if not isinstance(version, int) or version > SKOPS_VERSION:
-        raise EctskinError(f"{path}: model file version {version!r} is newer than this reads")
+    payload = read_skops_payload(
+        path, SKOPS_TRUSTED, SKOPS_FORMAT, SKOPS_VERSION, what="contact model"
+    )
     name = payload.get("name")
     if name not in CONTACT_CLASSICAL:
         raise EctskinError(f"{path}: field 'name' is {name!r}, expected one of {CONTACT_CLASSICAL}")
