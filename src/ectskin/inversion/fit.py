@@ -37,6 +37,11 @@ nuisances estimated): the Fisher information of the fitted model.
 (a in pF, r relative to the finger's signal): the field's interpolation error, the
 superposition of two fingers, the twin's per-channel drift. Zero by default (the readout noise
 alone; then the standard errors are the bound).
+
+**The finger's size** (``finger_scale_sd``): a bigger or softer fingertip than the field's
+couples more at every channel alike (∂C/∂R ≈ κ ΔC, :mod:`ectskin.twin.bound_field`), so each
+finger's signal is (1 + a) Δ, a with a Gaussian prior (a penalised fit, a BIC parameter). The
+standard errors carry a as a nuisance: it is nearly confounded with the force (docs/inversion.md).
 """
 
 from __future__ import annotations
@@ -73,6 +78,12 @@ MAX_NFEV = 50
 #: the optimiser's tolerances (MINPACK's lmder; its scaling by the Jacobian's column norms,
 #: ``diag=None``, is ``least_squares``' ``x_scale="jac"``)
 LM_OPTIONS: dict[str, Any] = {"ftol": 1e-6, "xtol": 1e-6, "gtol": 1e-8}
+#: the finger scale's prior sd that κ ≈ 0.08 /mm (the largest of the twin's states,
+#: :func:`ectskin.twin.bound_field.field_nuisances`) times a fingertip radius ±1.5 mm from the
+#: field's gives (adult fingertips 7–10 mm around the field's 8 mm)
+FINGER_SCALE_SD = 0.12
+#: the scale's range: this many prior sd either side of 1 (a truncated Gaussian prior)
+SCALE_BOUND_SD = 3.0
 #: lmder's exit codes that mean it stopped on a tolerance (5: the evaluation budget ran out)
 LM_CONVERGED = (1, 2, 3, 4)
 
@@ -81,7 +92,9 @@ LM_CONVERGED = (1, 2, 3, 4)
 class FingerEstimate:
     """One fitted finger: its face, whether it presses (``contact``) or hovers, its point
     (u, v) mm, force N (0 hovering), height mm (0 pressing), and their standard errors (the
-    bound at the solution; 0 for the value the mode fixes, inf where unresolved)."""
+    bound at the solution; 0 for the value the mode fixes, inf where unresolved); ``scale``
+    1 + a, its signal's fitted relative size, and its standard error (1 and 0 without
+    ``finger_scale_sd``)."""
 
     face: str
     contact: bool
@@ -93,6 +106,8 @@ class FingerEstimate:
     v_se_mm: float
     force_se_n: float
     height_se_mm: float
+    scale: float = 1.0
+    scale_se: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -124,10 +139,12 @@ class _Fit:
     chi2: float
     converged: bool
     rho: float = math.nan  # the two fingers' coupling (coupled two-finger fits)
+    scales: np.ndarray = field(default_factory=lambda: np.zeros(0))  # each finger's a
 
     @property
     def n_params(self) -> int:
-        return 3 * len(self.fingers) + (0 if math.isnan(self.rho) else 1) + self.beta.size
+        return (3 * len(self.fingers) + (0 if math.isnan(self.rho) else 1) + self.beta.size
+                + self.scales.size)
 
 
 class Inversion:
@@ -149,6 +166,8 @@ class Inversion:
     push_prior_sd : a Gaussian prior of this standard deviation on each push coefficient (in
         the columns' unit: N for :func:`~ectskin.inversion.model.push_basis`), its term joins
         χ² (a penalised fit); None: the push is unknown, without a prior.
+    finger_scale_sd : the prior sd of each finger's relative signal scale a (module docstring;
+        :data:`FINGER_SCALE_SD` from the physics), or None: the field's finger, no scale.
     two_fingers : "coupled" (two fingers as coupled conductors, one more parameter ρ:
         :mod:`ectskin.inversion.coupling`) or "superposition" (the sum of their signals).
     gate_p : a count of k + 1 fingers, or a further start, is tried only while the fits so
@@ -170,6 +189,7 @@ class Inversion:
         gate_p: float = 1e-4,
         push_prior_sd: float | None = None,
         two_fingers: str = "superposition",
+        finger_scale_sd: float | None = None,
     ) -> None:
         if not isinstance(fields, Mapping) or not fields:
             raise EctskinError(
@@ -190,6 +210,10 @@ class Inversion:
             raise EctskinError(f"Inversion: gate_p must be in [0, 1), got {gate_p!r}")
         if push_prior_sd is not None and not (math.isfinite(push_prior_sd) and push_prior_sd > 0):
             raise EctskinError(f"Inversion: push_prior_sd must be > 0 or None, got {push_prior_sd!r}")
+        if finger_scale_sd is not None and not (
+                isinstance(finger_scale_sd, int | float) and 0 < finger_scale_sd < math.inf):
+            raise EctskinError(
+                f"Inversion: finger_scale_sd must be > 0 or None, got {finger_scale_sd!r}")
         if two_fingers not in TWO_FINGER_MODELS:
             raise EctskinError(
                 f"Invalid value for 'two_fingers': allowed values are {list(TWO_FINGER_MODELS)}; "
@@ -199,6 +223,7 @@ class Inversion:
         self.starts = starts
         self.gate_p = float(gate_p)
         self.push_prior_sd = push_prior_sd
+        self.finger_scale_sd = finger_scale_sd
         self.noise = noise or ReadoutConfig()
         self.max_fingers = int(max_fingers)
         self.model_error = (a, r)
@@ -230,6 +255,8 @@ class Inversion:
             sm.prior_w = np.zeros(sm.N.shape[1])
             if push_prior_sd is not None:
                 sm.prior_w[:n_push] = 1.0 / push_prior_sd
+            # 1/sd of each finger's scale prior (0: no scale parameter)
+            sm.scale_w = 0.0 if finger_scale_sd is None else 1.0 / float(finger_scale_sd)
             self._models.append(sm)
             if self.coupled and max_fingers == 2 and sm.pairs is None:
                 raise EctskinError(
@@ -399,12 +426,12 @@ class Inversion:
             return int(t.face[i]), int(t.mode[i]), t.x[i].copy()
 
         if k == 1:
-            return [[node(i)] for i in t.starts(delta, self.starts)]
+            return [[node(i)] for i in t.starts(delta, self.starts, m.scale_w)]
         out = [[node(i), node(j)] for i, j in t.pairs(delta, self.starts)]
         if one is not None:
             fi, mi, x = one.fingers[0]
             rest = delta - m.signal(m.faces[fi], MODES[mi], x)[0]
-            out.insert(1, [(fi, mi, x.copy()), node(t.starts(rest, 1)[0])])
+            out.insert(1, [(fi, mi, x.copy()), node(t.starts(rest, 1, m.scale_w)[0])])
         return out[: self.starts + 1]
 
     @staticmethod
@@ -419,41 +446,52 @@ class Inversion:
     @staticmethod
     def _fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
                      start: list[tuple[int, int, np.ndarray]], coupled: bool = False) -> _Fit:
-        """Levenberg–Marquardt over (x_1, …, x_k, [ρ], β) from ``start`` (ρ: two coupled
-        fingers).
+        """Levenberg–Marquardt over (x_1, …, x_k, [ρ], [a_1, …, a_k], β) from ``start`` (ρ: two
+        coupled fingers; a: the fingers' scales, with ``m.scale_w``).
 
-        The bounds (the field's ranges, ρ in [0, RHO_MAX]) hold by evaluating the model at the
-        parameters clipped into them and adding a stiff penalty residual ``BOUND_WEIGHT`` ×
-        (p − clip(p)): MINPACK's LM (``method="lm"``) takes no bounds, and costs a fraction of
-        the bounded solvers' per iteration. The result is clipped into the ranges.
+        The bounds (the field's ranges, ρ in [0, RHO_MAX], a within ``SCALE_BOUND_SD`` prior sd)
+        hold by evaluating the model at the parameters clipped into them and adding a stiff
+        penalty residual ``BOUND_WEIGHT`` × (p − clip(p)): MINPACK's LM (``method="lm"``) takes
+        no bounds, and costs a fraction of the bounded solvers' per iteration. The result is
+        clipped into the ranges.
         """
         k = len(start)
         keys = [(m.faces[fi], MODES[mi]) for fi, mi, _ in start]
         with_rho = coupled and k == 2
-        nx = 3 * k + int(with_rho)  # the bounded parameters
+        nx = 3 * k + int(with_rho)  # the fingers' (and ρ's) parameters
         nb, n = m.N.shape[1], m.n_pairs
+        sw = m.scale_w
+        ns = k if sw > 0 else 0  # each finger's relative scale a: (1 + a) Δ
+        na = nx + ns  # the bounded parameters
         Nw = m.N / sigma[:, None]
-        lo = np.concatenate([m.bounds[key][0] for key in keys] + [np.zeros(int(with_rho))])
-        hi = np.concatenate([m.bounds[key][1] for key in keys] + [np.full(int(with_rho), RHO_MAX)])
-        # rows: the channels, the range penalties, the nuisances' priors; the Jacobian's constant
-        # parts (the nuisance columns, the priors) are set once
-        J = np.zeros((n + nx + nb, nx + nb))
-        J[:n, nx:] = -Nw
-        J[n + nx:, nx:] = np.diag(m.prior_w)
+        a_max = SCALE_BOUND_SD / sw if ns else 0.0
+        lo = np.concatenate([m.bounds[key][0] for key in keys]
+                            + [np.zeros(int(with_rho)), np.full(ns, -a_max)])
+        hi = np.concatenate([m.bounds[key][1] for key in keys]
+                            + [np.full(int(with_rho), RHO_MAX), np.full(ns, a_max)])
+        # rows: the channels, the range penalties, the scales' and the nuisances' priors; the
+        # Jacobian's constant parts (the nuisance columns, the priors) are set once
+        J = np.zeros((n + na + ns + nb, na + nb))
+        J[:n, na:] = -Nw
+        J[n + na: n + na + ns, nx:na] = sw * np.eye(ns)
+        J[n + na + ns:, na:] = np.diag(m.prior_w)
         cache: dict[str, Any] = {"p": None}
-        diag = np.arange(nx)
+        diag = np.arange(na)
         neg_inv_sigma = (-1.0 / sigma)[:, None]
 
         def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             if cache["p"] is None or not (cache["p"] == p).all():
-                x = p[:nx]
+                x = p[:na]
                 xc = np.clip(x, lo, hi)
                 inside = x == xc
                 total = np.zeros(n)
                 for j, key in enumerate(keys):
                     d, dj = m.signal(key[0], key[1], xc[3 * j: 3 * j + 3])
-                    total += d
-                    J[:n, 3 * j: 3 * j + 3] = dj * neg_inv_sigma
+                    g = 1.0 + xc[nx + j] if ns else 1.0
+                    total += g * d
+                    J[:n, 3 * j: 3 * j + 3] = (g * dj) * neg_inv_sigma
+                    if ns:
+                        J[:n, nx + j] = d * neg_inv_sigma[:, 0]
                 if with_rho:
                     c, da, db, drho = m.coupling(keys, [xc[:3], xc[3:6]], float(xc[6]))
                     total += c
@@ -461,18 +499,24 @@ class Inversion:
                     J[:n, 3:6] += db * neg_inv_sigma
                     J[:n, 6] = drho * neg_inv_sigma[:, 0]
                 if not inside.all():  # beyond a range: the model is flat there, the penalty not
-                    J[:n, :nx][:, ~inside] = 0.0
+                    J[:n, :na][:, ~inside] = 0.0
                 J[n + diag, diag] = np.where(inside, 0.0, BOUND_WEIGHT)
-                r = np.concatenate([(delta - total) / sigma - Nw @ p[nx:],
-                                    BOUND_WEIGHT * (x - xc), m.prior_w * p[nx:]])
+                r = np.concatenate([(delta - total) / sigma - Nw @ p[na:], BOUND_WEIGHT * (x - xc),
+                                    sw * xc[nx:], m.prior_w * p[na:]])
                 cache.update(p=p.copy(), r=r, J=J.copy())
             return cache["r"], cache["J"]
 
-        x0 = np.concatenate([x for _, _, x in start] + [np.full(int(with_rho), RHO_START)])
+        x0 = np.concatenate([x for _, _, x in start]
+                            + [np.full(int(with_rho), RHO_START), np.zeros(ns)])
         x0 = np.clip(x0, lo, hi)
-        # β from the linear fit at the start, so that the optimiser begins near its valley
         r0 = evaluate(np.concatenate([x0, np.zeros(nb)]))[0][:n]
-        beta0 = np.linalg.lstsq(Nw, r0, rcond=None)[0] if nb else np.zeros(0)
+        # the linear parameters (the scales and β) from a linear fit at the start, with their
+        # priors, so that the optimiser begins near its valley
+        A = np.vstack([np.c_[-J[:n, nx:na], Nw], np.diag(np.r_[np.full(ns, sw), m.prior_w])])
+        lin = (np.linalg.lstsq(A, np.r_[r0, np.zeros(ns + nb)], rcond=None)[0] if ns + nb
+               else np.zeros(0))
+        x0[nx:] = np.clip(lin[:ns], -a_max, a_max)
+        beta0 = lin[ns:]
         with warnings.catch_warnings():  # out of evaluations: `converged` says so
             warnings.simplefilter("ignore", RuntimeWarning)
             p, status = leastsq(
@@ -480,12 +524,12 @@ class Inversion:
                 Dfun=lambda p: evaluate(p)[1], maxfev=MAX_NFEV, **LM_OPTIONS,
             )
         p = np.array(p, dtype=np.float64, ndmin=1)
-        p[:nx] = np.clip(p[:nx], lo, hi)
+        p[:na] = np.clip(p[:na], lo, hi)
         res = evaluate(p)[0]
-        r = np.concatenate([res[:n], res[n + nx:]])  # the channels and the priors
+        r = np.concatenate([res[:n], res[n + na:]])  # the channels and the priors
         fingers = [(fi, mi, p[3 * j: 3 * j + 3].copy()) for j, (fi, mi, _) in enumerate(start)]
-        return _Fit(fingers, p[nx:].copy(), float(r @ r), status in LM_CONVERGED,
-                    rho=float(p[6]) if with_rho else math.nan)
+        return _Fit(fingers, p[na:].copy(), float(r @ r), status in LM_CONVERGED,
+                    rho=float(p[6]) if with_rho else math.nan, scales=p[nx:na].copy())
 
     def _result(self, m: StateModel, fit: _Fit, y: np.ndarray, w: int, ll: float,
                 bics: list[float]) -> InversionResult:
@@ -493,21 +537,28 @@ class Inversion:
         ests: list[FingerEstimate] = []
         if k:
             mu = m.untouched + m.N @ fit.beta
-            cols = []
-            for fi, mi, x in fit.fingers:
+            cols, scale_cols = [], []
+            g = 1.0 + fit.scales if fit.scales.size else np.ones(k)
+            for j, (fi, mi, x) in enumerate(fit.fingers):
                 d, dj = m.signal(m.faces[fi], MODES[mi], x)
-                mu = mu + d
-                cols.append(dj)
+                mu = mu + g[j] * d
+                cols.append(g[j] * dj)
+                scale_cols.append(d[:, None])
+            ns = fit.scales.size
             if not math.isnan(fit.rho):  # the coupling: its share, slopes and its own column
                 keys = [(m.faces[fi], MODES[mi]) for fi, mi, _ in fit.fingers]
                 c, da, db, drho = m.coupling(keys, [x for _, _, x in fit.fingers], fit.rho)
                 mu = mu + c
                 cols = [cols[0] + da, cols[1] + db, drho[:, None]]
-            J = np.concatenate(cols + [m.N], axis=1)
-            prior = {J.shape[1] - m.N.shape[1] + i: float(1.0 / pw**2)
-                     for i, pw in enumerate(m.prior_w) if pw > 0}
-            b = crb(J, self._sigma(m, mu, w), nuisance_cols=range(3 * k, J.shape[1]),
-                    prior_var=prior)
+            # the scales are bounded beside the fingers (the same marginal bound as nuisances)
+            J = np.concatenate(cols, axis=1)
+            n0 = J.shape[1]
+            J = np.concatenate([J] + scale_cols[:ns] + [m.N], axis=1)
+            prior = {n0 + ns + i: float(1.0 / pw**2) for i, pw in enumerate(m.prior_w) if pw > 0}
+            prior.update({n0 + i: float(1.0 / m.scale_w**2) for i in range(ns)})
+            interest = set(range(3 * k)) | set(range(n0, n0 + ns))
+            b = crb(J, self._sigma(m, mu, w), prior_var=prior,
+                    nuisance_cols=[c for c in range(J.shape[1]) if c not in interest])
             for j, (fi, mi, x) in enumerate(fit.fingers):
                 se = b.std[3 * j: 3 * j + 3]
                 contact = MODES[mi] == "contact"
@@ -518,6 +569,7 @@ class Inversion:
                     u_se_mm=float(se[0]), v_se_mm=float(se[1]),
                     force_se_n=float(se[2]) if contact else 0.0,
                     height_se_mm=0.0 if contact else h * float(se[2]),
+                    scale=float(g[j]), scale_se=float(b.std[3 * k + j]) if ns else 0.0,
                 ))
         return InversionResult(
             n_fingers=k, fingers=tuple(ests), log_likelihood=ll, bic=bics[k],

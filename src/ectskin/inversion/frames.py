@@ -85,7 +85,8 @@ def results_to_arrays(results: Sequence[InversionResult]) -> dict[str, np.ndarra
 
     ``n_fingers`` (F,) int, ``face`` (F, 2) str, ``contact`` (F, 2) bool, ``uv_mm`` (F, 2, 2),
     ``force_n`` / ``height_mm`` (F, 2), ``uv_se_mm`` (F, 2, 2), ``force_se_n`` /
-    ``height_se_mm`` (F, 2), ``log_likelihood`` (F,), ``bic`` (F, 3) (per count, inf where not
+    ``height_se_mm`` (F, 2), ``scale`` / ``scale_se`` (F, 2) (the finger's signal scale, 1 and 0
+    without a scale nuisance), ``log_likelihood`` (F,), ``bic`` (F, 3) (per count, inf where not
     tried), ``converged`` (F,) bool.
     """
     n = len(results)
@@ -99,6 +100,8 @@ def results_to_arrays(results: Sequence[InversionResult]) -> dict[str, np.ndarra
         "uv_se_mm": np.full((n, SLOTS, 2), np.nan),
         "force_se_n": np.full((n, SLOTS), np.nan),
         "height_se_mm": np.full((n, SLOTS), np.nan),
+        "scale": np.full((n, SLOTS), np.nan),
+        "scale_se": np.full((n, SLOTS), np.nan),
         "log_likelihood": np.array([r.log_likelihood for r in results], dtype=np.float64),
         "bic": np.full((n, SLOTS + 1), np.inf),
         "converged": np.array([r.converged for r in results], dtype=bool),
@@ -114,6 +117,8 @@ def results_to_arrays(results: Sequence[InversionResult]) -> dict[str, np.ndarra
             out["uv_se_mm"][i, k] = fe.u_se_mm, fe.v_se_mm
             out["force_se_n"][i, k] = fe.force_se_n
             out["height_se_mm"][i, k] = fe.height_se_mm
+            out["scale"][i, k] = fe.scale
+            out["scale_se"][i, k] = fe.scale_se
     return out
 
 

@@ -330,12 +330,20 @@ class NodeTable:
     def project(self, z: np.ndarray) -> np.ndarray:
         return z - self.Q @ (self.Q.T @ z)
 
-    def cost(self, target: np.ndarray) -> np.ndarray:
+    def cost(self, target: np.ndarray, scale_w: float = 0.0) -> np.ndarray:
         """(n_nodes,) the squared whitened, projected distance of ``target`` (n_pairs,) pF (a
         finger's signal: the untouched readout and any known fingers taken off) to every node,
-        less the constant ||P⊥ target / σ||²."""
+        less the constant ||P⊥ target / σ||².
+
+        ``scale_w`` > 0 (1/sd of the finger scale's prior): each node's signal d is scaled by
+        its best g, min over g of ||z − g d||² + w² (g − 1)², g = (d·z + w²) / (||d||² + w²)."""
         z = self.project(target / self.sigma)
-        return self.norm2 - 2.0 * (self.D @ z)
+        dz = self.D @ z
+        if scale_w <= 0:
+            return self.norm2 - 2.0 * dz
+        w2 = scale_w**2
+        g = (dz + w2) / (self.norm2 + w2)
+        return g * g * self.norm2 - 2.0 * g * dz + w2 * (g - 1.0) ** 2
 
     def pairs(self, target: np.ndarray, n: int) -> list[tuple[int, int]]:
         """The ``n`` best pairs of nodes (i, j) for a frame of two fingers, best first, searched
@@ -350,9 +358,10 @@ class NodeTable:
         m = cost.shape[1]
         return [(int(self.pair_rows[f // m]), int(self.pair_rows[f % m])) for f in flat]
 
-    def starts(self, target: np.ndarray, n: int) -> list[int]:
-        """The nearest node of each (face, mode) group, best first, at most ``n`` of them."""
-        cost = self.cost(target)
+    def starts(self, target: np.ndarray, n: int, scale_w: float = 0.0) -> list[int]:
+        """The nearest node of each (face, mode) group, best first, at most ``n`` of them
+        (``scale_w``: as :meth:`cost`)."""
+        cost = self.cost(target, scale_w)
         best = [lo + int(np.argmin(cost[lo:hi])) for lo, hi in self.groups]
         best.sort(key=lambda i: cost[i])
         return best[:n]
@@ -387,6 +396,9 @@ class StateModel:
         self.N, self.nuisance_names = nuisance_columns(self.untouched, drift, nuisance)
         #: 1/sd of a Gaussian prior on each nuisance coefficient, 0 for none (set by Inversion)
         self.prior_w = np.zeros(self.N.shape[1])
+        #: 1/sd of the prior on each finger's relative signal scale, 0 for no scale (set by
+        #: Inversion: ``finger_scale_sd``)
+        self.scale_w = 0.0
         spec = field.spec
         self.modes: tuple[str, ...] = ("contact", "hover") if np.size(field.heights_mm) else ("contact",)
         lo_f, hi_f = (float(a) for a in spec.force_range_n)

@@ -23,6 +23,11 @@ The hand's push as a nuisance (:func:`ectskin.inversion.push_basis`, direct solv
 trials with and without it and keeps the one with the lower mean point error (no test frame is
 used to choose); ``"on"`` / ``"off"`` force it.
 
+The finger's size (``finger_scale_sd``, e.g. :data:`ectskin.inversion.fit.FINGER_SCALE_SD`):
+people's fingertips differ from the field's, so each finger's signal may be fitted with an
+unknown relative scale under that prior (``Inversion(finger_scale_sd=...)``); None (the
+default) fits the field's finger as it is.
+
 :func:`ectskin.pipeline.metrics.inversion_block` turns the step's metrics into metrics.json's
 ``inversion``.
 """
@@ -203,8 +208,8 @@ def _dataset(rec: Recording, trials: Sequence[str]) -> ContactData | None:
 
 
 def _choose_push(rec: Recording, fields: Mapping[tuple[float, ...], ResponseField],
-                 noise: ReadoutConfig, val: Sequence[str], push: Mapping[Any, np.ndarray]
-                 ) -> dict[str, Any]:
+                 noise: ReadoutConfig, val: Sequence[str], push: Mapping[Any, np.ndarray],
+                 finger_scale_sd: float | None = None) -> dict[str, Any]:
     """The validation frames' mean point error with and without the push columns, and which is
     lower (ties and no validation frame: without, the smaller model)."""
     data = _dataset(rec, val)
@@ -216,7 +221,8 @@ def _choose_push(rec: Recording, fields: Mapping[tuple[float, ...], ResponseFiel
     sub = data.take(rows)
     errors = {}
     for name, cols in (("off", None), ("on", push)):
-        arrays, _ = invert_rows(Inversion(fields, noise, push=cols), rec, data, rows)
+        arrays, _ = invert_rows(Inversion(fields, noise, push=cols,
+                                          finger_scale_sd=finger_scale_sd), rec, data, rows)
         errors[name] = contact_report(sub, prediction_columns(arrays, sub.faces, sub.face_extent),
                                       with_maps=False)["loc_mm_mean"]
     return {"use": bool(errors["on"] < errors["off"]), "val_loc_mm_mean": errors,
@@ -232,6 +238,7 @@ def inversion_step(
     *,
     push: str = "auto",
     max_frames: int | None = MAX_FRAMES,
+    finger_scale_sd: float | None = None,
 ) -> dict[str, Any]:
     """Step "inversion": OUT_DIR/inversion/metrics.json (module docstring); returns it.
 
@@ -241,7 +248,8 @@ def inversion_step(
     holds ContactNet's and its baselines' point error on the states inverted
     (:func:`ectskin.pipeline.metrics.beside`, not stored: the run may change).
     ``max_frames``: the test frames inverted at most, evenly spread over them (None: every
-    one). ``push``: "auto", "on" or "off" (module docstring).
+    one). ``push``: "auto", "on" or "off"; ``finger_scale_sd``: the finger scale's prior (module
+    docstring).
     """
     if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
         raise EctskinError(f"inversion_step: max_frames must be an integer >= 1 or None, got "
@@ -266,6 +274,7 @@ def inversion_step(
         "data": digest(dict(data_settings)), "test_trials": test, "val_trials": val,
         "push": push, "push_choice_frames": PUSH_CHOICE_FRAMES, "noise": noise,
         "window": 1, "force_observable_n": FORCE_OBSERVABLE_N, "max_frames": max_frames,
+        "finger_scale_sd": finger_scale_sd,
     }
 
     def make() -> None:
@@ -288,8 +297,10 @@ def inversion_step(
             cols = {s: push_basis(f, noise=noise) for s, f in fields.items()}
             t_push = time.perf_counter() - t1
             if push == "auto":
-                choice = _choose_push(rec, fields, noise, [n for n in val if has[n]], cols)
-        inv = Inversion(fields, noise, push=cols if choice["use"] else None)
+                choice = _choose_push(rec, fields, noise, [n for n in val if has[n]], cols,
+                                      finger_scale_sd)
+        inv = Inversion(fields, noise, push=cols if choice["use"] else None,
+                        finger_scale_sd=finger_scale_sd)
         data = _dataset(rec, [n for n in test if has[n]])
         n_without = sum(without.values())
         if data is None:
@@ -308,6 +319,7 @@ def inversion_step(
             n_test_trials=len(test), push=choice,
             settings={"window": 1, "kind": "absolute", "noise": to_jsonable(noise),
                       "push": push, "max_fingers": inv.max_fingers,
+                      "finger_scale_sd": finger_scale_sd,
                       "fields": settings["fields"]},
         )
         result["timing"] = {**result.get("timing", {}), "total_s": time.perf_counter() - t0}
