@@ -57,6 +57,7 @@ __all__ = [
     "GP_AUTO_MAX",
     "NET",
     "PREFERENCE",
+    "candidate_predictions",
     "candidates_on_test",
     "check_contact_candidates",
     "choose_after_net",
@@ -312,6 +313,36 @@ def load_selected(run: Path, doc: dict[str, Any]) -> ContactClassical:
     return model
 
 
+def candidate_predictions(
+    run: Any, test: Any, pred: np.ndarray, train: Any
+) -> dict[str, tuple[np.ndarray | None, str]]:
+    """{name: (predictions on ``test`` or None, where they came from)} of every candidate of a
+    contact run's candidates.json ({} without one): the selected model's are ``pred``,
+    ContactNet answers from model.pt, the other classical candidates are refit on ``train``
+    (the run's training split as a ContactData; or an object with ``data`` and ``note``, as
+    :func:`ectskin.learn.evaluate.evaluate_run` passes it) with their recorded seed and settings
+    (None when no training split is at hand)."""
+    from ectskin.learn.classical import thread_limit
+
+    data, note = getattr(train, "data", train), getattr(train, "note", "")
+    out: dict[str, tuple[np.ndarray | None, str]] = {}
+    for name, info in (run.candidates or {}).get("candidates", {}).items():
+        if name == run.selected:
+            out[name] = (pred, run.model_file.name)
+        elif name == NET:
+            out[name] = (run.task.predict(run.model, test), "model.pt")
+        elif data is None:
+            out[name] = (None, f"not refit: {note}")
+        else:
+            s = info.get("settings") or {}
+            with thread_limit(1):
+                model, _, _ = fit_contact_classical(
+                    name, data, seed=int(s.get("seed", 0)), max_train=s.get("max_train")
+                )
+            out[name] = (model.predict(test.x), "refit on the train split")
+    return out
+
+
 def candidates_on_test(run: Any, case: Any, train: Any) -> dict[str, Any]:
     """Every candidate of a contact run's candidates.json on the test frames: {name:
     val_loc_mm, test_loc_mm (mean), test_loc_mm_median, test_force_mae_n,
@@ -319,31 +350,20 @@ def candidates_on_test(run: Any, case: Any, train: Any) -> dict[str, Any]:
     from its file, ContactNet from model.pt, the other classical candidates are refit on the
     run's training split with their recorded seed and settings (test numbers None when the
     training trials are not at hand)."""
-    from ectskin.learn.classical import thread_limit
     from ectskin.learn.tasks.contact import contact_report
 
     test, doc = case.test, run.candidates or {}
     out: dict[str, Any] = {}
-    for name, info in doc.get("candidates", {}).items():
-        if name == run.selected:
-            pred, source = case.pred, run.model_file.name
-        elif name == NET:
-            pred, source = run.task.predict(run.model, test), "model.pt"
-        elif train.data is None:
-            pred, source = None, f"not refit: {train.note}"
-        else:
-            s = info.get("settings") or {}
-            with thread_limit(1):
-                model, _, _ = fit_contact_classical(
-                    name, train.data, seed=int(s.get("seed", 0)), max_train=s.get("max_train")
-                )
-            pred, source = model.predict(test.x), "refit on the train split"
+    for name, (pred, source) in candidate_predictions(run, test, case.pred, train).items():
+        info = doc["candidates"][name]
         m = None if pred is None else contact_report(test, pred, with_maps=False)
         out[name] = {
             "val_loc_mm": info.get("val_loc_mm"),
             "test_loc_mm": None if m is None else m["loc_mm_mean"],
             "test_loc_mm_median": None if m is None else m["loc_mm_median"],
             "test_force_mae_n": None if m is None else m["force_mae_n"],
+            "test_force_coverage_1sigma": None if m is None else m["force_coverage_1sigma"],
+            "test_force_coverage_2sigma": None if m is None else m["force_coverage_2sigma"],
             "test_count_accuracy": None if m is None else m["count_accuracy"],
             "model": source,
             "selected": name == run.selected,

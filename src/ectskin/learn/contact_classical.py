@@ -27,7 +27,17 @@ The ``knn`` and ``ridge`` candidates are the contact task's k-NN and ridge basel
 functions call :func:`fit_contact_classical`): fit with the same seed on the same split they
 give the same predictions, so a choice among candidates that include them never loses to them.
 The Gaussian process gives its own uncertainty: ``sigma_mm`` is the mean of its predictive
-standard deviations of u and v (NaN for the others). Forces are clipped at 0.
+standard deviations of u and v (NaN for the others), ``force_sigma_n`` that of the force.
+Forces are clipped at 0.
+
+The other candidates' force σ (part ``force_sigma``, :func:`fit_force_sigma`) comes from errors
+on frames the force model did not see: the training trials are split into
+:data:`SIGMA_FOLDS` folds (seeded, by trial), the regression is refit on all folds but one and
+answers that one, and a linear model of |error| on the standardised frame, scaled so that the
+mean of (error / σ)² over those out-of-fold frames is 1, is the σ (at least
+:data:`SIGMA_FLOOR_REL` of the mean |error|). The training split, not the validation split:
+the contact baselines are fit where no validation split is at hand, and a candidate must
+answer as its baseline does. A model.skops written before this part loads without it (σ NaN).
 
 Training frames: a seeded random subsample of at most :data:`MAX_TRAIN`. The settings are
 common defaults, not tuned on any data.
@@ -75,6 +85,14 @@ GP_MAX_TRAIN = 2_000
 #: the finger slots of the columns (ContactNet's)
 MAX_FINGERS = 2
 PARTS = ("contact", "hover", "face", "regress")
+#: parts a model.skops may hold besides :data:`PARTS` (absent in files written before them)
+OPTIONAL_PARTS = ("force_sigma",)
+#: folds of the training trials whose out-of-fold force errors fit the force's σ
+SIGMA_FOLDS = 3
+#: the force's σ is at least this share of the mean out-of-fold |error|
+SIGMA_FLOOR_REL = 0.05
+#: ridge of the σ model (standardised frame features)
+SIGMA_RIDGE = 1e-3
 SKOPS_FORMAT = "ectskin.contact_classical"
 SKOPS_VERSION = 1
 #: types outside skops' defaults that a contact model.skops holds
@@ -208,8 +226,10 @@ class ContactClassical:
             count = _classes(self.parts["contact"], frames) if n else np.zeros(0)
             p_hover = _proba1(self.parts["hover"], frames) if n else np.zeros(0)
             face = _classes(self.parts["face"], frames) if n else np.zeros(0)
-            uvf, sigma = self._regress(frames)
-        slot = np.column_stack([face, uvf[:, 0], uvf[:, 1], sigma, uvf[:, 2]])
+            uvf, sigma, force_sigma = self._regress(frames)
+        if self.name != "gp":
+            force_sigma = force_sigma_of(self.parts.get("force_sigma"), frames)
+        slot = np.column_stack([face, uvf[:, 0], uvf[:, 1], sigma, uvf[:, 2], force_sigma])
         out = np.empty((n, len(PRED_COLUMNS) + MAX_FINGERS * len(SLOT_COLUMNS)))
         out[:, 0], out[:, 1], out[:, 2] = count, p_contact, p_hover
         for s in range(MAX_FINGERS):
@@ -217,25 +237,82 @@ class ContactClassical:
             out[:, a : a + len(SLOT_COLUMNS)] = slot
         return out
 
-    def _regress(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(n, 3) (u, v, force) and (n,) sigma_mm (NaN but for the Gaussian process)."""
+    def _regress(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(n, 3) (u, v, force), (n,) sigma_mm and (n,) force_sigma_n (both the Gaussian
+        process's own; NaN for the others)."""
         n = len(frames)
         reg = self.parts["regress"]
-        sigma = np.full(n, np.nan)
+        sigma, force_sigma = np.full(n, np.nan), np.full(n, np.nan)
         if reg is None or not n:
-            return np.zeros((n, 3)), sigma
-        if isinstance(reg, list):  # gbt: one regressor per output
-            out = np.column_stack([r.predict(frames) for r in reg])
-        elif self.name == "gp":
-            out, std = reg[-1].predict(reg[:-1].transform(frames), return_std=True)
-            std = np.asarray(std).reshape(n, -1)
-            sigma = std[:, :2].mean(axis=1)
-        else:
-            out = reg.predict(frames)
+            return np.zeros((n, 3)), sigma, force_sigma
+        if self.name != "gp":
+            return _predict_regress(self.name, reg, frames), sigma, force_sigma
+        out, std = reg[-1].predict(reg[:-1].transform(frames), return_std=True)
         out = np.asarray(out, dtype=np.float64).reshape(n, 3)
-        if self.name != "knn":  # the k-NN baseline's forces are means of forces >= 0
-            out[:, 2] = np.maximum(out[:, 2], 0.0)
-        return out, sigma
+        out[:, 2] = np.maximum(out[:, 2], 0.0)
+        std = np.asarray(std).reshape(n, -1)
+        return out, std[:, :2].mean(axis=1), std[:, min(2, std.shape[1] - 1)]
+
+
+def _predict_regress(name: str, reg: Any, frames: np.ndarray) -> np.ndarray:
+    """(n, 3) (u, v, force) of a fitted regression part (forces clipped at 0 but k-NN's)."""
+    n = len(frames)
+    if isinstance(reg, list):  # gbt: one regressor per output
+        out = np.column_stack([r.predict(frames) for r in reg])
+    else:
+        out = reg.predict(frames)
+    out = np.asarray(out, dtype=np.float64).reshape(n, 3)
+    if name != "knn":  # the k-NN baseline's forces are means of forces >= 0
+        out[:, 2] = np.maximum(out[:, 2], 0.0)
+    return out
+
+
+def _fit_regress(name: str, x: np.ndarray, target: np.ndarray, seed: int) -> Any:
+    if name == "gbt":
+        return [_regressor(name, seed).fit(x, target[:, j]) for j in range(target.shape[1])]
+    return _regressor(name, seed).fit(x, target)
+
+
+def fit_force_sigma(
+    name: str, x: np.ndarray, target: np.ndarray, groups: np.ndarray, seed: int
+) -> dict[str, Any] | None:
+    """The force σ of candidate ``name`` (module docstring) from frames in contact ``x``
+    (n, P), their (u, v, force) ``target`` (n, 3) and trial ``groups`` (n,): a dict of plain
+    numbers (:func:`force_sigma_of` answers with it), or None with fewer than two trials."""
+    trials = np.unique(groups)
+    if trials.size < 2:
+        return None
+    fold_of = dict(zip(np.random.default_rng(seed + 2).permutation(trials),
+                       np.arange(trials.size) % min(SIGMA_FOLDS, trials.size)))
+    fold = np.array([fold_of[g] for g in groups])
+    pred = np.empty(len(x))
+    for k in np.unique(fold):
+        held = fold == k
+        if name == "gbt":  # one regressor per output: the force's alone
+            reg = _regressor(name, seed).fit(x[~held], target[~held, 2])
+            pred[held] = np.maximum(reg.predict(x[held]), 0.0)
+        else:
+            pred[held] = _predict_regress(name, _fit_regress(name, x[~held], target[~held], seed),
+                                          x[held])[:, 2]
+    err = np.abs(pred - target[:, 2])
+    mean, scale = x.mean(0), np.maximum(x.std(0), 1e-12)
+    z = np.c_[(x - mean) / scale, np.ones(len(x))]
+    coef = np.linalg.solve(z.T @ z + SIGMA_RIDGE * len(x) * np.eye(z.shape[1]), z.T @ err)
+    floor = max(SIGMA_FLOOR_REL * float(err.mean()), 1e-9)
+    g = np.maximum(z @ coef, floor)
+    factor = max(float(np.sqrt(np.mean((err / g) ** 2))), 1e-12)
+    return {"mean": mean.tolist(), "scale": scale.tolist(), "coef": coef.tolist(),
+            "floor": floor, "factor": factor, "n_frames": int(len(x)),
+            "folds": int(np.unique(fold).size)}
+
+
+def force_sigma_of(part: Any, frames: np.ndarray) -> np.ndarray:
+    """(n,) force σ (N) of frames (n, P) by a :func:`fit_force_sigma` part (NaN: None)."""
+    if part is None:
+        return np.full(len(frames), np.nan)
+    z = (frames - np.asarray(part["mean"])) / np.asarray(part["scale"])
+    coef = np.asarray(part["coef"])
+    return part["factor"] * np.maximum(z @ coef[:-1] + coef[-1], part["floor"])
 
 
 def fit_contact_classical(
@@ -257,7 +334,7 @@ def fit_contact_classical(
         parts["contact"] = _fit_class(_classifier(name, seed), x, on_all)
         parts["hover"] = _fit_class(_classifier(name, seed), x, train.hover[idx].astype(int))
         on = on_all > 0
-        parts["face"], parts["regress"] = 0, None
+        parts["face"], parts["regress"], parts["force_sigma"] = 0, None, None
         if on.any():
             xo = x[on]
             target = np.column_stack([train.uv[idx][on, 0], train.force[idx][on, 0]])
@@ -265,10 +342,10 @@ def fit_contact_classical(
             if name == "gp" and len(xo) > GP_MAX_TRAIN:
                 keep = subsample(len(xo), GP_MAX_TRAIN, np.random.default_rng(seed + 1))
                 xo, target = xo[keep], target[keep]
-            if name == "gbt":
-                parts["regress"] = [_regressor(name, seed).fit(xo, target[:, j]) for j in range(3)]
-            else:
-                parts["regress"] = _regressor(name, seed).fit(xo, target)
+            parts["regress"] = _fit_regress(name, xo, target, seed)
+            if name != "gp":
+                groups = np.asarray(train.group)[idx][on]
+                parts["force_sigma"] = fit_force_sigma(name, xo, target, groups, seed)
     seconds = time.perf_counter() - t0
     settings = {**SETTINGS[name], "max_train": limit, "seed": seed, "standardised": True}
     if name == "gp":
@@ -340,6 +417,26 @@ def _check_part(path: Path, name: str, part: str, value: Any, n_pairs: int) -> N
         raise EctskinError(f"{path}: part 'regress' must hold 3 regressors, found {len(items)}")
 
 
+def _check_force_sigma(path: Path, part: Any, n_pairs: int) -> None:
+    """Refuse a ``force_sigma`` part that is not None or the plain numbers of
+    :func:`fit_force_sigma` for ``n_pairs`` channels."""
+    if part is None:
+        return
+    sizes = {"mean": n_pairs, "scale": n_pairs, "coef": n_pairs + 1}
+    ok = isinstance(part, dict) and all(
+        isinstance(part.get(k), list) and len(part[k]) == n
+        and all(isinstance(v, float | int) and np.isfinite(v) for v in part[k])
+        for k, n in sizes.items()
+    ) and all(isinstance(part.get(k), float | int) and np.isfinite(part[k]) and part[k] > 0
+              for k in ("floor", "factor"))
+    if not ok:
+        raise EctskinError(
+            f"{path}: part 'force_sigma' must be None or a dict of mean, scale ({n_pairs} "
+            f"numbers each), coef ({n_pairs + 1}), floor and factor (> 0), found "
+            f"{type(part).__name__}"
+        )
+
+
 def load_contact_classical(path: str | Path, *, layout: Any = None) -> ContactClassical:
     """Load a ``model.skops`` written by :func:`save_contact_classical`; refuse anything else
     (an EctskinError naming the file). Only skops' default types and :data:`SKOPS_TRUSTED` are
@@ -359,10 +456,15 @@ def load_contact_classical(path: str | Path, *, layout: Any = None) -> ContactCl
     if not isinstance(faces, list) or not faces or not all(isinstance(f, str) for f in faces):
         raise EctskinError(f"{path}: field 'faces' must be a list of face names, found {faces!r}")
     parts = payload.get("parts")
-    if not isinstance(parts, dict) or set(parts) != set(PARTS):
-        raise EctskinError(f"{path}: field 'parts' must hold {', '.join(PARTS)}")
+    if not isinstance(parts, dict) or not set(PARTS) <= set(parts) <= {*PARTS, *OPTIONAL_PARTS}:
+        raise EctskinError(
+            f"{path}: field 'parts' must hold {', '.join(PARTS)} (and may hold "
+            f"{', '.join(OPTIONAL_PARTS)})"
+        )
     for part in PARTS:
         _check_part(path, name, part, parts[part], payload["n_pairs"])
+    parts.setdefault("force_sigma", None)
+    _check_force_sigma(path, parts["force_sigma"], payload["n_pairs"])
     names = payload.get("pair_names")
     if not isinstance(names, list) or len(names) != payload["n_pairs"]:
         names = [f"ch{i}" for i in range(payload["n_pairs"])]

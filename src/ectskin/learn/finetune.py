@@ -16,6 +16,10 @@ a later epoch replaces them only where it is better on validation, so a fine-tun
 weights worse than the base on that split, and a fine-tune of 0 epochs answers exactly as the
 base run does.
 
+The same path on data sets in memory (no recording file, no split of it):
+``ectskin.design.variability.finetune_run``, what the variability study's fine-tuning recovery
+and the few-shot study (``ectskin study few-shot``) call.
+
 Refused (an EctskinError naming the run): a model of another task, a layout with another pair
 count than the base model reads, a contact window other than the base's, touch classes the
 base model does not have, and ``--init-from`` with a classical model choice.
@@ -27,6 +31,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
+import torch
 from torch import nn
 
 from ectskin._check import EctskinError
@@ -100,12 +105,19 @@ def keep_base(
     task: Any, model: nn.Module, criterion: Any, val_data: Any, settings: Any, d: Any
 ) -> tuple[float, float]:
     """The base weights scored on the new validation split (as every epoch is): (val_loss,
-    val_metric)."""
+    val_metric). Scoring leaves the base model as it was: a buffer the validation pass sets
+    (the contact force σ's scale, :mod:`ectskin.learn.tasks.contact`) is put back, so epoch 0
+    is the base run bit for bit; the epochs after it set theirs on the new split as usual."""
     from ectskin.learn.engine import evaluate, val_indices
 
+    before = {k: v.detach().clone() for k, v in model.named_buffers()}
     val_t = task.tensors(val_data, d.device)
     idx = val_indices(val_t.n, settings.val_samples, d.rank, d.world_size)
-    return evaluate(model, criterion, val_t, idx, settings.eval_batch_size, d)
+    scores = evaluate(model, criterion, val_t, idx, settings.eval_batch_size, d)
+    with torch.no_grad():
+        for k, v in model.named_buffers():
+            v.copy_(before[k])
+    return scores
 
 
 def save_base(out: Path, model: nn.Module, normalizer: dict, extra: dict, scores) -> None:

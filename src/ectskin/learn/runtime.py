@@ -138,7 +138,9 @@ class OnnxModel:
         with torch.inference_mode():
             want = wrapped(*examples).numpy()
         got = self(*(e.numpy() for e in examples))
-        if got.shape != want.shape or not np.allclose(got, want, rtol=_TOLERANCE, atol=_TOLERANCE):
+        if got.shape != want.shape or not np.allclose(
+            got, want, rtol=_TOLERANCE, atol=_TOLERANCE, equal_nan=True
+        ):
             diff = float(np.max(np.abs(got - want))) if got.shape == want.shape else None
             raise EctskinError(
                 f"{name}: the ONNX export does not reproduce the PyTorch model (shape "

@@ -297,7 +297,10 @@ def status_line(out: Output) -> str:
 def _contact_text(reading: Any) -> str:
     """A ``ContactReading`` in a few words."""
     fingers = ", ".join(
-        f"{f.face} ({f.u_mm:.0f}, {f.v_mm:.0f}) mm {f.force_n:.2f} N" for f in reading.fingers
+        f"{f.face} ({f.u_mm:.0f}, {f.v_mm:.0f}) mm {f.force_n:.2f}"
+        + (f" ± {f.force_sigma_n:.2f}" if getattr(f, "force_sigma_n", None) is not None else "")
+        + " N"
+        for f in reading.fingers
     )
     return (
         f"contact {reading.count}"

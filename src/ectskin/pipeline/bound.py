@@ -7,10 +7,23 @@
             OUT_DIR/bound/bound_vs_error.<fmt>  bound_field), and the bound at each test frame's
                                             true point; the maps, and ContactNet's error map
                                             beside the bound map per face
+    force_observable
+            OUT_DIR/runs/contact/force_observable.json
+                                            the force error of the contact run's model, its
+                                            baselines and candidates on the test frames where
+                                            the bound says force is observable, where it says
+                                            it is not, and where there is no bound
 
 :func:`bound_step` takes fields already built (the field step's {state: ResponseField}); the
 nuisance columns come from direct solves of each field's own sensor (``field_nuisances``).
-:func:`ectskin.pipeline.metrics.bound_block` turns bound.json into metrics.json's ``bound``.
+:func:`ectskin.pipeline.metrics.bound_block` turns bound.json into metrics.json's ``bound``, and
+:func:`ectskin.pipeline.metrics.force_split_keys` the force split into ``contact``'s keys.
+
+Force is *observable* at a test frame (one finger on the skin) when the bound on the force's
+standard deviation at its true point and force, in its state's field (the headline case, as
+the bound section reports it), is below the bound's threshold
+(:data:`ectskin.twin.bound.FORCE_THRESHOLD_N`, the inversion's ``FORCE_OBSERVABLE_N``);
+frames of a state without a field have no bound and are counted apart.
 """
 
 from __future__ import annotations
@@ -29,7 +42,8 @@ from ectskin._files import read_json, save_figure_atomic, write_json_atomic
 from ectskin.io import Recording, read_recording
 from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
 from ectskin.pipeline.runner import StepRunner, digest
-from ectskin.twin.bound import NUISANCES, cases
+from ectskin.pipeline.steps import run_settings
+from ectskin.twin.bound import FORCE_THRESHOLD_N, NUISANCES, cases
 from ectskin.twin.bound_field import (
     MAP_SPACING_MM,
     StateNuisances,
@@ -46,6 +60,8 @@ log = logging.getLogger(__name__)
 
 BOUND_DIR = "bound"
 BOUND_FILE = "bound.json"
+#: the force split of the contact run (in its folder)
+FORCE_FILE = "force_observable.json"
 #: the case the metrics lead with: every nuisance at its prior (the hand's push unknown, the
 #: inflation to ±1 ml, the finger's radius to ±1 mm), as the contact data have them
 HEADLINE_CASE = "all"
@@ -130,6 +146,112 @@ def frame_bounds(
             "states_without_field": missing}
 
 
+def frame_force_bounds(
+    fields: Mapping[tuple[float, ...], ResponseField],
+    columns: Mapping[tuple[float, ...], StateNuisances],
+    rec: Recording,
+    trials: Sequence[str],
+    *,
+    case: str = HEADLINE_CASE,
+    nuisances: Sequence[str] = NUISANCES,
+    prior_sd: Mapping[str, float] | None = None,
+) -> dict[str, np.ndarray]:
+    """{trial: (n_frames,) N} the bound (``case``) on the force's standard deviation at each
+    frame of ``trials`` with exactly one finger on the skin, at its true point and force (moved
+    to the field's nearest edge as :func:`frame_bounds` does); NaN at the other frames and where
+    the state or face has no field. The same bound as :func:`frame_bounds`, frame by frame."""
+    check_option("case", case, cases(tuple(nuisances)))
+    out: dict[str, np.ndarray] = {}
+    # (state, face) -> [(trial, frame rows, uv, force)], to bound each field's points at once
+    groups: dict[tuple[tuple[float, ...], str], list[tuple[str, np.ndarray, Any, Any]]] = {}
+    for name in trials:
+        t = rec.trial(name)
+        out[name] = np.full(t.n_frames, np.nan)
+        n_on = t.n_contacts
+        state = tuple(float(x) for x in t.inflation)
+        field = fields.get(state)
+        if n_on is None or t.finger_uv_mm is None or field is None:
+            continue
+        for k in range(t.n_fingers):
+            f = t.finger(k)
+            if f.contact is None or f.uv_mm is None or f.surface not in field.faces:
+                continue
+            rows = np.flatnonzero((n_on == 1) & f.contact.astype(bool))
+            if rows.size:
+                force = np.zeros(t.n_frames) if f.force is None else f.force
+                groups.setdefault((state, str(f.surface)), []).append(
+                    (name, rows, f.uv_mm[rows], force[rows]))
+    for (state, face), parts in groups.items():
+        field = fields[state]
+        (ulo, uhi), (vlo, vhi) = field.spec.extent(face)
+        flo, fhi = field.spec.force_range_n
+        uv = np.concatenate([p[2] for p in parts])
+        q = np.c_[np.clip(uv[:, 0], ulo, uhi), np.clip(uv[:, 1], vlo, vhi)]
+        fq = np.clip(np.concatenate([p[3] for p in parts]), flo, fhi)
+        sd = field_bounds(field, face, q, fq, columns=columns.get(state), nuisances=nuisances,
+                          prior_sd=prior_sd, only=[case])[case]["force_n"]
+        a = 0
+        for name, rows, _, _ in parts:
+            out[name][rows] = sd[a : a + rows.size]
+            a += rows.size
+    return out
+
+
+def contact_force_split(
+    run_dir: Path,
+    rec: Recording,
+    bounds: Mapping[str, np.ndarray],
+    *,
+    threshold_n: float = FORCE_THRESHOLD_N,
+    seed: int = 0,
+    baselines: bool = True,
+) -> dict[str, Any]:
+    """The force split (:func:`ectskin.learn.tasks.contact.force_split_report`) of the contact
+    run in ``run_dir`` on its test trials of ``rec`` (calibrated as ``ectskin evaluate`` does),
+    with ``bounds`` ({trial: (n_frames,) N}, :func:`frame_force_bounds`): {"model": the model
+    the run answers with, "models": {name: split}} for that model, every other candidate of its
+    candidates.json and, with ``baselines``, the contact baselines refit on its training trials
+    with ``seed`` (as the run's evaluation fits them). ``threshold_n``: the bound's own
+    (:data:`ectskin.twin.bound.FORCE_THRESHOLD_N`, the inversion's ``FORCE_OBSERVABLE_N``)."""
+    from ectskin.learn.baselines.contact import contact_baselines
+    from ectskin.learn.contact_choice import candidate_predictions
+    from ectskin.learn.evaluate import calibration, read_run
+    from ectskin.learn.tasks.contact import force_split_report
+    run = read_run(run_dir)
+    if run.task.name != "contact":
+        raise EctskinError(f"{run_dir}: not a contact run (task {run.task.name!r})")
+    calib = calibration(run, rec, None, "the contact data")
+    ds = run.task.dataset(rec, reference=calib.value, **run.task.dataset_options(run.config))
+
+    def part(names: Sequence[str]) -> Any:
+        wanted = set(names)
+        return ds.select(np.array([i for i, n in enumerate(ds.group_names) if n in wanted],
+                                  dtype=np.int64))
+
+    test_names = list(run.split.get("test") or [])
+    missing = [n for n in test_names if n not in bounds]
+    if missing:
+        raise EctskinError(f"contact_force_split: no bound for test trial {missing[0]!r}")
+    test, train = part(test_names), part(run.split.get("train") or [])
+    sd = np.array([bounds[test.group_names[g]][f] for g, f in zip(test.group, test.frame)])
+    if run.classical is not None:
+        pred = run.classical.predict(test.x)
+    elif run.model is not None:
+        pred = run.task.predict(run.model, test)
+    else:
+        raise EctskinError(f"{run_dir}: the run has no model to answer with")
+    preds = {run.selected: pred}
+    for name, (p, _) in candidate_predictions(run, test, pred, train).items():
+        if p is not None:
+            preds[name] = p
+    if baselines and train.n_samples:
+        for name, (p, _) in contact_baselines(train, test, train.region_centre,
+                                              seed=seed).items():
+            preds.setdefault(name, p)
+    return {"model": run.selected, "threshold_n": threshold_n,
+            "models": {k: force_split_report(test, p, sd, threshold_n) for k, p in preds.items()}}
+
+
 def bound_step(
     runner: StepRunner,
     config: ReproduceConfig,
@@ -142,8 +264,9 @@ def bound_step(
     force_n: float = 1.0,
     case: str = HEADLINE_CASE,
 ) -> dict[str, Any]:
-    """Step "bound": OUT_DIR/bound/ (module docstring) from ``fields`` ({inflation: field});
-    returns bound.json.
+    """Steps "bound": OUT_DIR/bound/ (module docstring) from ``fields`` ({inflation: field}),
+    and, with ``data`` and a trained contact run, "force_observable"; returns bound.json, with
+    the force split (the step's file, not stored in bound.json) under ``force_split``.
 
     ``data``: (contact.h5, its settings) of the contact step, whose test trials
     (runs/contact/split.json) are bounded frame by frame; None: the maps alone. The error map
@@ -166,11 +289,21 @@ def bound_step(
         **config.figure_settings,
     }
 
+    cache: dict[str, Any] = {}
+
+    def state_columns() -> dict[tuple[float, ...], StateNuisances]:
+        """The nuisance columns of every state, solved once for both steps."""
+        if "columns" not in cache:
+            with threadpool_limits(1):
+                cache["columns"] = (
+                    {s: field_nuisances(f) for s, f in fields.items()} if nuisances else {})
+        return cache["columns"]
+
     def make() -> None:
         t0 = time.perf_counter()
         first = next(iter(fields.values()))
         with threadpool_limits(1):
-            columns = {s: field_nuisances(f) for s, f in fields.items()} if nuisances else {}
+            columns = state_columns()
             t_cols = time.perf_counter() - t0
             maps = field_bound_maps(fields, columns, first.spec.layout, spacing_mm=spacing_mm,
                                     force_n=force_n, nuisances=nuisances, prior_sd=prior_sd)
@@ -197,4 +330,28 @@ def bound_step(
                  maps["timing"]["total_s"], t_cols)
 
     runner.step("bound", settings, [out_dir], make)
-    return read_json(out_dir / BOUND_FILE, "bound maps")
+    result = read_json(out_dir / BOUND_FILE, "bound maps")
+    trained = any((run_dir / f).is_file() for f in ("model.pt", "model.skops"))
+    if data is not None and test and trained:
+        force_file = run_dir / FORCE_FILE
+        force_settings = {
+            **{k: settings[k] for k in ("fields", "nuisances", "prior_sd", "case", "data",
+                                        "test_trials")},
+            "run": digest(run_settings(config, CONTACT_RUN, dict(data[1]))),
+            "baselines": config.baselines, "seed": config.seed,
+        }
+
+        def split() -> None:
+            t0 = time.perf_counter()
+            rec = read_recording(data[0])
+            with threadpool_limits(1):
+                bounds = frame_force_bounds(fields, state_columns(), rec, test, case=case,
+                                            nuisances=nuisances, prior_sd=prior_sd)
+            out = contact_force_split(run_dir, rec, bounds, seed=config.seed,
+                                      baselines=config.baselines)
+            out.update(case=case, seconds=time.perf_counter() - t0)
+            write_json_atomic(force_file, out)
+
+        runner.step("force_observable", force_settings, [force_file], split)
+        result["force_split"] = read_json(force_file, "contact force split")
+    return result

@@ -96,7 +96,8 @@ def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
     the slots in the fitted order; a frame where none presses gives slot 0 the point of the
     hovering finger, or, with no finger at all, the middle of the first face (an answer is
     needed wherever a finger is on the skin, and that one is charged its full error).
-    ``sigma_mm``: the point's standard error, √(σ_u² + σ_v²); ``face``: the index in ``faces``.
+    ``sigma_mm``: the point's standard error, √(σ_u² + σ_v²); ``force_sigma_n``: the force's
+    (0 where there is none: no force fitted); ``face``: the index in ``faces``.
     """
     n = len(arrays["n_fingers"])
     S, nc = MAX_FINGERS, len(SLOT_COLUMNS)
@@ -123,6 +124,9 @@ def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
                 pred[i, a + col["sigma_mm"]] = float(np.hypot(*se))
                 pred[i, a + col["force_n"]] = (arrays["force_n"][i, k]
                                                if arrays["contact"][i, k] else 0.0)
+                if "force_sigma_n" in col and "force_se_n" in arrays and arrays["contact"][i, k]:
+                    se_f = float(arrays["force_se_n"][i, k])  # the fit's Fisher standard error
+                    pred[i, a + col["force_sigma_n"]] = se_f if np.isfinite(se_f) else 0.0
             else:
                 pred[i, a + col["u_mm"]] = (u0 + u1) / 2
                 pred[i, a + col["v_mm"]] = (v0 + v1) / 2

@@ -3,7 +3,8 @@
 :func:`combine_metrics` builds the dict that :mod:`ectskin.report` renders (its keys are listed
 there): the paper runs' metrics under ``touch`` and ``track``; the robust TouchMLP under
 ``touch.robust``, with ``recipe_description``, its training recipe in words; the ablations under
-``track.ablations``; the contact run's blocks (:func:`contact_blocks`); the physical limit under
+``track.ablations``; the contact run's blocks (:func:`contact_blocks`), with the force error
+where the bound says force is observable and where not (:func:`force_split_keys`); the physical limit under
 ``bound`` (:func:`bound_block`, from the bound step's bound.json); the training-free inversion
 under ``inversion`` (:func:`inversion_block`, from the inversion step's metrics); then the data, the protocol,
 the step timings, the reused steps and the machine.
@@ -19,6 +20,7 @@ from typing import Any
 
 from ectskin._check import EctskinError
 from ectskin.io import list_trials
+from ectskin.learn.metrics.contact import FORCE_SPLIT_PARTS
 from ectskin.learn.profiles import describe_recipe
 from ectskin.pipeline.config import ABLATIONS
 from ectskin.pipeline.runner import StepRunner
@@ -119,10 +121,22 @@ CONTACT_KEYS = (
     "face_accuracy",
     "force_mae_n",
     "force_rel",
+    "force_coverage_1sigma",
+    "force_coverage_2sigma",
+    "force_sigma_n_median",
     "hover_detect_mm",
     "contact_accuracy",
     "n_single_contact_frames",
 )
+#: the force split's keys (:func:`ectskin.learn.metrics.contact.force_split`) copied into
+#: ``contact`` and each of its baselines, as key in the split → key in metrics.json
+FORCE_SPLIT_KEYS = {
+    **{f"force_mae_n_{p}": f"force_mae_n_{p}" for p in FORCE_SPLIT_PARTS},
+    **{f"share_{p}": f"force_share_{p}" for p in FORCE_SPLIT_PARTS},
+    **{f"n_frames_{p}": f"force_n_frames_{p}" for p in FORCE_SPLIT_PARTS},
+    **{f"force_coverage_{k}sigma_{p}": f"force_coverage_{k}sigma_{p}"
+       for p in FORCE_SPLIT_PARTS for k in (1, 2)},
+}
 #: two-finger metrics copied to ``multi``
 MULTI_KEYS = (
     "count_accuracy",
@@ -159,6 +173,28 @@ def contact_blocks(run: Mapping[str, Any]) -> dict[str, Any]:
     multi = multi_of(c)
     multi["baselines"] = {b: multi_of(v) for b, v in baselines.items()}
     return {"contact": contact, "multi": multi}
+
+
+def force_split_keys(contact: dict[str, Any], split: Mapping[str, Any] | None) -> None:
+    """Put the force split of the bound step (:func:`ectskin.pipeline.bound.contact_force_split`:
+    {"model", "threshold_n", "models": {name: split}}) into metrics.json's ``contact`` block:
+    the answering model's :data:`FORCE_SPLIT_KEYS` on top, each baseline's beside its other
+    numbers, and ``force_split`` (the threshold, the bound's case, every model's whole split,
+    the mean bound in each part)."""
+    if not split:
+        return
+    models = split.get("models") or {}
+    own = models.get(split.get("model")) or {}
+    contact.update({new: own.get(old) for old, new in FORCE_SPLIT_KEYS.items()})
+    for name, b in (contact.get("baselines") or {}).items():
+        if name in models:
+            b.update({new: models[name].get(old) for old, new in FORCE_SPLIT_KEYS.items()})
+    contact["force_split"] = {
+        "threshold_n": split.get("threshold_n"),
+        "case": split.get("case"),
+        "model": split.get("model"),
+        "models": dict(models),
+    }
 
 
 def handling_block(off_run: Mapping[str, Any]) -> dict[str, Any]:
@@ -216,6 +252,8 @@ def combine_metrics(
             m["track"]["ablations"] = abl
     if contact is not None:
         m.update(contact_blocks(contact))
+        if bound is not None:
+            force_split_keys(m["contact"], bound.get("force_split"))
     if bound is not None:
         m["bound"] = bound_block(bound, m.get("contact"))
     if inversion is not None:

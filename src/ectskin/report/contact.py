@@ -146,6 +146,56 @@ def _share(x: Any) -> str:
     return pct(x) if isinstance(x, int | float) else DASH
 
 
+#: the parts of the force split (metrics.json ``contact.force_split``) and their words
+FORCE_PARTS = (
+    ("observable", "observable (bound < {thr:g} N)"),
+    ("not_observable", "not observable (bound ≥ {thr:g} N)"),
+    ("no_bound", "no bound (no field at the frame's state)"),
+)
+
+
+def force_split_section(c: Mapping[str, Any]) -> list[tuple[str, Any]]:
+    """Where force can be known: the answering model's force MAE, the strongest baseline's and
+    the model's σ coverage over the test frames (one finger) where the bound says force is
+    observable, where it says it is not, and where there is none (``contact.force_split``);
+    [] without the split."""
+    split = c.get("force_split")
+    if not isinstance(split, Mapping) or not split.get("models"):
+        return []
+    thr = split.get("threshold_n") or 0.1
+    models = split["models"]
+    own = models.get(split.get("model")) or {}
+    others = {k: v for k, v in models.items() if k != split.get("model")}
+    rows = []
+    for part, label in FORCE_PARTS:
+        key = f"force_mae_n_{part}"
+        best = _best(others, key, True)
+        rows.append((
+            label.format(thr=thr),
+            _share(own.get(f"share_{part}")),
+            _value(own.get(key), "N"),
+            f"{baseline_name(best[0])} {_value(best[1], 'N')}" if best else DASH,
+            _value(own.get(f"bound_force_n_mean_{part}"), "N"),
+            f"{_share(own.get(f'force_coverage_1sigma_{part}'))} / "
+            f"{_share(own.get(f'force_coverage_2sigma_{part}'))}",
+        ))
+    cov1, cov2 = c.get("force_coverage_1sigma"), c.get("force_coverage_2sigma")
+    text = (
+        f"Force where it can be known: the test frames with one finger on the skin, split by the "
+        f"bound on the force's standard deviation at each frame's true point and force (case "
+        f"`{split.get('case') or DASH}`, the bound section's), at {thr:g} N. Where the bound is "
+        "above it, no unbiased estimate from one frame comes within it: this layout cannot tell "
+        "the force there, and an error near the spread of the forces is the honest answer. "
+        "Every force comes with the model's own standard deviation σ; a calibrated σ holds the "
+        "true force within ±1σ / ±2σ in about 68 % / 95 % of the frames"
+        + (f" (all frames: {_share(cov1)} / {_share(cov2)})." if isinstance(cov1, int | float)
+           and isinstance(cov2, int | float) else ".")
+    )
+    head = ("frames", "share", "this run's MAE", "strongest baseline", "mean bound",
+            "within ±1σ / ±2σ")
+    return [("p", text), ("table", (head, rows))]
+
+
 def bound_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
     """The physical limit's words and per-state table (metrics.json ``bound``); [] without it."""
     b = lookup(metrics, "bound")
@@ -286,6 +336,7 @@ def contact_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
             s.append(("table", (header + ("bound (CRB)",), contact_table(c, bound_test=bound_test))))
         else:
             s.append(("table", (header, contact_table(c))))
+        s.extend(force_split_section(c))
         per_state = c.get("per_state") or {}
         if per_state:
             s.append(("p", "Contact point error per inflation state (chamber volumes)" + (

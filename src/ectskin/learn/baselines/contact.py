@@ -7,7 +7,8 @@ one finger slot filled, the others copies), so one function computes the metrics
 ==================  =====================================================================
 ``region_centre``   the touch classifier's answer turned into a point: logistic regression
                     (the strongest touch baseline) over no touch + the regions, the point is
-                    the predicted region's centre; force = the mean training force. Left out
+                    the predicted region's centre; force = the mean training force, its σ
+                    the training forces' standard deviation. Left out
                     (:func:`left_out`, with a note) on a layout without physical regions
 ``knn``             5 nearest training frames: count and hover by vote, face by vote among
                     frames in contact, (u, v) and force their mean
@@ -15,7 +16,9 @@ one finger slot filled, the others copies), so one function computes the metrics
                     hover by logistic regression
 ==================  =====================================================================
 
-Classical models are fit on a seeded random subsample of at most ``max_train`` frames.
+Classical models are fit on a seeded random subsample of at most ``max_train`` frames. The
+``knn`` and ``ridge`` forces come with the σ of :mod:`ectskin.learn.contact_classical` (fit on
+out-of-fold residuals of the training split).
 """
 
 from __future__ import annotations
@@ -49,9 +52,9 @@ def _frames(data: ContactData) -> np.ndarray:
     return np.asarray(data.x[:, -1, :], dtype=np.float64)
 
 
-def _pack(count, p_contact, p_hover, face, uv, force) -> np.ndarray:
+def _pack(count, p_contact, p_hover, face, uv, force, force_sigma) -> np.ndarray:
     n = len(count)
-    slot = np.column_stack([face, uv[:, 0], uv[:, 1], np.full(n, np.nan), force])
+    slot = np.column_stack([face, uv[:, 0], uv[:, 1], np.full(n, np.nan), force, force_sigma])
     out = np.empty((n, len(PRED_COLUMNS) + MAX_FINGERS * len(SLOT_COLUMNS)))
     out[:, 0], out[:, 1], out[:, 2] = count, p_contact, p_hover
     for s in range(MAX_FINGERS):
@@ -112,6 +115,8 @@ def region_centre_baseline(
     centre = region_centres[np.clip(r, 0, len(region_centres) - 1)]
     on = train.count > 0
     mean_force = float(train.force[on, 0].mean()) if on.any() else 0.0
+    # the σ of a constant answer: the RMS of its error over the training frames in contact
+    sd_force = float(train.force[on, 0].std()) if on.sum() > 1 else np.nan
     return _pack(
         (r > 0).astype(float),
         p_contact,
@@ -119,6 +124,7 @@ def region_centre_baseline(
         centre[:, 0],
         centre[:, 1:],
         np.full(len(xt), mean_force),
+        np.full(len(xt), sd_force),
     )
 
 

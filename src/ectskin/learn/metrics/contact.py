@@ -9,6 +9,10 @@ side edge). A model that names the wrong face is thus charged at least the body'
 * :func:`localisation_metrics`: the error of one finger's point (mean / median / p90, per face,
   per inflation state, and a map over each face);
 * :func:`force_metrics`: MAE and relative error of the force;
+* :func:`force_coverage`: the share of frames whose true force lies within ±1σ and ±2σ of the
+  predicted force, σ the model's own standard deviation of it;
+* :func:`force_split`: the force MAE (and coverage) where a per-frame bound says force is
+  observable, where it says it is not, and where there is no bound;
 * :func:`hover_metrics`: detection rate of a hovering finger against its height, and the height
   up to which it is detected;
 * :func:`match_fingers` and :func:`multi_metrics`: count accuracy and per-finger error after
@@ -156,6 +160,78 @@ def force_metrics(true_n: np.ndarray, pred_n: np.ndarray) -> dict[str, Any]:
         "force_bias_n": float(err.mean()),
         "n_frames": int(t.size),
     }
+
+
+def force_coverage(
+    true_n: np.ndarray, pred_n: np.ndarray, sigma_n: np.ndarray
+) -> dict[str, Any]:
+    """Calibration of a predicted force standard deviation: ``force_coverage_1sigma`` /
+    ``_2sigma``, the share of frames with |pred − true| ≤ 1σ / 2σ (a Gaussian error of that σ
+    gives 68.3 % / 95.4 %), and ``force_sigma_n_median``, over the frames with a finite σ > 0;
+    None where no frame has one (a model that gives no σ), with ``n_frames`` those frames."""
+    t, p, s = (np.asarray(a, float) for a in (true_n, pred_n, sigma_n))
+    if not t.shape == p.shape == s.shape:
+        raise EctskinError(
+            f"force_coverage: true, pred and sigma must have one shape, got {t.shape}, "
+            f"{p.shape}, {s.shape}"
+        )
+    ok = np.isfinite(s) & (s > 0)
+    if not ok.any():
+        return {"force_coverage_1sigma": None, "force_coverage_2sigma": None,
+                "force_sigma_n_median": None, "n_frames": 0}
+    z = np.abs(p[ok] - t[ok]) / s[ok]
+    return {
+        "force_coverage_1sigma": float(np.mean(z <= 1.0)),
+        "force_coverage_2sigma": float(np.mean(z <= 2.0)),
+        "force_sigma_n_median": float(np.median(s[ok])),
+        "n_frames": int(ok.sum()),
+    }
+
+
+#: the parts of :func:`force_split`: (suffix of its keys, which frames)
+FORCE_SPLIT_PARTS = ("observable", "not_observable", "no_bound")
+
+
+def force_split(
+    true_n: np.ndarray,
+    pred_n: np.ndarray,
+    bound_sd_n: np.ndarray,
+    threshold_n: float,
+    sigma_n: np.ndarray | None = None,
+) -> dict[str, Any]:
+    """The force error split by a per-frame bound on the force's standard deviation
+    ``bound_sd_n`` (n,) N (NaN: no bound at that frame): frames with a bound below
+    ``threshold_n`` are *observable*, those with one at or above it *not observable*, the rest
+    *no bound*. Per part P of :data:`FORCE_SPLIT_PARTS`: ``force_mae_n_P`` (None without
+    frames), ``share_P`` (of all frames), ``n_frames_P``, ``bound_force_n_mean_P`` (the mean
+    bound there) and, with ``sigma_n`` (the model's own σ, NaN where it gives none), the
+    :func:`force_coverage` ``force_coverage_1sigma_P`` / ``_2sigma_P``."""
+    t, p, b = (np.asarray(a, float) for a in (true_n, pred_n, bound_sd_n))
+    if not t.shape == p.shape == b.shape or t.ndim != 1:
+        raise EctskinError(
+            f"force_split: true, pred and bound_sd must be one-dimensional of one shape, got "
+            f"{t.shape}, {p.shape}, {b.shape}"
+        )
+    if not (np.isfinite(threshold_n) and threshold_n > 0):
+        raise EctskinError(f"force_split: threshold_n must be a number > 0, got {threshold_n!r}")
+    has = np.isfinite(b)
+    parts = {
+        "observable": has & (b < threshold_n),
+        "not_observable": has & ~(b < threshold_n),
+        "no_bound": ~has,
+    }
+    err = np.abs(p - t)
+    out: dict[str, Any] = {"threshold_n": float(threshold_n), "n_frames": int(t.size)}
+    for name, m in parts.items():
+        out[f"force_mae_n_{name}"] = float(err[m].mean()) if m.any() else None
+        out[f"share_{name}"] = float(m.mean()) if t.size else None
+        out[f"n_frames_{name}"] = int(m.sum())
+        out[f"bound_force_n_mean_{name}"] = float(b[m].mean()) if (m & has).any() else None
+        if sigma_n is not None:
+            cov = force_coverage(t[m], p[m], np.asarray(sigma_n, float)[m])
+            out[f"force_coverage_1sigma_{name}"] = cov["force_coverage_1sigma"]
+            out[f"force_coverage_2sigma_{name}"] = cov["force_coverage_2sigma"]
+    return out
 
 
 def hover_metrics(

@@ -8,7 +8,15 @@ window into a feature vector; heads read it out:
 * per finger slot s: ``face`` (B, S, n_faces) logits, ``uv`` (B, S, 2) the point in units of
   the face's half extent (centred), ``log_var`` (B, S) the log variance of that point (same
   units; the model's own uncertainty, trained with a Gaussian likelihood), ``force`` (B, S) in
-  units of ``force_scale`` N.
+  units of ``force_scale`` N, and with ``force_sigma`` ``force_log_var`` (B, S) the log variance
+  of that force (same units; the model's own, trained with a Gaussian likelihood on the
+  training frames; :meth:`ContactNet.decode` multiplies its σ by the buffer
+  ``force_sigma_scale``, fitted on the validation frames by the contact task's criterion).
+
+``force_sigma`` is False in the files of runs made before the force had its uncertainty (their
+stored config lacks the field, and their weights the head): they load as they were, and their
+force's σ column is 0 (no σ). The contact task builds new models with it
+(:meth:`~ectskin.learn.tasks.contact.ContactTask.build_model`).
 
 Trunks (``arch``):
 
@@ -47,8 +55,14 @@ class ContactNetConfig:
     hidden: int = 128
     channels: int = 64  # temporal: convolution channels
     dropout: float = 0.1
+    force_sigma: bool = False  # a head for the force's log variance (module docstring)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.force_sigma, bool | np.bool_):
+            raise EctskinError(
+                f"ContactNetConfig.force_sigma must be true or false, got {self.force_sigma!r}"
+            )
+        self.force_sigma = bool(self.force_sigma)
         for name in ("n_pairs", "window", "n_faces", "max_fingers", "hidden", "channels"):
             v = getattr(self, name)
             if not isinstance(v, int | np.integer) or isinstance(v, bool) or v < 1:
@@ -80,6 +94,8 @@ class ContactNet(nn.Module):
         }
         if config.arch == "temporal":
             shapes["conv.0.weight"] = ("channels", "n_pairs", 3)
+        if config.force_sigma:
+            shapes["force_var_head.weight"] = ("max_fingers", "hidden")
         return shapes
 
     def __init__(self, config: ContactNetConfig | None = None) -> None:
@@ -115,6 +131,10 @@ class ContactNet(nn.Module):
         # per slot: face logits, (u, v), log variance, force
         self.slot_head = nn.Linear(c.hidden, s * 4)
         self.face_head = nn.Linear(c.hidden, s * c.n_faces)
+        # per slot: the force's log variance
+        self.force_var_head = nn.Linear(c.hidden, s) if c.force_sigma else None
+        if c.force_sigma:  # the force σ's scale on held-out data (set by the validation pass)
+            self.register_buffer("force_sigma_scale", torch.ones(()))
 
     def set_normalization(
         self,
@@ -143,7 +163,8 @@ class ContactNet(nn.Module):
             buf.copy_(val)
 
     def forward(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
-        """x: (B, k, n_pairs) → {count, hover, face, uv, log_var, force} (see the docstring)."""
+        """x: (B, k, n_pairs) → {count, hover, face, uv, log_var, force} and, with
+        ``force_sigma``, ``force_log_var`` (see the docstring)."""
         c = self.config
         z = (x - self.x_mean) / self.x_std  # (B, k, P)
         if self.conv is not None:
@@ -152,7 +173,7 @@ class ContactNet(nn.Module):
         s = c.max_fingers
         slots = self.slot_head(h).view(-1, s, 4)
         face = self.face_head(h).view(-1, s, c.n_faces)
-        return {
+        out = {
             "count": self.count_head(h),
             "hover": self.hover_head(h)[:, 0],
             "face": face,
@@ -160,9 +181,13 @@ class ContactNet(nn.Module):
             "log_var": slots[..., 2].clamp(-12.0, 6.0),
             "force": slots[..., 3],
         }
+        if self.force_var_head is not None:
+            out["force_log_var"] = self.force_var_head(h).clamp(-14.0, 6.0)  # (B, S)
+        return out
 
     def decode(self, out: dict[str, torch.Tensor]) -> torch.Tensor:
-        """(B, 3 + S · 5) physical predictions, columns as :data:`PRED_COLUMNS` describes."""
+        """(B, 3 + S · 6) physical predictions, columns as :data:`PRED_COLUMNS` and
+        :data:`SLOT_COLUMNS` describe (``force_sigma_n`` 0 without the force's σ head)."""
         count_p = out["count"].softmax(-1)  # (B, S + 1)
         face = out["face"].argmax(-1)  # (B, S)
         centre = self.uv_centre[face]  # (B, S, 2)
@@ -171,11 +196,23 @@ class ContactNet(nn.Module):
         sigma = out["log_var"].mul(0.5).exp()[..., None] * half  # (B, S, 2) mm
         sigma_mm = sigma.norm(dim=-1) / np.sqrt(2.0)  # per-axis RMS
         force = (out["force"] * self.force_scale).clamp_min(0.0)
+        if "force_log_var" in out:
+            scale = self.force_scale * self.force_sigma_scale
+            force_sd = out["force_log_var"].mul(0.5).exp() * scale  # (B, S) N
+        else:  # no σ: 0 (a NaN would fail the ONNX export's check against this model)
+            force_sd = torch.zeros_like(force)
         count = count_p.argmax(-1).to(uv.dtype)
         p_contact = 1.0 - count_p[:, 0]
         p_hover = torch.sigmoid(out["hover"])
         slots = torch.cat(
-            [face[..., None].to(uv.dtype), uv, sigma_mm[..., None], force[..., None]], -1
+            [
+                face[..., None].to(uv.dtype),
+                uv,
+                sigma_mm[..., None],
+                force[..., None],
+                force_sd[..., None],
+            ],
+            -1,
         )
         return torch.cat(
             [count[:, None], p_contact[:, None], p_hover[:, None], slots.flatten(1)], 1
@@ -183,6 +220,8 @@ class ContactNet(nn.Module):
 
 
 #: columns of :meth:`ContactNet.decode` (and of the contact task's predictions): three per
-#: frame, then five per finger slot
+#: frame, then six per finger slot: ``sigma_mm`` the point's standard deviation per axis (mm),
+#: NaN where the model gives none; ``force_sigma_n`` the force's (N), 0 or NaN where the model
+#: gives none
 PRED_COLUMNS = ("count", "p_contact", "p_hover")
-SLOT_COLUMNS = ("face", "u_mm", "v_mm", "sigma_mm", "force_n")
+SLOT_COLUMNS = ("face", "u_mm", "v_mm", "sigma_mm", "force_n", "force_sigma_n")

@@ -3,7 +3,8 @@
 ``predict(window)`` gives the raw columns of :meth:`ContactNet.decode`; ``read(window)`` one
 :class:`ContactReading` per frame: finger count, probabilities of contact and hover, and per
 finger its face, point (mm), uncertainty (mm, the model's own, one standard deviation per axis;
-NaN where the model gives none) and force (N).
+NaN where the model gives none), force (N) and the force's standard deviation (N; None where
+the model gives none: a run trained before the force had its σ).
 
 A contact run whose ``candidates.json`` selects a classical model
 (:mod:`ectskin.learn.contact_choice`) answers with its ``model.skops`` instead
@@ -36,6 +37,7 @@ class FingerEstimate:
     v_mm: float
     sigma_mm: float
     force_n: float
+    force_sigma_n: float | None = None
 
 
 @dataclass(frozen=True)
@@ -138,7 +140,7 @@ class ContactPredictor(Predictor):
         return dict(self.payload.get("extra", {}).get("face_extent") or {})
 
     def predict(self, window_calibrated: Any) -> np.ndarray:
-        """(k, n_pairs) window, oldest frame first → (3 + S · 5,) columns (``PRED_COLUMNS``,
+        """(k, n_pairs) window, oldest frame first → (3 + S · 6,) columns (``PRED_COLUMNS``,
         then ``SLOT_COLUMNS`` per slot); batched (B, k, n_pairs) → (B, columns)."""
         x, batched = as_input(
             "window",
@@ -166,9 +168,16 @@ class ContactPredictor(Predictor):
         faces = self.faces
         for s in range(count):
             a = len(PRED_COLUMNS) + s * len(SLOT_COLUMNS)
-            face, u, v, sigma, force = row[a : a + len(SLOT_COLUMNS)]
+            face, u, v, sigma, force, force_sd = row[a : a + len(SLOT_COLUMNS)]
             fingers.append(
-                FingerEstimate(faces[int(face)], float(u), float(v), float(sigma), float(force))
+                FingerEstimate(
+                    faces[int(face)],
+                    float(u),
+                    float(v),
+                    float(sigma),
+                    float(force),
+                    float(force_sd) if np.isfinite(force_sd) and force_sd > 0 else None,
+                )
             )
         return ContactReading(
             count=count,

@@ -12,16 +12,27 @@ Training loss (:class:`ContactCriterion`), per frame:
   of the face's half extent, weight :data:`POSITION_WEIGHT`) and of its force (in units of the
   training force scale), and the Gaussian negative log-likelihood of the position under the
   predicted variance (with the position itself held fixed, so the variance learns the error
-  without pulling the point). One finger is slot 0; two are matched to the slots in the
-  cheaper of the two orders (permutation-invariant).
+  without pulling the point), and the same for the force under its predicted variance (a model
+  with ``force_sigma``; the force itself held fixed, so its smooth-L1 fit is what it was
+  without the variance, and the variance's minimiser is the expected squared force error given
+  the window). One finger is slot 0; two are matched to the slots in the cheaper of the two
+  orders (permutation-invariant).
 
 Validation metric: the mean distance (mm) between each finger's true and predicted points,
 slot 0 for one finger, matched for two; a wrong face is charged the body's thickness across.
+The validation pass also calibrates the force's σ on those held-out frames (a model with
+``force_sigma``): the variance the training frames taught is scaled so that the mean of
+(force error / σ)² over the validation frames with one finger is 1, and the scale is stored in
+the model (``force_sigma_scale``), so the weights kept for an epoch carry their own epoch's
+scale. A network's errors on frames it trained on are smaller than on others; without the scale
+its σ would be too small on new frames.
 Test localisation errors are distances over the skin (:func:`ectskin.layout.geometry.on_skin_distance`:
 around the body's side edge between front and back). Test metrics: localisation (mean / median / p90, per face,
 per inflation state, a map per face), force, hover detection against height, finger count and
-per-finger error after Hungarian matching, each beside the baselines of
-:mod:`ectskin.learn.baselines.contact` on the same test frames.
+per-finger error after Hungarian matching, the calibration of the force's σ (the share of
+frames within ±1σ and ±2σ), each beside the baselines of
+:mod:`ectskin.learn.baselines.contact` on the same test frames. :func:`force_split_report` splits
+the force error by a per-frame bound (the reproduction's, :mod:`ectskin.pipeline.bound`).
 """
 
 from __future__ import annotations
@@ -48,7 +59,9 @@ from ectskin.learn.data.contact import (
 )
 from ectskin.learn.engine import Tensors
 from ectskin.learn.metrics.contact import (
+    force_coverage,
     force_metrics,
+    force_split,
     hover_metrics,
     localisation_metrics,
     multi_metrics,
@@ -67,6 +80,8 @@ PREDICT_BATCH = 4096
 POSITION_WEIGHT = 10.0
 #: smooth-L1 transition of the position and force terms (normalised units)
 SMOOTH_BETA = 0.02
+#: weight of each Gaussian negative log-likelihood (of the point's and of the force's variance)
+NLL_WEIGHT = 0.1
 
 
 def slot_columns(pred: np.ndarray, slot: int) -> dict[str, np.ndarray]:
@@ -87,6 +102,9 @@ class ContactCriterion(Criterion):
     ) -> None:
         super().__init__()
         self.thickness = float(thickness_mm)
+        # the model whose force σ the validation pass calibrates (None: one without the σ)
+        net = getattr(model, "module", model)
+        self.sigma_model = net if hasattr(net, "force_sigma_scale") else None
         self.count_weight = count_weight  # (S + 1,) or None: every count weighs 1
         self.state_means = state_means  # (n_states, P) or None: no inflation shift
         self.shift_states = 0 if state_means is None else len(state_means)
@@ -104,7 +122,10 @@ class ContactCriterion(Criterion):
         err2 = (out["uv"][:, s].detach() - uv_n).square().sum(-1)
         nll = 0.5 * (2 * lv + err2 * torch.exp(-lv))
         force = F.smooth_l1_loss(out["force"][:, s], f_n, reduction="none", beta=SMOOTH_BETA)
-        return ce + POSITION_WEIGHT * pos + 0.1 * nll + force
+        if "force_log_var" in out:  # the force's variance, its mean held fixed
+            flv = out["force_log_var"][:, s]
+            nll = nll + 0.5 * (flv + (out["force"][:, s].detach() - f_n).square() * torch.exp(-flv))
+        return ce + POSITION_WEIGHT * pos + NLL_WEIGHT * nll + force
 
     def _targets(self, model: nn.Module, face, uv, force):
         m = getattr(model, "module", model)
@@ -165,10 +186,20 @@ class ContactCriterion(Criterion):
     def eval_sums(self, model, batch) -> torch.Tensor:
         loss, out = self._per_sample(model, batch)
         dist, n_fingers = self._distance(model, out, batch)
-        return torch.stack([loss.sum(), dist, n_fingers, loss.new_tensor(len(loss))])
+        z2, n_one = loss.new_zeros(()), loss.new_zeros(())
+        if "force_log_var" in out:  # (force error / σ)² of slot 0 on frames with one finger
+            _, count, face, uv, force, _ = batch
+            _, f_n = self._targets(model, face, uv, force)
+            one = count == 1
+            r2 = (out["force"][:, 0] - f_n[:, 0]).square() * torch.exp(-out["force_log_var"][:, 0])
+            z2, n_one = r2[one].sum(), one.sum().to(loss.dtype)
+        return torch.stack([loss.sum(), dist, n_fingers, loss.new_tensor(len(loss)), z2, n_one])
 
     def finish(self, sums: torch.Tensor) -> tuple[float, float]:
-        loss, dist, n_fingers, n = sums.tolist()
+        """(val_loss, val_metric); sets the force σ's scale of the model (module docstring)."""
+        loss, dist, n_fingers, n, z2, n_one = sums.tolist()
+        if self.sigma_model is not None and n_one > 0 and np.isfinite(z2):
+            self.sigma_model.force_sigma_scale.fill_(float(np.sqrt(max(z2 / n_one, 1e-12))))
         return loss / n, dist / max(n_fingers, 1.0)
 
 
@@ -245,7 +276,9 @@ class ContactTask(Task[ContactData]):
             "n_faces": len(data.faces),
             "max_fingers": MAX_FINGERS,
         }
-        return ContactNet(build_config(ContactNetConfig, shape, model_options))
+        # new models give the force's σ (model option force_sigma=False builds one without)
+        options = {"force_sigma": True, **(model_options or {})}
+        return ContactNet(build_config(ContactNetConfig, shape, options))
 
     def fit_normalization(self, model: nn.Module, data: ContactData) -> dict[str, Any]:
         """Per-pair mean / std of the training windows; each face's centre and half extent
@@ -309,7 +342,7 @@ class ContactTask(Task[ContactData]):
 
     # ------------------------------------------------------------------ evaluation
     def predict(self, model: nn.Module, data: ContactData) -> np.ndarray:
-        """(n, 3 + S · 5) float32 predictions: :data:`PRED_COLUMNS`, then per slot
+        """(n, 3 + S · 6) float32 predictions: :data:`PRED_COLUMNS`, then per slot
         :data:`SLOT_COLUMNS`."""
         m = getattr(model, "module", model)
         return forward_batches(model, [data.x], batch_size=PREDICT_BATCH, output=m.decode)
@@ -410,6 +443,11 @@ def contact_report(
     )
     p0 = slot_columns(pred, 0)
     force = force_metrics(test.force[single, 0], p0["force_n"][single])
+    coverage = force_coverage(
+        test.force[single, 0], p0["force_n"][single], p0["force_sigma_n"][single]
+    )
+    force.update({k: v for k, v in coverage.items() if k != "n_frames"})
+    force["n_frames_with_sigma"] = coverage["n_frames"]
     off = test.count == 0
     hover = hover_metrics(
         test.height[off],
@@ -427,6 +465,9 @@ def contact_report(
         "n_single_contact_frames": int(single.sum()),
         "force_mae_n": force["force_mae_n"],
         "force_rel": force.get("force_rel"),
+        "force_coverage_1sigma": force["force_coverage_1sigma"],
+        "force_coverage_2sigma": force["force_coverage_2sigma"],
+        "force_sigma_n_median": force["force_sigma_n_median"],
         "hover_detect_mm": hover["hover_detect_mm"],
         "contact_accuracy": float(np.mean(detect_true == detect_pred)) if n else None,
         "count_accuracy": multi["count_accuracy"],
@@ -444,3 +485,26 @@ def contact_report(
     if with_maps and "map" in loc:
         out["map"] = loc["map"]
     return out
+
+
+def force_split_report(
+    test: ContactData, pred: np.ndarray, bound_sd_n: np.ndarray, threshold_n: float
+) -> dict[str, Any]:
+    """The force error of predictions ``pred`` on ``test``'s frames with one finger on the skin
+    (those of ``force_mae_n``), split by ``bound_sd_n`` (n,) N, the bound on the force's
+    standard deviation at each sample's true point (NaN: none), at ``threshold_n``
+    (:func:`ectskin.learn.metrics.contact.force_split`, with the coverage of the predicted σ)."""
+    bound = np.asarray(bound_sd_n, float)
+    if bound.shape != (test.n_samples,):
+        raise EctskinError(
+            f"force_split_report: bound_sd_n must have shape ({test.n_samples},), got {bound.shape}"
+        )
+    single = test.count == 1
+    p0 = slot_columns(pred, 0)
+    return force_split(
+        test.force[single, 0],
+        p0["force_n"][single],
+        bound[single],
+        threshold_n,
+        sigma_n=p0["force_sigma_n"][single],
+    )
