@@ -106,7 +106,7 @@ def test_mixup_and_label_smoothing_loss_by_hand():
     xb, yb = torch.randn(8, 4), torch.tensor([0, 1, 2, 0, 1, 2, 0, 1])
     got = task.loss(model, (xb, yb), np.random.default_rng(9))
     xa, y_a, y_b, lam = augment_touch_batch(
-        xb, yb, np.random.default_rng(9), state_means=means, mixup_alpha=0.4
+        xb, yb, np.random.default_rng(9), state_means=means, mixup_alpha=1.0, mixup_pairs="class"
     )
     want = mixup_cross_entropy(model(xa), y_a, y_b, lam, 0.1)
     assert torch.equal(got, want)

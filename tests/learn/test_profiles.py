@@ -36,7 +36,7 @@ def test_robust_profile_settings_and_track_refusal(tmp_path):
     assert (s.epochs, s.batch_size, s.lr, s.step_size, s.gamma) == (20, 256, 1e-3, 5, 1 / 1.2)
     assert (s.inflation_shift, s.mixup_alpha, s.label_smoothing, s.select) == (
         True,
-        0.4,
+        1.0,
         0.1,
         "val_metric",
     )

@@ -55,7 +55,8 @@ def test_robust_training_is_deterministic_and_resumes_exactly(tmp_path, states_d
     assert cfg["profile"] == "robust"
     assert cfg["recipe"] == {
         "inflation_shift": True,
-        "mixup_alpha": 0.4,
+        "mixup_alpha": 1.0,
+        "mixup_pairs": "class",
         "label_smoothing": 0.1,
         "select": "val_metric",
         "inflation_shift_states": 6,
@@ -101,7 +102,7 @@ def test_inflation_shift_is_skipped_with_a_warning_without_two_rest_trials(
         train("touch", tr, va, tmp_path, TrainConfig(profile="robust", epochs=1, progress=False))
     assert "inflation shift skipped" in caplog.text and "1 no-contact trial" in caplog.text
     cfg = json.loads((tmp_path / "config.json").read_text())
-    assert cfg["recipe"]["inflation_shift_states"] == 0 and cfg["recipe"]["mixup_alpha"] == 0.4
+    assert cfg["recipe"]["inflation_shift_states"] == 0 and cfg["recipe"]["mixup_alpha"] == 1.0
 
 
 @pytest.mark.slow

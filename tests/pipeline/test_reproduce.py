@@ -331,8 +331,8 @@ def test_reproduce_trains_evaluates_and_reports_the_robust_model(tmp_path):
     assert r["n_test_frames"] == m["touch"]["n_test_frames"]
     assert len(r["per_trial"]) == m["touch"]["split"]["test"]
     assert r["training"]["profile"] == "robust" and r["training"]["epochs"] == 8
-    assert r["training"]["recipe"]["mixup_alpha"] == 0.4
-    assert "mixup (Beta 0.4, 0.4)" in r["recipe_description"]
+    assert r["training"]["recipe"]["mixup_alpha"] == 1.0
+    assert "mixup within each class (Beta 1, 1)" in r["recipe_description"]
     assert m["touch"]["training"]["profile"] == "quick"  # the paper-recipe run is untouched
     split = [
         json.loads((out / "runs" / n / "split.json").read_text()) for n in ("touch", "touch_robust")

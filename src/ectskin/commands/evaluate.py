@@ -63,7 +63,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="a recording of the same skin whose rest state (0 ml, untouched) calibrates the "
         "data (default: the data's own rest state, else the training recording's, stored in "
-        "the run)",
+        "the run). A touch run trained with 'train --reference state' or 'inflation' is "
+        "always calibrated as it was trained (each state's no-contact trials of the data, or "
+        "the run's inflation model), and refuses this option",
     )
     p.add_argument(
         "-o",

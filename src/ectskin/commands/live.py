@@ -16,6 +16,7 @@ import logging
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -270,6 +271,7 @@ def run(args: argparse.Namespace) -> int:
                 if args.touch_model
                 else None
             )
+            _check_touch_reference(touch, args.touch_model)
             track = (
                 TrackPredictor.from_run(args.track_model, layout=layout)
                 if args.track_model
@@ -282,6 +284,22 @@ def run(args: argparse.Namespace) -> int:
             return _run(
                 args, {"touch": touch, "track": track, "contact": contact}, ref_markers, fields
             )
+
+
+def _check_touch_reference(touch: Any, source: Any) -> None:
+    """Refuse a touch run calibrated against each inflation state's rest readout: the live
+    stream is calibrated against one rest readout (the rest state's), so its frames would not be
+    the frames the run learnt from."""
+    from ectskin.learn.data.touch import FOLLOWS_INFLATION
+
+    mode = getattr(touch, "reference_mode", None)
+    if touch is not None and mode in FOLLOWS_INFLATION:
+        raise EctskinError(
+            f"--touch-model {source}: the run calibrates each frame against the rest readout at "
+            f"its own inflation (reference {mode!r}); the live engine calibrates against the rest "
+            "state's readout only. Use a run trained with --reference rest (the paper's recipe) "
+            "for live use"
+        )
 
 
 def _use_runtime(runtime: str, predictors: list) -> None:

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from ectskin._check import EctskinError
 from ectskin.commands._options import add_out, add_overwrite, add_seed, integer, resolve_out
-from ectskin.learn.profiles import PROFILE_TASKS, PROFILES
+from ectskin.learn.profiles import PROFILE_REFERENCE, PROFILE_TASKS, PROFILES, REFERENCES
 
 #: ``--model`` values: ectskin.learn.candidates.TOUCH_MODELS and the contact-only ones of
 #: ectskin.learn.contact_choice.CONTACT_MODELS, listed here because importing those modules
@@ -41,6 +41,7 @@ EXAMPLES = """\
   ectskin train touch data.h5 -o runs/touch --overwrite       # start the run over
   ectskin train touch data.h5 -o runs/auto --model auto --profile quick  # best on validation
   ectskin train touch data.h5 -o runs/gbt --model gbt         # gradient-boosted trees alone
+  ectskin train touch data.h5 -o runs/st --reference state    # Eq. 2 at each state's own rest
   ectskin train contact press.h5 -o runs/c --model auto --window 1 --profile quick
   ectskin train contact new.h5 -o runs/ft --init-from runs/c --window 1 --epochs 5
   torchrun --nproc_per_node 3 -m ectskin.cli train track data.h5 -o runs/track
@@ -74,6 +75,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "contactnet (default; mlp means it too); auto: ContactNet and knn, ridge, gbt (and gp "
         "on at most 2000 training frames), the lowest validation point error selected; or one "
         "of knn, ridge, gbt, gp alone",
+    )
+    defaults = ", ".join(f"{k} {v}" for k, v in PROFILE_REFERENCE.items())
+    p.add_argument(
+        "--reference",
+        choices=REFERENCES,
+        default=None,
+        help="touch: the reference c_0 of Eq. 2: auto/rest the uninflated, untouched state (the "
+        "paper's); state the no-contact trial(s) of each trial's own inflation state; inflation "
+        "a model of the rest readout over the chamber volumes fitted on the recording's states "
+        "(works at unseen inflation levels; stored in the run); state-offset, inflation-offset "
+        "the same rest readout subtracted but divided by the 0-ml rest readout; meta per-trial "
+        f"references of an import. Default: the profile's ({defaults}); see "
+        "ectskin.io.inflation_reference",
     )
     add_seed(p, help="seed of the split and training (default 0)")
     p.add_argument(
@@ -140,6 +154,7 @@ def run(args: argparse.Namespace) -> int:
         threads=args.threads,
         model=args.model,
         init_from=args.init_from,
+        reference=args.reference,
     )
     summary = train_from_recording(args.task, args.data, out, config)
     if int(os.environ.get("RANK", "0")) != 0:

@@ -23,8 +23,21 @@ Where references come from (``reference`` argument of :func:`touch_reference`):
              recording with no inflation information at all (every ``trial.inflation == ()``, a
              non-inflatable skin) uses its no-contact trials. Error if there is none.
 ``"meta"``   ``trial.meta["reference"]`` of every trial (error if one lacks it).
+``"state"``  the mean readout of the no-contact trial(s) of each trial's own inflation state
+             (:func:`ectskin.io.inflation_reference.state_reference`; error naming a state
+             without one).
+``"inflation"``  c_0(p) predicted from each trial's inflation by an
+             :class:`~ectskin.io.inflation_reference.InflationModel` fitted on the rest readouts
+             of the recording's states; an :class:`InflationModel` given instead (e.g. the one a
+             trained run stores) is applied as it is.
+``"state-offset"``, ``"inflation-offset"``  c_0(p) as "state" / "inflation", but Eq. 2 divides
+             by the rest state's readout: c = (c_t − c_0(p)) / c_0(0). This function returns
+             c_0(p); the divisor is :func:`reference_divisor`.
 array        an explicit (n_pairs,) reference in the recording's units (pF); only the measured
              channels are used (an unmeasured one may be NaN).
+
+"rest" is the paper's Eq. 2 (one reference for every trial); "state" and "inflation" follow the
+inflation the pump sets (:mod:`ectskin.io.inflation_reference`).
 
 **Readouts that are already differences** (difference imaging; a generic import with
 ``readouts="difference"``, ``docs/import-format.md``): the recording's ``meta["readouts"]`` is
@@ -49,11 +62,20 @@ from typing import Any
 import numpy as np
 
 from ectskin._check import EctskinError
+from ectskin.io.inflation_reference import InflationModel, state_reference
 from ectskin.io.recording import Recording, Trial
 
 log = logging.getLogger(__name__)
 
-REFERENCE_OPTIONS = ("auto", "rest", "meta")
+REFERENCE_OPTIONS = (
+    "auto",
+    "rest",
+    "meta",
+    "state",
+    "inflation",
+    "state-offset",
+    "inflation-offset",
+)
 #: ``rec.meta["readouts"]`` of a recording whose readouts are differences (difference imaging)
 DIFFERENCE = "difference"
 
@@ -260,7 +282,7 @@ def meta_reference(trial: Trial, n_pairs: int, channels: np.ndarray | None = Non
 def touch_reference(
     rec: Recording,
     *,
-    reference: str | np.ndarray = "auto",
+    reference: str | np.ndarray | InflationModel = "auto",
     channels: np.ndarray | None = None,
 ) -> dict[str, Any]:  # (n_kept,) arrays; None for differences
     """The touch-recognition reference c_0 of every trial (see the module docstring).
@@ -268,7 +290,8 @@ def touch_reference(
     Parameters
     ----------
     rec : Recording
-    reference : "auto" | "rest" | "meta" | (n_pairs,) array
+    reference : "auto" | "rest" | "meta" | "state" | "inflation" | InflationModel | (n_pairs,)
+        array
     channels : (n_kept,) int array, optional
         Measured channel indices; the references returned are restricted to them.
 
@@ -282,11 +305,20 @@ def touch_reference(
     names = [rec.layout.pair_names[j] for j in keep]
     if is_difference(rec):
         if not isinstance(reference, str):
+            found = "a model" if isinstance(reference, InflationModel) else "an array"
             raise EctskinError(
                 "reference: the recording's readouts are differences (meta 'readouts': "
-                "'difference'): Eq. 2 takes no reference, expected none, found an array"
+                f"'difference'): Eq. 2 takes no reference, expected none, found {found}"
             )
         return {t.name: None for t in rec.trials}
+    if isinstance(reference, InflationModel):
+        refs = reference.references(rec, keep)
+        return {
+            n: check_reference(
+                r, keep.size, source=f"trial {n!r}: inflation reference", pair_names=names
+            )
+            for n, r in refs.items()
+        }
     if not isinstance(reference, str):
         try:
             full = np.asarray(reference, dtype=np.float64)
@@ -304,8 +336,41 @@ def touch_reference(
         )
     if reference == "meta" or (reference == "auto" and own_reference(rec) == "meta"):
         return {t.name: meta_reference(t, rec.n_pairs, keep) for t in rec.trials}
+    if reference in ("state", "state-offset"):
+        return {
+            n: check_reference(
+                r, keep.size, source=f"trial {n!r}: state reference", pair_names=names
+            )
+            for n, r in state_reference(rec, keep).items()
+        }
+    if reference in ("inflation", "inflation-offset"):
+        divisor = "own" if reference == "inflation" else "rest"
+        model = InflationModel.fit(rec, keep, divisor=divisor)
+        return touch_reference(rec, reference=model, channels=channels)
     ref, _ = rest_reference(rec, channels=keep)
     return {t.name: ref for t in rec.trials}
+
+
+def reference_divisor(
+    rec: Recording, reference: Any, channels: np.ndarray | None = None
+) -> np.ndarray | None:
+    """What Eq. 2 divides by when it is not the reference c_0(p) itself: the rest state's
+    readout c_0(0), (n_kept,) pF, for "state-offset" (the rest state of ``rec``) and an
+    :class:`InflationModel` of divisor "rest" (its prediction at 0 ml); None otherwise."""
+    keep = np.arange(rec.n_pairs) if channels is None else np.asarray(channels)
+    names = [rec.layout.pair_names[j] for j in keep]
+    if is_difference(rec):
+        return None
+    if isinstance(reference, InflationModel) and reference.divisor == "rest":
+        return check_reference(
+            reference.rest_readout()[keep],
+            keep.size,
+            source="inflation model at 0 ml",
+            pair_names=names,
+        )
+    if isinstance(reference, str) and reference == "state-offset":
+        return rest_reference(rec, channels=keep)[0]
+    return None
 
 
 def own_reference(rec: Recording) -> str | None:

@@ -46,6 +46,7 @@ def augment_touch_batch(
     *,
     state_means: torch.Tensor | None = None,
     mixup_alpha: float = 0.0,
+    mixup_pairs: str = "any",
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
     """The ``robust`` recipe's augmentation of one touch batch.
 
@@ -56,10 +57,14 @@ def augment_touch_batch(
        the raw difference equals adding the difference of the normalised means.
     2. Mixup (when ``mixup_alpha`` > 0) on the shifted batch: λ_i ~ Beta(α, α) per sample and a
        random partner j = perm(i) within the batch; x_i ← λ_i x_i + (1 − λ_i) x_j.
+       ``mixup_pairs`` "class": the partner is drawn among the frames of the same class (a
+       permutation within each class of the batch), so the mixed frame keeps its label: a touch
+       of the same region between two training trials (other placements, states, fingers).
 
     Every draw comes from ``rng`` (numpy; the caller seeds it from (seed, epoch, rank)), in the
-    order a, b (each (B,)), λ (B,), perm (B,). Returns ``(x, y_a, y_b, lam)``: y_a = y and
-    y_b = y[perm], lam (B,) float32, both None without mixup. Shapes: x (B, P), y (B,).
+    order a, b (each (B,)), λ (B,), perm (B,; "class": one permutation per class present, in
+    class order). Returns ``(x, y_a, y_b, lam)``: y_a = y and y_b = y[perm], lam (B,) float32,
+    both None without mixup. Shapes: x (B, P), y (B,).
     """
     n = int(x.shape[0])
     if state_means is not None and len(state_means) >= 2:
@@ -68,7 +73,15 @@ def augment_touch_batch(
     if mixup_alpha <= 0:
         return x, y, None, None
     lam = torch.from_numpy(rng.beta(mixup_alpha, mixup_alpha, size=n).astype(np.float32))
-    perm = torch.from_numpy(rng.permutation(n)).to(x.device)
+    if mixup_pairs == "class":
+        labels = y.detach().cpu().numpy()
+        order = np.arange(n)
+        for c in np.unique(labels):
+            idx = np.flatnonzero(labels == c)
+            order[idx] = idx[rng.permutation(idx.size)]
+        perm = torch.from_numpy(order).to(x.device)
+    else:
+        perm = torch.from_numpy(rng.permutation(n)).to(x.device)
     lam = lam.to(x.device)
     x = lam[:, None] * x + (1 - lam[:, None]) * x[perm]  # (B, P)
     return x, y, y[perm], lam

@@ -31,8 +31,10 @@ taken (``test_data``).
 The calibration (Eq. 2) of a model that reads frames against a rest state
 (:func:`calibration`): ``reference`` (``--reference REC.h5``: the rest state of that
 recording) if given; else the evaluated recording's own (rest-state trials or per-trial
-references); else the training recording's rest reference stored in the run. The metrics say
-which (``reference``).
+references); else the training recording's rest reference stored in the run. A touch run
+trained with reference "state" or "inflation" (:mod:`ectskin.io.inflation_reference`) is
+calibrated as it was trained: against each state's no-contact trials of the evaluated
+recording, or by the inflation model stored in the run. The metrics say which (``reference``).
 
 Where the results go (:func:`evaluation_files`): on the run's own data (the file named in
 ``split.json``) ``metrics.json`` and the figures in the run folder; on other data
@@ -71,6 +73,7 @@ from ectskin.learn.candidates import (
 from ectskin.learn.channels import measured_channels
 from ectskin.learn.checkpoint import check_channels, check_layout, load_checkpoint
 from ectskin.learn.data import SampleData
+from ectskin.learn.data.touch import stored_touch_reference
 from ectskin.learn.runfiles import (
     check_outputs,
     check_run_dir,
@@ -112,7 +115,6 @@ __all__ = [
 CURVES_FIGURE = "learning_curves"
 #: checkpoint ``extra`` fields copied into the metrics' ``training``
 EXTRA_TRAINING_FIELDS = ("device", "profile", "seed", "world_size")
-
 
 
 @dataclass
@@ -432,6 +434,13 @@ def calibration(
                 "against its first frame (prior knowledge)"
             )
         return ReferenceChoice("auto", "trajectory", "each trajectory's first frame (prior)")
+    follows = _follows_inflation(run)
+    if follows is not None:
+        if reference is not None:
+            raise EctskinError(
+                f"--reference does not apply to {run.path}: it calibrates against {follows.text}"
+            )
+        return follows
     given, name = None, None
     if reference is not None:
         given = reference if isinstance(reference, Recording) else read_recording(reference)
@@ -524,11 +533,19 @@ def _training_trials(run: Run, rec: Recording, ds: SampleData, chosen: Evaluated
                 None,
                 f"the training recording {path} changed since training (trial(s) {changed[:3]})",
             )
-    task = run.task
+    task, follows = run.task, _follows_inflation(run)
     train_ds = task.dataset(
-        train_rec, reference=run.split.get("reference", "auto"), **task.dataset_options(run.config)
+        train_rec,
+        reference="auto" if follows is None else follows.value,
+        **task.dataset_options(run.config),
     )
     return _select_names(train_ds, names)
+
+
+def _follows_inflation(run: Run) -> ReferenceChoice | None:
+    """A touch run's stored reference that follows the inflation, else None (rest state)."""
+    extra, source = run.payload.get("extra", {}), str(run.path / "split.json")
+    return stored_touch_reference(run.split, extra, source) if run.task.name == "touch" else None
 
 
 def _select_names(ds: SampleData, names: list[str]) -> _Train:

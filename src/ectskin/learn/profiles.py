@@ -20,13 +20,19 @@ choice); it is what :func:`ectskin.learn.train.train` and ``train_from_recording
   every 3 epochs. Both add the inflation shift of the ``robust`` recipe to every training
   window and keep the weights with the lowest validation localisation error.
 * ``robust`` (touch only; ours, not the paper's): the paper's TouchMLP, unchanged, trained with
-  a recipe meant to generalise to unseen (inflation state, touch placement) combinations. Per
-  training frame it adds an *inflation shift*, the difference between the mean no-contact
-  frames of two training inflation states drawn at random ("the same touch seen at another
-  inflation", see :mod:`ectskin.learn.augment`), then mixes the batch up (mixup, Beta(0.4, 0.4),
-  a λ per sample), uses cross-entropy with label smoothing 0.1, Adam 1e-3 divided by 1.2 every 5
-  epochs, batch 256, 20 epochs, and keeps the weights with the best validation *accuracy*, ties
-  broken by the lower validation loss.
+  a recipe meant to generalise to unseen (inflation state, touch placement) combinations. Its
+  frames are calibrated by Eq. 2 against the rest readout of their own inflation state
+  (reference ``"state"``: c = (c_t − c_0(p)) / c_0(p), c_0(p) the mean of the state's
+  no-contact trial(s), :mod:`ectskin.io.inflation_reference`; :data:`PROFILE_REFERENCE`,
+  ``TrainConfig.reference`` overrides it). Per training frame it adds
+  an *inflation shift*, the difference between the mean no-contact frames of two training
+  inflation states drawn at random ("the same touch seen at another inflation", see
+  :mod:`ectskin.learn.augment`; about zero once each state's rest is subtracted, it matters
+  with the rest reference), then mixes each frame with a frame of the *same class* (mixup
+  within each class, Beta(1, 1), a λ per sample: a touch of the same region between two
+  training trials), uses cross-entropy with label smoothing 0.1, Adam 1e-3 divided by 1.2 every
+  5 epochs, batch 256, 20 epochs, and keeps the weights with the best validation *accuracy*,
+  ties broken by the lower validation loss.
 
 Measured training times are in ``BENCHMARKS.md``; a run's accuracy is in its ``metrics.json``.
 """
@@ -63,6 +69,7 @@ class TrainSettings:
     # --- touch recipe (defaults: the paper's, no augmentation) --------------------------------
     inflation_shift: bool = False  # add mean(no-contact state a) - mean(state b) per frame
     mixup_alpha: float = 0.0  # > 0: mixup with Beta(alpha, alpha), one lambda per sample
+    mixup_pairs: str = "any"  # mixup partners: any frame of the batch, or one of the same class
     label_smoothing: float = 0.0  # of the training cross-entropy (validation loss: plain CE)
     select: str = "val_loss"  # keep the weights of the lowest val_loss or the best val_metric
 
@@ -101,7 +108,8 @@ PROFILES: dict[str, dict[str, TrainSettings]] = {
             batch_size=256,
             step_size=5,
             inflation_shift=True,
-            mixup_alpha=0.4,
+            mixup_alpha=1.0,
+            mixup_pairs="class",
             label_smoothing=0.1,
             select="val_metric",
         ),
@@ -115,7 +123,19 @@ RECIPE_TASKS = ("touch",)
 #: calibrated frames)
 SHIFT_TASKS = ("touch", "contact")
 #: The fields of the touch recipe, stored as ``recipe`` in config.json and metrics.json.
-RECIPE_FIELDS = ("inflation_shift", "mixup_alpha", "label_smoothing", "select")
+RECIPE_FIELDS = ("inflation_shift", "mixup_alpha", "mixup_pairs", "label_smoothing", "select")
+#: ``TrainSettings.mixup_pairs``: partners among all frames of the batch, or of the same class
+MIXUP_PAIRS = ("any", "class")
+#: profile → the Eq. 2 reference its touch data is calibrated with
+#: (:func:`ectskin.io.calibration.touch_reference`) unless ``TrainConfig.reference`` says
+#: otherwise: "auto" (the rest state, the paper's) or one that follows the inflation
+PROFILE_REFERENCE = {"paper": "auto", "quick": "auto", "robust": "state"}
+#: Tasks whose data set takes a ``reference`` other than "auto" from :class:`TrainConfig`
+REFERENCE_TASKS = ("touch",)
+#: ``TrainConfig.reference`` values: ectskin.io.calibration.REFERENCE_OPTIONS, listed here because
+#: importing ``ectskin.io`` loads h5py, which the command-line parser (it imports this module)
+#: would pay for (a test keeps the two equal)
+REFERENCES = ("auto", "rest", "meta", "state", "inflation", "state-offset", "inflation-offset")
 
 
 def profiles_for(task: str) -> tuple[str, ...]:
@@ -187,6 +207,10 @@ class TrainConfig:
     init_from : a trained run (or its ``model.pt``) to fine-tune: its config, normaliser and
         weights are the start (:mod:`ectskin.learn.finetune`); ``epochs`` may then be 0 (the
         base weights kept as they are).
+    reference : touch: the Eq. 2 reference of the data set
+        (:func:`ectskin.io.calibration.touch_reference`: "auto", "rest", "meta", "state",
+        "inflation"); None: the profile's (:data:`PROFILE_REFERENCE`). Read by
+        ``train_from_recording`` only; the run stores it and evaluation re-applies it.
     """
 
     profile: str = "paper"
@@ -205,6 +229,24 @@ class TrainConfig:
     model: str = "mlp"
     settings: dict[str, Any] | None = None
     init_from: str | None = None
+    reference: str | None = None
+
+    def reference_for(self, task: str) -> str:
+        """The Eq. 2 reference of ``task``'s data set: :attr:`reference`, else the profile's
+        (:data:`PROFILE_REFERENCE`); "auto" for a task other than touch (where another value is
+        an error)."""
+        if self.reference is not None:
+            check_option("reference", self.reference, REFERENCES, source="TrainConfig")
+        if task not in REFERENCE_TASKS:
+            if self.reference not in (None, "auto"):
+                raise EctskinError(
+                    f"TrainConfig: reference {self.reference!r} applies to task "
+                    f"{' or '.join(repr(t) for t in REFERENCE_TASKS)} only, got task {task!r}"
+                )
+            return "auto"
+        if self.reference is not None:
+            return self.reference
+        return PROFILE_REFERENCE.get(self.profile, "auto")
 
     def settings_for(self, task: str) -> TrainSettings:
         """The :class:`TrainSettings` of :attr:`profile` for ``task`` with :attr:`settings`,
@@ -250,6 +292,7 @@ def _check_settings(settings: TrainSettings) -> None:
             f"{settings.label_smoothing!r}"
         )
     check_option("select", settings.select, SELECT)
+    check_option("mixup_pairs", settings.mixup_pairs, MIXUP_PAIRS)
 
 
 def describe_recipe(recipe: Mapping[str, Any] | None, metric: str = "accuracy") -> str:
@@ -259,6 +302,13 @@ def describe_recipe(recipe: Mapping[str, Any] | None, metric: str = "accuracy") 
     if not recipe:
         return "the paper's recipe"
     parts = []
+    reference = recipe.get("reference")
+    if reference in ("state", "state-offset"):
+        parts.append("frames calibrated against the rest readout of their own inflation state")
+    elif reference in ("inflation", "inflation-offset"):
+        parts.append("frames calibrated against the rest readout predicted at their inflation")
+    if reference in ("state-offset", "inflation-offset"):
+        parts[-1] += " (divided by the 0-ml rest readout)"
     if recipe.get("inflation_shift"):
         n = int(recipe.get("inflation_shift_states") or 0)
         parts.append(
@@ -268,7 +318,8 @@ def describe_recipe(recipe: Mapping[str, Any] | None, metric: str = "accuracy") 
         )
     alpha = float(recipe.get("mixup_alpha") or 0)
     if alpha > 0:
-        parts.append(f"mixup (Beta {alpha:g}, {alpha:g})")
+        within = " within each class" if recipe.get("mixup_pairs") == "class" else ""
+        parts.append(f"mixup{within} (Beta {alpha:g}, {alpha:g})")
     smoothing = float(recipe.get("label_smoothing") or 0)
     if smoothing > 0:
         parts.append(f"label smoothing {smoothing:g}")

@@ -123,7 +123,9 @@ def train_from_recording(
     rec = read_recording(data_path)
     if t.windowed:
         _check_window_size(rec, config.window, data_path)
-    data = t.dataset(rec, window=config.window, prior=config.prior)
+    data = t.dataset(
+        rec, window=config.window, prior=config.prior, reference=config.reference_for(task)
+    )
     t.check_trainable(data, str(data_path))
     counts = config.counts or t.split_counts
     split_seed = config.seed if config.split_seed is None else config.split_seed
@@ -137,6 +139,8 @@ def train_from_recording(
         "split_seed": split_seed,
         **data_identity(rec),
     }
+    if getattr(data, "reference", None):  # touch: the Eq. 2 reference, re-applied by evaluate
+        split["touch_reference"] = data.reference
     summary = train(task, parts["train"], parts["val"], out, config, split=split)
     summary.update({f"n_{k}": int(p.n_samples) for k, p in parts.items()})
     return summary
@@ -284,6 +288,8 @@ def _train(job: _Job, train_data: SampleData, val_data: SampleData) -> dict[str,
             finetune.save_base(job.out_dir, m.model, m.normalizer, m.extra, scores)
     recipe = {k: getattr(s, k) for k in RECIPE_FIELDS}
     recipe["inflation_shift_states"] = criterion.shift_states
+    if getattr(train_data, "reference", None):  # touch: which Eq. 2 reference calibrated it
+        recipe["reference"] = train_data.reference.get("mode")
     rank_batch = math.ceil(s.batch_size / d.world_size)
     if d.main:
         _write_header(job, m, recipe, rank_batch, train_data, val_data)

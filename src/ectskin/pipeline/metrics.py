@@ -44,6 +44,8 @@ ROBUST_KEYS = (
     "worst_trial",
     "training",
     "split",
+    "reference",
+    "baselines",  # fitted on the robust run's own calibrated inputs (its Eq. 2 reference)
 )
 #: keys of an ablation run's track metrics copied under ``track.ablations.<key>``
 ABLATION_KEYS = (

@@ -24,6 +24,7 @@ from ectskin._check import EctskinError
 from ectskin._files import read_json
 from ectskin.io import Recording, read_recording, write_recording
 from ectskin.learn.evaluate import evaluate_run
+from ectskin.learn.profiles import RECIPE_FIELDS, profile_settings
 from ectskin.learn.train import TrainConfig, train_from_recording
 from ectskin.pipeline.config import RUNS, ReproduceConfig
 from ectskin.pipeline.runner import Job, StepRunner, digest, plain, settings_diff
@@ -33,8 +34,9 @@ from ectskin.twin.characterize import characterize as characterize_twin
 log = logging.getLogger(__name__)
 
 DATA_FILE = "data.h5"
-#: the two runs evaluated against the baselines (the ablations are compared to ``track``)
-MAIN_RUNS = ("touch", "track")
+#: the runs evaluated against the baselines, each on its own calibrated inputs (the touch runs
+#: may differ in their Eq. 2 reference; the ablations are compared to ``track``)
+MAIN_RUNS = ("touch", "touch_robust", "track")
 
 
 def recording_digest(recording: Recording) -> str:
@@ -119,7 +121,14 @@ def run_settings(
     """The settings a training of run ``name`` depends on (and its evaluation, with
     ``baselines``)."""
     task, window, prior = RUNS[name]
-    model = {"model": config.touch_model} if name == "touch" and config.touch_model != "mlp" else {}
+    model: dict[str, Any] = (
+        {"model": config.touch_model} if name == "touch" and config.touch_model != "mlp" else {}
+    )
+    if task == "touch":  # the Eq. 2 reference and the recipe of the run's profile
+        profile = config.run_profile(name)
+        s = profile_settings(task, profile)
+        model["reference"] = TrainConfig(profile=profile).reference_for(task)
+        model["recipe"] = {k: getattr(s, k) for k in RECIPE_FIELDS}
     return {
         **model,
         "data": digest(data_settings),

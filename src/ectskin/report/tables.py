@@ -95,7 +95,11 @@ def results_table(metrics: Mapping[str, Any]) -> list[tuple[str, str, str, str]]
                     f"Touch: test accuracy, {ROBUST_LABEL}",
                     f"{PAPER['touch_accuracy_pct']:.2f} % (34 of 28 800 misclassified, all adjacent)",
                     f"{pct(lookup(r, 'accuracy'))} ({wrong})",
-                    DASH,
+                    "; ".join(
+                        f"{baseline_name(k)} {pct(lookup(v, 'accuracy'))}"
+                        for k, v in (lookup(r, "baselines", {}) or {}).items()
+                    )
+                    or DASH,
                 )
             )
     k = lookup(metrics, "track", {})
@@ -234,11 +238,25 @@ def margin_text(metrics: Mapping[str, Any]) -> list[str]:
             f"Trained with the robust recipe, the same TouchMLP reaches {pct(racc)} on the same "
             f"test trials ({100 * gain:+.2f} points versus the paper's recipe"
         )
-        if best_touch is not None:
+        own = _best_accuracy(lookup(metrics, "touch.robust.baselines", {}) or {})
+        if own is not None:  # the baselines fitted on the robust run's own calibrated inputs
+            name, b = own
+            text += (
+                f", {100 * (racc - b):+.2f} points versus '{baseline_name(name)}' on the same "
+                "calibrated inputs"
+            )
+        elif best_touch is not None:
             name, b = best_touch
             text += f", {100 * (racc - b):+.2f} points versus '{baseline_name(name)}'"
         out.append(text + ").")
     return out
+
+
+def _best_accuracy(baselines: Mapping[str, Any]) -> tuple[str, float] | None:
+    """(name, accuracy) of the most accurate of ``baselines`` ({name: metrics}), None if none."""
+    scored = [(k, float(v["accuracy"])) for k, v in baselines.items()
+              if isinstance(v, Mapping) and v.get("accuracy") is not None]
+    return max(scored, key=lambda kv: kv[1]) if scored else None
 
 
 def ablation_note(metrics: Mapping[str, Any]) -> str | None:

@@ -74,6 +74,15 @@ class TouchPredictor(Predictor):
         return super().from_run(run_dir, device=device, layout=layout)
 
     @property
+    def reference_mode(self) -> str | None:
+        """The Eq. 2 reference the run was trained with when it follows the inflation ("state",
+        "inflation", ...: :data:`ectskin.learn.data.touch.FOLLOWS_INFLATION`), else None (the
+        rest state, what a live stream is calibrated against)."""
+        doc = (self.payload.get("extra") or {}).get("reference")
+        mode = doc.get("mode") if isinstance(doc, dict) else None
+        return str(mode) if mode else None
+
+    @property
     def model_name(self) -> str:
         """ "mlp" or the classical candidate answering."""
         return "mlp" if self.classical is None else self.classical.name

@@ -57,6 +57,7 @@ class TouchCriterion(Criterion):
         super().__init__()
         self.label_smoothing = float(settings.label_smoothing) if settings is not None else 0.0
         self.mixup_alpha = float(settings.mixup_alpha) if settings is not None else 0.0
+        self.mixup_pairs = str(settings.mixup_pairs) if settings is not None else "any"
         self.state_means = state_means  # (n_states, P) or None: no inflation shift
         self.shift_states = 0 if state_means is None else len(state_means)
 
@@ -73,7 +74,12 @@ class TouchCriterion(Criterion):
                 return F.cross_entropy(model(x), y, label_smoothing=self.label_smoothing)
             return F.cross_entropy(model(x), y)  # mean over the batch (the paper's loss)
         x, y_a, y_b, lam = augment_touch_batch(
-            x, y, rng, state_means=self.state_means, mixup_alpha=self.mixup_alpha
+            x,
+            y,
+            rng,
+            state_means=self.state_means,
+            mixup_alpha=self.mixup_alpha,
+            mixup_pairs=self.mixup_pairs,
         )
         return mixup_cross_entropy(model(x), y_a, y_b, lam, self.label_smoothing)
 
@@ -167,7 +173,13 @@ class TouchTask(Task[TouchData]):
         return {"x": norm.to_dict()}
 
     def checkpoint_extra(self, data: TouchData) -> dict[str, Any]:
-        return {"n_classes": int(data.n_classes)}
+        """The class count and the Eq. 2 reference of the training frames
+        (:func:`~ectskin.learn.data.touch.reference_doc`: evaluation and inference calibrate
+        the same way)."""
+        out: dict[str, Any] = {"n_classes": int(data.n_classes)}
+        if getattr(data, "reference", None):
+            out["reference"] = data.reference
+        return out
 
     # ------------------------------------------------------------------ training
     def criterion(
