@@ -2,29 +2,37 @@
 (slow) the whole study on a tiny protocol, resumed without redoing a step. Data sets merged across
 skins: ``TouchData.concat`` (tests/learn/data/test_data_base.py).
 
-What each test catches: fine-tuning that trains the caller's model in place (the baseline would
-be scored with the fine-tuned weights), does not train at all, or draws other batches than its
-seed says; summary means that count a missing value as 0; a table cell that breaks the Markdown
-table; a resumed study that simulates again.
+What each test catches: fine-tuning that trains the nominal run in place (the baseline would
+be scored with the fine-tuned weights), does not train at all, refits the normaliser, does not
+start from the run's weights (0 epochs must answer as the run: the ``--init-from`` path) or
+trains with the profile's augmentation instead of the study's settings; summary means that
+count a missing value as 0; a table cell that breaks the Markdown table; a resumed study that
+simulates again.
 """
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import replace
 
+import numpy as np
 import pytest
 import torch
 
 from ectskin.design import variability as var
 from ectskin.design.variability import (
     VariabilityConfig,
-    finetune,
+    finetune_config,
+    finetune_run,
     report_markdown,
     skin_cases,
     summarise,
 )
+from ectskin.io import write_recording
+from ectskin.learn.checkpoint import load_checkpoint
 from ectskin.learn.data import touch_dataset
 from ectskin.learn.tasks import get_task
+from ectskin.learn.train import TrainConfig, train_from_recording
 from ectskin.twin.protocol import Protocol
 
 
@@ -32,63 +40,62 @@ def _accuracy(model, data) -> float:
     return float((get_task("touch").predict(model, data) == data.y).mean())
 
 
-def test_finetune_learns_and_leaves_the_given_model_alone(make_recording):
-    synthetic_recording = make_recording
-    torch.manual_seed(0)
-    data = touch_dataset(synthetic_recording(n_frames=12), reference="rest")
-    t = get_task("touch")
-    model = t.build_model(data, None)
-    t.fit_normalization(model, data)
-    model.eval()
-    before = {k: v.clone() for k, v in model.state_dict().items()}
-    acc0 = _accuracy(model, data)
-    tuned = finetune("touch", model, data, epochs=25, lr=1e-2, seed=0)
-    for k, v in model.state_dict().items():
-        assert torch.equal(v, before[k]), k
+@pytest.fixture
+def touch_base(tmp_path, make_recording):
+    """A touch run trained one epoch (barely: one optimiser step) and another skin's data."""
+    rec = tmp_path / "a.h5"
+    write_recording(make_recording(n_frames=12, seed=0), rec)
+    run = tmp_path / "base"
+    config = TrainConfig(profile="quick", epochs=1, progress=False, counts=(4, 1, 1))
+    train_from_recording("touch", rec, run, config)
+    data = touch_dataset(make_recording(n_frames=12, seed=3), reference="rest")
+    return run, data
+
+
+def _digest(path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_finetune_learns_from_the_run_and_leaves_it_alone(touch_base):
+    run, data = touch_base
+    before = _digest(run / "model.pt")
+    base, _, _ = load_checkpoint(run / "model.pt")
+    base.eval()
+    acc0 = _accuracy(base, data)
+    cfg = replace(
+        finetune_config("touch", VariabilityConfig(finetune_epochs=25, finetune_lr=1e-2)),
+        threads=1,
+    )
+    tuned, summary = finetune_run("touch", run, data, data, cfg)
+    assert _digest(run / "model.pt") == before  # the nominal run is not trained in place
+    assert summary["best_epoch"] > 0 and not tuned.training
     acc1 = _accuracy(tuned, data)
     assert acc1 >= 0.75 and acc1 > acc0 + 0.3
-    # the normalisation is the trained model's, not refit
-    assert torch.equal(tuned.state_dict()["x_mean"], before["x_mean"])
+    # the normalisation is the trained run's, not refit on the few samples
+    for k in ("x_mean", "x_std"):
+        assert torch.equal(tuned.state_dict()[k], base.state_dict()[k])
 
 
-def _finetune_by_hand(task, model, data, *, epochs, lr, seed, batch_size=32):
-    """The reference: plain Adam over a seeded permutation per epoch, the task's loss."""
-    import copy
-
-    from ectskin.learn.profiles import TrainSettings
-
-    t = get_task(task)
-    model = copy.deepcopy(model)
-    cpu = torch.device("cpu")
-    criterion = t.criterion(model, TrainSettings(epochs, batch_size, lr=lr), data, cpu)
-    tensors = t.tensors(data, cpu)
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
-    g = torch.Generator().manual_seed(seed)
-    model.train()
-    for _ in range(epochs):
-        perm = torch.randperm(tensors.n, generator=g)
-        for start in range(0, tensors.n, batch_size):
-            loss = criterion.loss(model, tensors.batch(perm[start : start + batch_size]), None)
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-    return model.eval()
-
-
-def test_finetune_through_the_engine_matches_a_loop_by_hand(make_recording):
-    torch.manual_seed(0)
-    data = touch_dataset(make_recording(n_frames=12), reference="rest")
+def test_zero_finetune_epochs_answer_as_the_run(touch_base):
+    """The --init-from path: 0 epochs keep the base weights bit for bit."""
+    run, data = touch_base
+    base, _, _ = load_checkpoint(run / "model.pt")
+    cfg = finetune_config("touch", VariabilityConfig(finetune_epochs=0))
+    tuned, summary = finetune_run("touch", run, data, data, cfg)
+    assert summary["best_epoch"] == 0
     t = get_task("touch")
-    model = t.build_model(data, None)
-    t.fit_normalization(model, data)
-    model.eval()
-    torch.manual_seed(9)  # the dropout masks draw from the global generator
-    tuned = finetune("touch", model, data, epochs=3, lr=1e-2, seed=4)
-    torch.manual_seed(9)
-    want = _finetune_by_hand("touch", model, data, epochs=3, lr=1e-2, seed=4)
-    for k, v in want.state_dict().items():
-        assert torch.equal(tuned.state_dict()[k], v), k  # bit for bit
-    assert not tuned.training
+    np.testing.assert_array_equal(t.predict(tuned, data), t.predict(base.eval(), data))
+
+
+def test_finetune_settings_are_the_studys():
+    """Adam at a constant finetune_lr, batches of 32, every sample once per epoch, no
+    augmentation, lowest loss kept; for both tasks' profiles (touch: robust, which augments)."""
+    cfg = VariabilityConfig(finetune_epochs=7, finetune_lr=2e-4)
+    for task in ("touch", "contact"):
+        s = finetune_config(task, cfg).settings_for(task)
+        assert (s.epochs, s.batch_size, s.lr) == (7, var.FINETUNE_BATCH, 2e-4)
+        assert s.step_size >= s.epochs and s.samples_per_epoch is None
+        assert not s.augments and s.label_smoothing == 0 and s.select == "val_loss"
 
 
 def test_skin_cases_roles_seeds_and_a_zero_scale():

@@ -32,9 +32,12 @@ Steps (each cached under ``OUT``, so a stopped run resumes where it stopped):
      ``dr_own_reference``: the DR model with the skin's own reference;
    * ``finetune`` (recovery c): the nominal model fine-tuned on N labelled samples of the skin
      (N in ``finetune_frames``; drawn at random from its train-split trials, nominal
-     reference, so N = 0 is the baseline), ``finetune_epochs`` epochs of Adam at
-     ``finetune_lr`` from the trained weights (the training loop of :mod:`ectskin.learn.engine`),
-     the normalisation kept.
+     reference, so N = 0 is the baseline) through the path of ``ectskin train --init-from``
+     (:func:`finetune_run`: the nominal run's config, normaliser and weights), with
+     :func:`finetune_config`: ``finetune_epochs`` epochs of Adam at a constant ``finetune_lr``,
+     batches of :data:`FINETUNE_BATCH`, no augmentation; the N samples are also the validation
+     data, so the kept weights are those of the lowest loss on them, the nominal weights
+     (epoch 0) included.
 
    Touch: test accuracy; contact: ``loc_mm_mean`` (mm over the skin, frames with one finger).
    ``OUT/eval/<skin>.json`` per skin.
@@ -49,8 +52,9 @@ the relative change of its rest readout from the nominal one.
 
 from __future__ import annotations
 
-import copy
+import contextlib
 import logging
+import tempfile
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -71,10 +75,7 @@ from ectskin.io.calibration import touch_reference
 from ectskin.layout import SensorLayout, default_layout
 from ectskin.learn.checkpoint import load_checkpoint
 from ectskin.learn.data import SampleData
-from ectskin.learn.distributed import Dist
-from ectskin.learn.engine import Tensors, train_one_epoch
 from ectskin.learn.evaluate import Run, read_run
-from ectskin.learn.profiles import TrainSettings
 from ectskin.learn.tasks import EvalCase, get_task
 from ectskin.learn.threads import torch_threads
 from ectskin.learn.train import TrainConfig, train, train_from_recording
@@ -101,6 +102,9 @@ EVALUATIONS = (
     ("domain_randomisation", "dr", "nominal"),
     ("dr_own_reference", "dr", "own"),
 )
+
+#: The batch size of the fine-tunes (recovery c).
+FINETUNE_BATCH = 32
 
 #: A channel whose own rest readout is below this fraction of the nominal one is dead.
 DEAD_FRACTION = 0.01
@@ -288,7 +292,9 @@ def _profile(task: str, config: VariabilityConfig) -> str:
 
 
 def _train_config(task: str, config: VariabilityConfig) -> TrainConfig:
+    # every skin is scored on frames calibrated against one rest readout: train on such frames
     return TrainConfig(
+        reference="rest" if task == "touch" else None,
         profile=_profile(task, config),
         seed=config.seed,
         progress=config.progress,
@@ -441,44 +447,62 @@ def _finetuned_score(
     pool = _trials(ds, run.split["train"], rec)
     rng = np.random.default_rng([config.seed, 17, n, sum(map(ord, case.name))])
     take = rng.choice(pool.n_samples, size=min(n, pool.n_samples), replace=False)
-    model = finetune(
-        task,
-        run.model,
-        pool.take(np.sort(take)),
-        epochs=config.finetune_epochs,
-        lr=config.finetune_lr,
-        seed=config.seed,
-    )
+    sample = pool.take(np.sort(take))
+    model, _ = finetune_run(task, run.path, sample, sample, finetune_config(task, config))
     return score(task, model, run.config, rec, reference, names)
 
 
-def finetune(
+def finetune_config(task: str, config: VariabilityConfig) -> TrainConfig:
+    """The :class:`TrainConfig` of the study's fine-tunes (recovery c): the task's profile with
+    ``finetune_epochs`` epochs of Adam at a constant ``finetune_lr`` (``step_size`` = the epochs)
+    in batches of :data:`FINETUNE_BATCH`, every sample once per epoch, no augmentation (no
+    inflation shift, mixup or label smoothing), the epoch of the lowest validation loss kept."""
+    epochs = config.finetune_epochs
+    return TrainConfig(
+        profile=_profile(task, config),
+        seed=config.seed,
+        epochs=epochs,
+        batch_size=FINETUNE_BATCH,
+        settings={
+            "lr": config.finetune_lr,
+            "step_size": max(epochs, 1),
+            "samples_per_epoch": None,
+            "val_samples": None,
+            "inflation_shift": False,
+            "mixup_alpha": 0.0,
+            "label_smoothing": 0.0,
+            "select": "val_loss",
+        },
+        threads=config.threads,
+        progress=False,
+        resume=False,
+    )
+
+
+def finetune_run(
     task: str,
-    model: torch.nn.Module,
-    data: SampleData,
-    *,
-    epochs: int,
-    lr: float,
-    seed: int = 0,
-    batch_size: int = 32,
-) -> torch.nn.Module:
-    """A copy of ``model`` trained ``epochs`` more epochs on ``data`` with Adam at ``lr`` (the
-    task's training loss, no augmentation; the model's normalisation is kept), one
-    :func:`~ectskin.learn.engine.train_one_epoch` per epoch on the CPU over a permutation drawn
-    from a generator seeded by ``seed``."""
-    t = get_task(task)
-    model = copy.deepcopy(model)
-    settings = TrainSettings(epochs=max(epochs, 1), batch_size=batch_size, lr=lr)
-    cpu = Dist()
-    criterion = t.criterion(model, settings, data, cpu.device)
-    tensors: Tensors = t.tensors(data, cpu.device)
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
-    g = torch.Generator().manual_seed(seed)
-    for epoch in range(epochs):
-        perm = torch.randperm(tensors.n, generator=g)
-        train_one_epoch(model, criterion, opt, tensors, perm, batch_size, epoch=epoch, d=cpu)
-    model.eval()
-    return model
+    init_from: str | Path,
+    train_data: SampleData,
+    val_data: SampleData,
+    config: TrainConfig,
+    out: str | Path | None = None,
+) -> tuple[torch.nn.Module, dict[str, Any]]:
+    """Fine-tune the trained run ``init_from`` (a run folder or its ``model.pt``) on in-memory
+    data: :func:`~ectskin.learn.train.train` with ``config.init_from`` set, the path of
+    ``ectskin train TASK NEW.h5 --init-from RUN`` (:mod:`ectskin.learn.finetune`: the base run's
+    config, normaliser and weights; the base scored on ``val_data`` and kept as epoch 0 unless
+    an epoch beats it there). The run folder is ``out``, or a temporary one removed afterwards.
+    Returns the kept model (``model.pt``, in eval mode) and train's summary."""
+    cfg = replace(config, init_from=str(init_from), resume=False)
+    with contextlib.ExitStack() as stack:
+        folder = (
+            Path(out)
+            if out is not None
+            else Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="ectskin-ft-")))
+        )
+        summary = train(task, train_data, val_data, folder, cfg)
+        model, _, _ = load_checkpoint(folder / "model.pt", kind=get_task(task).model_kind)
+    return model.eval(), summary
 
 
 # ----------------------------------------------------------------------------- summary, report

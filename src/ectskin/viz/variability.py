@@ -7,6 +7,7 @@ MNE style like :mod:`ectskin.viz.learning`: each function takes the study's per-
 ``results`` maps a skin name to its evaluation: ``role`` ("nominal", "sampled", "fault"),
 ``scale``, and per task (``"touch"``, ``"contact"``) the metric of each evaluation of
 :data:`EVALUATION_LABELS` (None where it is not defined) and ``finetune`` ({N as str: metric}).
+:func:`plot_few_shot` draws the few-shot curves of :mod:`ectskin.study.fewshot`.
 """
 
 from __future__ import annotations
@@ -110,5 +111,53 @@ def plot_finetune(
     axs[0].legend(fontsize=8)
     if new:
         fig.suptitle("Fine-tuning the nominal model on N frames of each skin")
+        fig.tight_layout()
+    return _finish(fig, show)
+
+
+def plot_few_shot(
+    curve: Mapping[str, Mapping[str, Mapping[str, Any]]],
+    metrics: Mapping[str, str],
+    *,
+    axes: Sequence[Any] | None = None,
+    show: bool = False,
+) -> Figure:
+    """Few-shot curves (:mod:`ectskin.study.fewshot`): each metric against the number N of
+    labelled frames of the new skin, one line per method with its spread over the draws as
+    error bars, one panel per metric.
+
+    ``curve`` maps N (as str) → method → metric → ``{"mean", "std"}`` (a metric or a method
+    absent at some N, or a None mean, is a gap); ``metrics`` maps metric key → axis label, in
+    panel order; ``axes``: one Axes per metric (a new figure otherwise)."""
+    if not metrics:
+        raise EctskinError("plot_few_shot: metrics must name at least one metric")
+    if axes is None:
+        fig = _new_figure(show, figsize=(4.2 * len(metrics), 4.0))
+        axs, new = list(np.atleast_1d(fig.subplots(1, len(metrics)))), True
+    else:
+        axs, new = list(axes), False
+        if len(axs) != len(metrics):
+            raise EctskinError(
+                f"axes must hold {len(metrics)} Axes ({', '.join(metrics)}), got {len(axs)}"
+            )
+        fig = axs[0].figure
+    ns = sorted(curve, key=int)
+    methods = list(dict.fromkeys(m for n in ns for m in curve[n]))
+    for ax, (key, label) in zip(axs, metrics.items()):
+        for method in methods:
+            mean, std = [], []
+            for n in ns:
+                v = curve[n].get(method, {}).get(key) or {}
+                mean.append(np.nan if v.get("mean") is None else v["mean"])
+                std.append(0.0 if v.get("std") is None else v["std"])
+            x = [int(n) for n in ns]
+            ax.errorbar(x, mean, yerr=std, fmt="o-", capsize=3, label=method)
+        ax.set_xscale("symlog", linthresh=100)
+        ax.set_xlabel("labelled frames of the new skin N")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axs[0].legend(fontsize=8)
+    if new:
+        fig.suptitle("Adapting to a new skin: N labelled frames")
         fig.tight_layout()
     return _finish(fig, show)
