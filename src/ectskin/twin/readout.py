@@ -14,6 +14,13 @@ the average of ``samples_per_frame`` conversions.
 * The excitation and the gain of the charge amplifier fluctuate from frame to frame, a noise
   proportional to the capacitance: relative size 10^(−``gain_snr_db``/20) (assumed 66 dB).
 * A slow relative drift (thermal) of the baseline, ``drift_rel`` over ``drift_period_s``.
+* ``noise_scale`` (default 1) multiplies the σ of both random noises, the gain noise and the
+  averaged quantisation noise (:func:`noise_pf` and :func:`readout` alike): 3 is a readout with
+  three times the noise (SNR 9.5 dB lower), 0 a noiseless one, whose output is the drifting true
+  capacitance, not rounded to the output grid either (there is no conversion noise to average).
+  The drift is unchanged. The random numbers are drawn at every scale, so a trial's other draws
+  (the markers' noise) stay the same. A study knob (``ectskin study reading``), not a property
+  of the paper's electronics.
 
 The SNR of a pair is 20 log10(C / σ) with σ² the sum of both noises; for the twin's smallest
 pairs (~30 fF) it is about 62 dB, above the paper's 60 dB, and it rises with the capacitance.
@@ -41,6 +48,7 @@ class ReadoutConfig:
     gain_snr_db: float = 66.0  # (assumed) frame-to-frame gain noise: σ = C · 10^(−this/20)
     drift_rel: float = 5e-4  # (assumed) amplitude of the slow relative baseline drift
     drift_period_s: float = 1800.0  # (assumed) drift period (thermal), experiment clock
+    noise_scale: float = 1.0  # multiplies the σ of the gain and quantisation noise; 0: noiseless
 
     def __post_init__(self) -> None:
         for name in ("resolution_pf", "gain_snr_db", "drift_period_s"):
@@ -53,6 +61,12 @@ class ReadoutConfig:
             )
         if not (np.isfinite(self.drift_rel) and 0 <= self.drift_rel < 0.1):
             raise EctskinError(f"readout: drift_rel must be in [0, 0.1), got {self.drift_rel!r}")
+        v = self.noise_scale
+        if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v >= 0):
+            raise EctskinError(
+                f"readout: noise_scale must be a finite number >= 0 (1: the electronics' noise, "
+                f"0: none), got {v!r}"
+            )
 
     @property
     def output_step_pf(self) -> float:
@@ -61,9 +75,10 @@ class ReadoutConfig:
 
 
 def noise_pf(c_pf: np.ndarray, config: ReadoutConfig) -> np.ndarray:
-    """Standard deviation (pF) of one output frame's noise at capacitance ``c_pf``."""
-    gain = np.abs(c_pf) * 10.0 ** (-config.gain_snr_db / 20.0)
-    quant = config.resolution_pf / np.sqrt(12.0 * config.samples_per_frame)
+    """Standard deviation (pF) of one output frame's noise at capacitance ``c_pf`` (both noises
+    times ``config.noise_scale``)."""
+    gain = np.abs(c_pf) * 10.0 ** (-config.gain_snr_db / 20.0) * config.noise_scale
+    quant = config.resolution_pf / np.sqrt(12.0 * config.samples_per_frame) * config.noise_scale
     return np.sqrt(gain**2 + quant**2)
 
 
@@ -95,14 +110,18 @@ def readout(
     c = Q_{q/N}( c_true · (1 + a sin(2π t/T + φ_ch)) · (1 + g) + e ), with g the gain noise,
     e ~ N(0, q²/(12N)) the averaged quantisation noise of N dithered conversions and Q_{q/N} the
     grid of their average; t is the experiment clock (so the drift is continuous across
-    consecutive trials).
+    consecutive trials). ``config.noise_scale`` s multiplies both noises' σ; at s = 0 the output
+    is c_true · (1 + a sin(...)), unrounded (the same random numbers are drawn at every s).
     """
     drift = 1.0 + config.drift_rel * np.sin(
         2 * np.pi * t_experiment_s[:, None] / config.drift_period_s + drift_phase[None, :]
     )
-    gain = 1.0 + rng.standard_normal(c_true.shape) * 10.0 ** (-config.gain_snr_db / 20.0)
-    quant = config.resolution_pf / np.sqrt(12.0 * config.samples_per_frame)
+    s = config.noise_scale
+    gain = 1.0 + rng.standard_normal(c_true.shape) * 10.0 ** (-config.gain_snr_db / 20.0) * s
+    quant = config.resolution_pf / np.sqrt(12.0 * config.samples_per_frame) * s
     c = c_true * drift * gain + rng.standard_normal(c_true.shape) * quant
+    if s == 0:
+        return c
     step = config.output_step_pf
     return np.round(c / step) * step
 

@@ -38,7 +38,13 @@ from ectskin.layout import SensorLayout, default_layout
 from ectskin.twin.field import ResponseField
 from ectskin.twin.field_response import FieldTouchResponse, TrialFields
 from ectskin.twin.finger import Finger
-from ectskin.twin.human import finger_path, hand_push, second_finger_path, trial_fingers
+from ectskin.twin.human import (
+    dwell_points,
+    finger_path,
+    hand_push,
+    second_finger_path,
+    trial_fingers,
+)
 from ectskin.twin.mechanics import Handling, Manipulator, ManipulatorConfig, Touch
 from ectskin.twin.pool import run_in_workers
 from ectskin.twin.protocol import Protocol, TrialPlan, plan_trials, region_bounds
@@ -96,7 +102,7 @@ def simulate_trial(
         c_true = np.empty((n, sensor.layout.n_pairs))
         markers_true = np.empty((n, n_markers, 3))
         n_solves = 0
-        dwells = np.array_split(np.arange(n), len(plan.touch_uv_mm))
+        dwells = readout_segments(n, fps, np.asarray(plan.touch_uv_mm), protocol)
         if protocol.response == "field":
             if fields is None:
                 raise EctskinError("simulate: protocol.response is 'field' but no fields given")
@@ -108,7 +114,8 @@ def simulate_trial(
             c_true = response(path, hand, path2)
             n_solves = response.n_solves
         # one readout model per dwell: the finger moves to a new point for each equal share of
-        # the trial (finger_path), and each model is accurate around its own point
+        # the trial (finger_path), and each model is accurate around its own point (a finger
+        # sliding from point to point has one per stretch of its way: readout_segments)
         for rows in dwells:
             seg = _rows(path, rows)
             seg_hand = _rows(hand, rows)
@@ -175,6 +182,37 @@ def simulate_trial(
         **sizes,
         meta=meta,
     )
+
+
+#: the longest stretch (mm) of a sliding finger's way that one readout model of a solved trial
+#: covers: TouchResponse's quadratic in the point stays within about 0.2 fF of direct solves up
+#: to 2 mm from its centre (0.3-0.4 fF at 3.3 mm, 5-6 fF at 6 mm, measured)
+SLIDE_SEGMENT_MM = 4.0
+
+
+def readout_segments(
+    n: int, fps: float, aimed_uv: np.ndarray, protocol: Protocol
+) -> list[np.ndarray]:
+    """The frames of each readout model of a touch trial: one per dwell (the equal shares of
+    :func:`~ectskin.twin.human.dwell_points`). A solved trial (``response="solve"``) whose
+    finger slides from dwell to dwell (``dwell_slide_s`` > 0) cuts each dwell further, at equal
+    lengths along its way (the aimed path, no random draw), into stretches of at most
+    :data:`SLIDE_SEGMENT_MM`: one quadratic model around a single point would be off by several
+    fF at the ends of a slide of 5 mm or more."""
+    dwells = np.array_split(np.arange(n), len(aimed_uv))
+    if protocol.dwell_slide_s <= 0 or protocol.response != "solve":
+        return dwells
+    way = dwell_points(n, fps, np.asarray(aimed_uv, dtype=np.float64), protocol.dwell_slide_s)
+    out: list[np.ndarray] = []
+    for rows in dwells:
+        along = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(way[rows], axis=0), axis=1))]
+        k = int(np.ceil(along[-1] / SLIDE_SEGMENT_MM))
+        if k <= 1:
+            out.append(rows)
+            continue
+        cuts = np.searchsorted(along, along[-1] * np.arange(1, k) / k)
+        out.extend(part for part in np.split(rows, cuts) if part.size)
+    return out
 
 
 def _rows(obj: Any, rows: np.ndarray) -> Any:
