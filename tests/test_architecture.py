@@ -34,6 +34,7 @@ LAYERS = (
     ("report",),
     ("pipeline",),
     ("design",),
+    ("study",),
     ("live",),
     ("dashboard",),
     ("commands",),

@@ -18,4 +18,5 @@ COMMANDS = (
     ("design", "design"),
     ("variability", "variability"),
     ("bound", "bound"),
+    ("study", "study"),
 )
