@@ -148,8 +148,13 @@ def _sections(metrics: Mapping[str, Any], figures: list[tuple[str, Path]]) -> li
             "profile instead of the paper's recipe"
             + (f": {recipe}" if recipe else "")
             + ". It is evaluated on the same test trials. On the twin the paper's recipe fits the "
-            "training trials exactly and generalises poorly to unseen combinations of inflation "
-            "state and touch placement; see docs/architecture.md."
+            "training trials exactly and keeps the weights of one of its first epochs (its "
+            "validation loss rises from then on): the test trials are other trials. Which "
+            "choices of the experiment's reading move it is measured by `ectskin study reading` "
+            "(docs/paper-reading.md): more touch points per trial raise it on every seed "
+            "measured; the readout noise, the force range, the pad's slide, the hand and the "
+            "fingers move it less than the seed does; split by frame instead of by trial "
+            "(which leaks trials) every model reaches 100 %."
         )
         s.append(("p", text))
     margins = margin_text(metrics)
