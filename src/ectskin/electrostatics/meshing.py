@@ -29,7 +29,7 @@ from functools import lru_cache
 import numpy as np
 
 from ectskin._check import EctskinError, check_array, check_option
-from ectskin.electrostatics.panels import Panels
+from ectskin.electrostatics.panels import Panels, cross3
 
 SPACINGS = ("uniform", "cosine")
 
@@ -368,6 +368,24 @@ def sphere_panels(
     shrink the sphere; with the correction the isolated-sphere capacitance is within about 0.2 % of
     4π ε0 R already at n = 6 (216 panels).
     """
+    c = check_array("centre", centre, (3,), finite=True)
+    if not c.any() and isinstance(conductor, (int, np.integer)):  # (a fingertip's own frame)
+        return _sphere_at_origin(
+            _positive_float("radius", radius), _positive_int("n", n), int(conductor),
+            n_conductors, bool(true_area),
+        )
+    return _sphere_panels(c, radius, n, conductor, n_conductors, true_area)
+
+
+@lru_cache(maxsize=16)
+def _sphere_at_origin(
+    radius: float, n: int, conductor: int, n_conductors: int | None, true_area: bool
+) -> Panels:
+    """:func:`sphere_panels` about the origin, kept (the panels are read-only)."""
+    return _sphere_panels(np.zeros(3), radius, n, conductor, n_conductors, true_area)
+
+
+def _sphere_panels(centre, radius, n, conductor, n_conductors, true_area) -> Panels:
     q = sphere_quads(centre, radius, n)
     p = Panels.from_quads(q, conductor, n_conductors)
     if not true_area:
@@ -386,9 +404,9 @@ def sphere_panels(
 def orthonormal_frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors e1, e2 with (e1, e2, axis) right-handed and orthonormal."""
     helper = np.array([1.0, 0, 0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])
-    e1 = np.cross(helper, axis)
+    e1 = cross3(helper, axis)
     e1 /= np.linalg.norm(e1)
-    e2 = np.cross(axis, e1)
+    e2 = cross3(axis, e1)
     return e1, e2
 
 

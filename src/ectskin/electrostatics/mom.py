@@ -39,7 +39,7 @@ import scipy.linalg
 from scipy.spatial.distance import cdist
 
 from ectskin._check import EctskinError, check_array
-from ectskin.electrostatics.panels import Panels
+from ectskin.electrostatics.panels import Panels, cross3
 
 logger = logging.getLogger(__name__)
 
@@ -99,10 +99,10 @@ def _panel_frames(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     lv = np.linalg.norm(v, axis=1)
     eu = u / lu[:, None]
     ev = v / lv[:, None]
-    n = np.cross(u, v)
+    n = cross3(u, v)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
-    mu = np.cross(eu, n)
-    mv = np.cross(ev, n)
+    mu = cross3(eu, n)
+    mv = cross3(ev, n)
     hu = 0.5 * u
     hv = 0.5 * v
     huv = np.einsum("nj,nj->n", hu, hv)
@@ -195,22 +195,26 @@ def potential_matrix(
         raise EctskinError("potential_matrix: panels is empty (0 panels)")
     c = panels.centres
     areas = panels.areas
-    sizes = panels.sizes
-    dist = cdist(c, c)  # (N, N) mm
-    # near pairs, as index lists: |r_i − r_j| < near_factor · max(size_i, size_j)
-    reach = near_factor * sizes
-    near = dist < reach[:, None]
-    near |= near.T
-    ii, jj = np.nonzero(near)
-    # far field: P_ij ≈ 1 / |r_i − r_j| (times 1/(4π ε0 εr), applied below)
+    reach = near_factor * panels.sizes
+    dist = cdist(c, c)  # (N, N) mm, symmetric
+    # near pairs i <= j, as index lists: |r_i − r_j| < near_factor · max(size_i, size_j)
+    ii, jj = np.nonzero(dist < np.maximum(reach[:, None], reach[None, :]))
+    upper = ii <= jj
+    ii, jj = ii[upper], jj[upper]
+    scale = 0.5 / (4.0 * np.pi * EPS0_PF_PER_MM * eps_r)
+    # far field: P_ij ≈ 1 / |r_i − r_j|, symmetric: (P¹ + P¹ᵀ) / 2 is P¹ (×2 × ½ applied as one)
     with np.errstate(divide="ignore"):
         P = np.divide(1.0, dist, out=dist)
-    # near field: exact (1/A_j) ∫ dA'/|r_i − r'|
+    P *= 2.0 * scale
+    # near field: exact (1/A_j) ∫ dA'/|r_i − r'| both ways, then symmetrised
     frames = _panel_frames(panels.u, panels.v)
-    P[ii, jj] = _integral(c[jj] - c[ii], frames[jj]) / areas[jj]
-    P += P.T
-    P *= 0.5 / (4.0 * np.pi * EPS0_PF_PER_MM * eps_r)
-    logger.debug("potential_matrix: %d panels, %d near pairs", n, ii.size)
+    both_i, both_j = np.concatenate([ii, jj]), np.concatenate([jj, ii])
+    one_way = _integral(c[both_j] - c[both_i], frames[both_j]) / areas[both_j]
+    m = ii.size
+    sym = (one_way[:m] + one_way[m:]) * scale
+    P[ii, jj] = sym
+    P[jj, ii] = sym
+    logger.debug("potential_matrix: %d panels, %d near pairs", n, 2 * m - np.sum(ii == jj))
     return P
 
 
@@ -304,10 +308,17 @@ def field_at(panels: Panels, charges, points, eps_r: float = 1.0) -> np.ndarray:
     r = check_array("points", points, (None, 3), finite=True)
     c = panels.centres
     comps = [r[:, k, None] - c[None, :, k] for k in range(3)]  # (M, N) each, mm
-    d2 = comps[0] * comps[0] + comps[1] * comps[1] + comps[2] * comps[2]
-    w = 1.0 / (d2 * np.sqrt(d2))  # 1 / |r − c|³
-    E = np.stack([(dk * w) @ q for dk in comps], axis=1)  # (M, 3, n_columns), BLAS products
-    return E / (4.0 * np.pi * EPS0_PF_PER_MM * eps_r)
+    d2 = comps[0] * comps[0]
+    d2 += comps[1] * comps[1]
+    d2 += comps[2] * comps[2]
+    w = np.sqrt(d2)
+    w *= d2
+    np.divide(1.0, w, out=w)  # 1 / |r − c|³
+    for dk in comps:
+        dk *= w
+    E = np.stack([dk @ q for dk in comps], axis=1)  # (M, 3, n_columns), BLAS products
+    E /= 4.0 * np.pi * EPS0_PF_PER_MM * eps_r
+    return E
 
 
 def dielectric_sensitivity(panels: Panels, charges, points, volumes, eps_r: float = 1.0) -> np.ndarray:

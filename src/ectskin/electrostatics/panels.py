@@ -45,10 +45,10 @@ class Panels:
     n_conductors: int
 
     def __post_init__(self) -> None:
-        centres = check_array("Panels.centres", self.centres, (None, 3), finite=True)
+        centres = _rows3("Panels.centres", self.centres, None)
         n = centres.shape[0]
-        u = check_array("Panels.u", self.u, (n, 3), finite=True)
-        v = check_array("Panels.v", self.v, (n, 3), finite=True)
+        u = _rows3("Panels.u", self.u, n)
+        v = _rows3("Panels.v", self.v, n)
         conductor = conductor_array(self.conductor, n, "Panels.conductor")
         if isinstance(self.n_conductors, bool) or not isinstance(
             self.n_conductors, (int, np.integer)
@@ -66,10 +66,10 @@ class Panels:
                 f"Panels.conductor[{bad}] must be in 0..{n_conductors - 1} "
                 f"(n_conductors={n_conductors}), got {int(conductor[bad])}"
             )
-        cross = np.cross(u, v)
-        areas = np.linalg.norm(cross, axis=1)
+        cross = cross3(u, v)
+        areas = _norms(cross)
         # A panel is degenerate when its area is negligible against its edge lengths squared.
-        scale = np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1)
+        scale = _norms(u) * _norms(v)
         degenerate = ~(areas > 1e-9 * scale) | ~(scale > 0)
         if np.any(degenerate):
             bad = int(np.flatnonzero(degenerate)[0])
@@ -115,9 +115,12 @@ class Panels:
         It bounds the distance between any two points of the panel, which is what decides
         whether a point sees the panel as a point charge (see :func:`~.mom.potential_matrix`).
         """
-        return np.maximum(
-            np.linalg.norm(self.u + self.v, axis=1), np.linalg.norm(self.u - self.v, axis=1)
-        )
+        sizes = self.__dict__.get("_sizes")
+        if sizes is None:  # (computed once: the arrays are read-only)
+            sizes = np.maximum(_norms(self.u + self.v), _norms(self.u - self.v))
+            sizes.setflags(write=False)
+            object.__setattr__(self, "_sizes", sizes)
+        return sizes
 
     def corners(self) -> np.ndarray:
         """(N, 4, 3) parallelogram corners ``c0..c3`` in order around each panel, mm.
@@ -197,6 +200,39 @@ class Panels:
         if n_conductors is None:
             n_conductors = int(cond.max()) + 1 if cond.size else 1
         return Panels(self.centres, self.u, self.v, cond, n_conductors)
+
+
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n, 3) row-wise cross products a × b of (n, 3) arrays: ``np.cross``'s arithmetic (the
+    same products and differences), without its general-axis overhead."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
+    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
+    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
+    return out
+
+
+def _rows3(name: str, value, n: int | None) -> np.ndarray:
+    """``value`` as a finite float (n, 3) array (any n when None), or an EctskinError naming
+    ``name`` (:func:`~ectskin._check.check_array`; a float64 array of that shape is taken as
+    it is)."""
+    if (
+        isinstance(value, np.ndarray)
+        and value.dtype == np.float64
+        and value.ndim == 2
+        and value.shape[1] == 3
+        and (n is None or value.shape[0] == n)
+        and np.isfinite(value).all()
+    ):
+        return value
+    return check_array(name, value, (n, 3), finite=True)
+
+
+def _norms(a: np.ndarray) -> np.ndarray:
+    """(n,) Euclidean norms of the rows of an (n, 3) array (as ``np.linalg.norm(a, axis=1)``)."""
+    return np.sqrt(np.add.reduce(a * a, axis=1))
 
 
 def conductor_array(conductor, n: int, name: str) -> np.ndarray:

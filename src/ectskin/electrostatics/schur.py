@@ -73,17 +73,27 @@ def potential_block(
             raise EctskinError(f"potential_block: {name} must be Panels, got {type(p).__name__}")
     eps_r = _positive("eps_r", eps_r)
     near_factor = _positive("near_factor", near_factor)
+    return _block(rows, rows.sizes, None, cols, eps_r, near_factor)
+
+
+def _block(
+    rows: Panels, row_sizes: np.ndarray, row_frames: np.ndarray | None, cols: Panels,
+    eps_r: float, near_factor: float,
+) -> np.ndarray:
+    """:func:`potential_block` with the rows' sizes (and :func:`~.mom._panel_frames`, computed
+    for the near pairs' rows only when None) at hand."""
     ca, cb = rows.centres, cols.centres
     dist = cdist(ca, cb)
-    near = dist < near_factor * np.maximum(rows.sizes[:, None], cols.sizes[None, :])
+    near = dist < near_factor * np.maximum(row_sizes[:, None], cols.sizes[None, :])
     ii, jj = np.nonzero(near)
     with np.errstate(divide="ignore"):
         P = np.divide(2.0, dist, out=dist)  # far pairs: P¹_ij + P¹_ji = 2 / |r_i − r_j|
     # near pairs: P¹_ij (col panel j's exact potential at row centre i) + P¹_ji (row panel i's
     # at col centre j)
-    near_ij = _integral(cb[jj] - ca[ii], _panel_frames(cols.u, cols.v)[jj]) / cols.areas[jj]
-    near_ji = _integral(ca[ii] - cb[jj], _panel_frames(rows.u, rows.v)[ii]) / rows.areas[ii]
-    P[ii, jj] = near_ij + near_ji
+    if ii.size:
+        near_ij = _integral(cb[jj] - ca[ii], _panel_frames(cols.u[jj], cols.v[jj])) / cols.areas[jj]
+        fr = _panel_frames(rows.u[ii], rows.v[ii]) if row_frames is None else row_frames[ii]
+        P[ii, jj] = near_ij + _integral(ca[ii] - cb[jj], fr) / rows.areas[ii]
     P *= 0.5 / (4.0 * np.pi * EPS0_PF_PER_MM * eps_r)
     return P
 
@@ -137,6 +147,8 @@ class FixedConductors:
         self.panels = panels
         self.eps_r = _positive("eps_r", eps_r)
         self.near_factor = _positive("near_factor", near_factor)
+        self._sizes = panels.sizes
+        self._frames = _panel_frames(panels.u, panels.v)
         P = potential_matrix(panels, self.eps_r, near_factor=self.near_factor)
         if not np.all(np.isfinite(P)):
             raise EctskinError(
@@ -216,9 +228,10 @@ class FixedConductors:
 
     def _solve_batch(self, added: list[Panels], K_out: np.ndarray, S_out: np.ndarray | None) -> None:
         """The block solve of the module docstring for a batch of added sets (in place)."""
-        C = np.concatenate(
-            [potential_block(self.panels, p, self.eps_r, near_factor=self.near_factor) for p in added],
-            axis=1,
+        # the fixed panels' rows of every added set's columns, in one block
+        C = _block(
+            self.panels, self._sizes, self._frames, Panels.concatenate(added), self.eps_r,
+            self.near_factor,
         )
         W_all = scipy.linalg.solve_triangular(self._L, C, lower=True, check_finite=False)
         n_s = 0 if S_out is None else S_out.shape[1]

@@ -11,7 +11,9 @@
   electrode panels (and the chamber cavities) are the untouched state's. They are factored once
   per row (:class:`~ectskin.electrostatics.schur.FixedConductors`) and every finger position and
   height adds only its own panels: the same readout as the direct solve, to round-off. That the
-  finger at force 0 moves no electrode panel is checked on every row.
+  finger at force 0 moves no electrode panel is checked on every row. For the same reason the
+  row's fingertips rest on one untouched skin and are placed together
+  (:func:`~ectskin.twin.finger.hovering`), then turned into panels by the twin's own calls.
 * **Untouched**: the state without a finger.
 
 Every function here is deterministic: its result depends only on its arguments (the per-row
@@ -30,6 +32,7 @@ from ectskin._check import EctskinError
 from ectskin.electrostatics import EPS0_PF_PER_MM, Panels
 from ectskin.electrostatics.schur import FixedConductors
 from ectskin.twin.field_spec import FieldSpec, physics_digest
+from ectskin.twin.finger import hovering
 from ectskin.twin.mechanics import Touch
 from ectskin.twin.sensor import SensorModel
 
@@ -123,15 +126,25 @@ def hover_row(
         cells = (pts[0], vols[0])
     solver = FixedConductors(base, sensor.eps_r, cells=cells)
     touches = [Touch(face, (float(u_mm), float(v))) for v in v_mm]
-    fingers = [
-        sensor.finger_panels(inflation_ml, t, zeros, heights_mm=heights) for t in touches
-    ]  # n_v lists of n_heights
-    try:  # the whole row in one batch
-        flat = _readouts(sensor, solver, [p for per_v in fingers for p in per_v], cavities)
-        return flat.reshape(len(v_mm), heights.size, -1)
-    except EctskinError:
-        pass
-    out = np.empty((len(v_mm), heights.size, sensor.layout.n_pairs))
+    # the fingertips of the whole row placed at once (the finger at force 0 leaves the body as
+    # it is); the panels and any direct solve below are the twin's own calls
+    with hovering(sensor.manipulator, sensor.finger, inflation_ml, touches, heights):
+        fingers = [
+            sensor.finger_panels(inflation_ml, t, zeros, heights_mm=heights) for t in touches
+        ]  # n_v lists of n_heights
+        try:  # the whole row in one batch
+            flat = _readouts(sensor, solver, [p for per_v in fingers for p in per_v], cavities)
+            return flat.reshape(len(v_mm), heights.size, -1)
+        except EctskinError:
+            pass
+        return _one_by_one(sensor, inflation_ml, solver, touches, fingers, heights, cavities)
+
+
+def _one_by_one(sensor, inflation_ml, solver, touches, fingers, heights, cavities) -> np.ndarray:
+    """The hover row point by point, where the batch failed: a point whose Schur complement is
+    not positive definite is solved directly."""
+    zeros = np.zeros(heights.size)
+    out = np.empty((len(touches), heights.size, sensor.layout.n_pairs))
     for k, (touch, per_v) in enumerate(zip(touches, fingers)):
         try:
             out[k] = _readouts(sensor, solver, per_v, cavities)

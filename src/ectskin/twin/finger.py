@@ -29,7 +29,9 @@ state and force, and above the skin (hover) too:
   Newton step from its lateral miss and a bound on the skin's slope) is dropped, its weight
   below e⁻⁵⁰; the others are solved as if all were, so the rest height is the same to
   round-off at about a third of the cost. Frames that differ only in the height above the skin
-  (a hovering finger) share one placement.
+  (a hovering finger) share one placement. Fingers that hover (force 0) leave the body as it is,
+  so many of them (a response field's grid row) are placed at once on the one untouched skin
+  (:func:`hover_fingertips`, :func:`hovering`), with the same steps as each alone.
 * *Cover.* The sealing cover (``Finger.skin_cover_mm``) under the pressed pad is a bonded thin
   soft layer, a Winkler foundation: it compresses by the mean pressure F / (π a²) over the
   Hertz contact disc divided by the bonded layer's compression modulus E_c = E (1 + 2 S²), S =
@@ -47,6 +49,9 @@ touch) cheaply, sharing the rest-state panels: the simulation draws each trial's
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 
 import numpy as np
@@ -199,6 +204,11 @@ def rest_fingertips(
     ``forces`` as given to the mechanics, ``per_touch`` and ``heights`` (F, T) each finger's force
     and height above the skin per frame; every fingertip on the skin deformed by all of them."""
     touches = (touch,) if isinstance(touch, Touch) else tuple(touch)
+    placed = _PLACED.get()
+    if placed is not None and isinstance(touch, Touch) and handling is None:
+        key = _hover_key(manipulator, fingers[0], inflation_ml, heights[:, 0])
+        if key == placed[0] and not np.any(forces) and touch in placed[1]:
+            return [placed[1][touch]]
     return [
         _rest_one(
             manipulator, fingers[k], t, inflation_ml, touch, forces, per_touch[:, k],
@@ -206,6 +216,90 @@ def rest_fingertips(
         )
         for k, t in enumerate(touches)
     ]
+
+
+def hover_fingertips(
+    manipulator: Manipulator, finger: Finger, inflation_ml, touches: Sequence[Touch], heights
+) -> list[Fingertip]:
+    """The fingertips of ``finger`` hovering at ``heights`` (H,) above each of ``touches``
+    (single touches, force 0): element t is ``rest_fingertips(manipulator, [finger],
+    inflation_ml, touches[t], zeros(H), zeros((H, 1)), heights[:, None])[0]``, to round-off.
+
+    A finger that does not press leaves the body as it is (no dimple, no load on the rod), so
+    all of them rest on the untouched skin and are placed together, one frame per touch (and,
+    as in :func:`rest_fingertips`, one placement for all the heights): the same Newton steps
+    for every skin sample, a dozen mappings of the skin for all the touches instead of a dozen
+    for each (the later steps map a few dozen samples per touch, where the cost of a mapping
+    is mostly its own)."""
+    touches = tuple(touches)
+    if not touches or not all(isinstance(t, Touch) for t in touches):
+        raise EctskinError(f"hover_fingertips: touches must be Touch, got {touches!r:.80}")
+    heights = np.atleast_1d(np.asarray(heights, dtype=np.float64))
+    if heights.ndim != 1 or not np.all(heights > 0):
+        raise EctskinError(
+            f"hover_fingertips: heights must be (H,) heights above the skin > 0 mm, got "
+            f"{heights.tolist()}"
+        )
+    n_h = heights.size
+    out: dict[int, Fingertip] = {}
+    for surface in dict.fromkeys(t.surface for t in touches):
+        idx = [k for k, t in enumerate(touches) if t.surface == surface]
+        uv = np.asarray([touches[k].uv_mm for k in idx], dtype=np.float64)  # (T, 2)
+        n_t = len(idx)
+        zeros = np.zeros(n_t)
+
+        def deform(rest, surface=surface, zeros=zeros):  # (T, k, 2) -> (T, k, 3), untouched
+            return manipulator.deform(surface, rest, inflation_ml, None, zeros)
+
+        pts = deform(uv[:, None])[:, 0]  # (T, 3)
+        frame = manipulator.face_frame(surface, uv, inflation_ml)[0]  # (T, 3, 3)
+        depth, cover, target = _pad(finger, np.zeros(1), np.zeros(1, dtype=bool))
+        depths = np.repeat(depth, n_t)
+        skin, valid = _skin_at(
+            manipulator, surface, deform, uv[:, None], np.repeat(target, n_t, axis=0), pts,
+            frame, finger.radius_mm, depths,
+        )
+        above = rest_height(skin - pts[:, None], frame[..., 2], finger.radius_mm, depths,
+                            valid=valid)
+        for g, k in enumerate(idx):  # every height: the same placement, lifted
+            p = np.repeat(pts[g : g + 1], n_h, axis=0)
+            n = np.repeat(frame[g : g + 1, :, 2], n_h, axis=0)
+            c = np.repeat(cover, n_h)
+            centre = p + n * (above[g] + c + heights)[:, None]
+            out[k] = Fingertip(finger, p, n, centre, np.zeros(n_h), c, heights.copy())
+    return [out[k] for k in range(len(touches))]
+
+
+#: the placements of :func:`hovering` while its block runs: (key, {touch: Fingertip})
+_PLACED: ContextVar[tuple[tuple, dict[Touch, Fingertip]] | None] = ContextVar(
+    "ectskin_hovering", default=None
+)
+
+
+def _hover_key(manipulator: Manipulator, finger: Finger, inflation_ml, heights) -> tuple:
+    """What a hovering placement depends on besides its touch."""
+    def raw(a) -> bytes:
+        return np.ascontiguousarray(a, dtype=np.float64).reshape(-1).tobytes()
+
+    return (id(manipulator), finger, raw(inflation_ml), raw(heights))
+
+
+@contextmanager
+def hovering(
+    manipulator: Manipulator, finger: Finger, inflation_ml, touches: Sequence[Touch], heights
+) -> Iterator[list[Fingertip]]:
+    """Place ``touches`` hovering at ``heights`` at once (:func:`hover_fingertips`) and, inside
+    the block, answer :func:`rest_fingertips` of any one of them (the same manipulator, finger,
+    inflation and heights, force 0, no handling) with that placement: a response field's hover
+    row solved by the twin's own calls (:meth:`~ectskin.twin.sensor.SensorModel.finger_panels`),
+    placed as a row. Yields the fingertips."""
+    tips = hover_fingertips(manipulator, finger, inflation_ml, touches, heights)
+    key = _hover_key(manipulator, finger, inflation_ml, np.asarray(heights, dtype=np.float64))
+    token = _PLACED.set((key, dict(zip(touches, tips))))
+    try:
+        yield tips
+    finally:
+        _PLACED.reset(token)
 
 
 def _rest_one(
@@ -247,6 +341,22 @@ def _placement(m: Manipulator, fg: Finger, one: Touch, inflation_ml, touch, forc
     uv = np.asarray([one.uv_mm])
     pts = m.deform(one.surface, uv, inflation_ml, touch, forces, handling)[:, 0]  # (F, 3)
     frame = m.face_frame(one.surface, uv, inflation_ml, touch, forces, handling)[:, 0]
+    depth, cover, target = _pad(fg, force_one, contact)
+    nrm = frame[..., 2]
+
+    def deform(rest):
+        return m.deform(one.surface, rest, inflation_ml, touch, forces, handling)
+
+    skin, valid = _skin_at(
+        m, one.surface, deform, np.asarray(one.uv_mm), target, pts, frame, fg.radius_mm, depth
+    )
+    above = rest_height(skin - pts[:, None], nrm, fg.radius_mm, depth, valid=valid)
+    return pts, nrm, depth, cover, above
+
+
+def _pad(fg: Finger, force_one, contact) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(pad depth (F,), cover (F,), the skin samples' lateral offsets along the face's axes
+    (F, m, 2)) of ``fg`` pressing with ``force_one`` (F,) where ``contact`` (F,), else above."""
     depth = np.where(contact, fg.indentation_mm(force_one), 0.0)  # (F,)
     cover = np.where(contact, fg.cover_mm(force_one), fg.skin_cover_mm)
     rho = np.sqrt(depth * (2 * fg.radius_mm - depth))  # the flat pad's radius
@@ -260,24 +370,21 @@ def _placement(m: Manipulator, fg: Finger, one: Touch, inflation_ml, touch, forc
     )  # (F, rings)
     ang = np.linspace(0, 2 * np.pi, _RING_POINTS, endpoint=False)
     target = (radii[:, :, None, None] * np.c_[np.cos(ang), np.sin(ang)][None, None]).reshape(
-        len(pts), -1, 2
-    )  # (F, m, 2) lateral offsets along the face's axes
-    nrm = frame[..., 2]
-    skin, valid = _skin_at(
-        m, one, target, pts, frame, inflation_ml, touch, forces, handling, fg.radius_mm, depth
-    )
-    above = rest_height(skin - pts[:, None], nrm, fg.radius_mm, depth, valid=valid)
-    return pts, nrm, depth, cover, above
+        len(depth), -1, 2
+    )  # (F, m, 2)
+    return depth, cover, target
 
 
 def _skin_at(
-    m: Manipulator, one: Touch, target, pts, frame, inflation_ml, touch, forces, handling,
+    m: Manipulator, surface: str, deform, uv0, target, pts, frame,
     radius: float | None = None, depth: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The deformed skin at the lateral offsets ``target`` (F, m, 2) from the points ``pts``
     (F, 3) along the face's carried axes ``frame`` (F, 3, 3) (u, v, normal): rest coordinates
     found by Newton steps through the deformation (the skin stretches and rises steeply beside
-    a bulge; the flat face's map is the first guess), kept on the face.
+    a bulge; the flat face's map is the first guess), kept on the face. ``deform`` maps rest
+    coordinates (F, k, 2) on ``surface`` to the deformed skin (F, k, 3), frame by frame;
+    ``uv0``: the finger's rest point (2,), or one per frame (F, 1, 2).
 
     Returns the skin (F, k, 3) at k of the samples and a mask (F, k) of the valid ones. With
     ``radius`` and ``depth`` (F,) (the fingertip's), a sample is dropped at any step where its
@@ -287,7 +394,6 @@ def _skin_at(
     without ``radius``)."""
     n_f, n_m = target.shape[:2]
     e12 = frame[..., :2].transpose(0, 2, 1)  # (F, 2, 3)
-    uv0 = np.asarray(one.uv_mm)
     h = 0.05  # the Jacobian's forward differences, mm
     steps = np.array([[h, 0.0], [0.0, h]])
     valid = np.ones((n_f, n_m), dtype=bool)
@@ -295,11 +401,11 @@ def _skin_at(
     inv = np.broadcast_to(np.eye(2), (n_f, n_m, 2, 2))
     for step in range(_PLACE_STEPS):
         fresh = step < _JACOBIAN_STEPS  # a new Jacobian, or the last one (chord steps)
-        x = m.deform(one.surface, uv0 + offset, inflation_ml, touch, forces, handling)
-        lat = np.einsum("fki,fmi->fmk", e12, x - pts[:, None])  # (F, m, 2)
+        x = deform(uv0 + offset)
+        lat = _along(x - pts[:, None], e12[:, None])  # (F, m, 2)
         if radius is not None and depth is not None:
             keep = valid & _worth_solving(
-                m, one.surface, uv0 + offset, x - pts[:, None], lat, target, frame[..., 2],
+                m, surface, uv0 + offset, x - pts[:, None], lat, target, frame[..., 2],
                 radius, depth, valid,
             )
             if keep.sum(axis=1).max() < target.shape[1]:
@@ -317,18 +423,23 @@ def _skin_at(
         if fresh:
             trial = (uv0 + offset)[:, None] + steps[None, :, None]  # (F, 2, m, 2)
             n_k = target.shape[1]
-            xs = m.deform(
-                one.surface, trial.reshape(n_f, -1, 2), inflation_ml, touch, forces, handling
-            ).reshape(n_f, 2, n_k, 3)
-            lat_s = np.einsum("fki,fsmi->fsmk", e12, xs - pts[:, None, None])  # (F, 2, m, 2)
+            xs = deform(trial.reshape(n_f, -1, 2)).reshape(n_f, 2, n_k, 3)
+            lat_s = _along(xs - pts[:, None, None], e12[:, None, None])  # (F, 2, m, 2)
             jac = np.stack([lat_s[:, 0] - lat, lat_s[:, 1] - lat], axis=-1) / h
             # beyond the body's ends the map stops (such points are kept on the face at the
             # end): there a step takes the flat face's map
-            flat = np.abs(np.linalg.det(jac)) < 0.1
-            inv = np.linalg.inv(np.where(flat[..., None, None], np.eye(2), jac))
-        offset = offset + np.einsum("fmij,fmj->fmi", inv, target - lat)
-    uv = _on_face(m, one.surface, uv0 + offset)
-    return m.deform(one.surface, uv, inflation_ml, touch, forces, handling), valid
+            det = jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
+            flat = np.abs(det) < 0.1
+            jac = np.where(flat[..., None, None], np.eye(2), jac)
+            det = np.where(flat, 1.0, det)[..., None, None]
+            inv = np.stack(
+                [np.stack([jac[..., 1, 1], -jac[..., 0, 1]], axis=-1),
+                 np.stack([-jac[..., 1, 0], jac[..., 0, 0]], axis=-1)], axis=-2
+            ) / det  # (F, m, 2, 2), the 2 × 2 inverse
+        miss = target - lat
+        offset = offset + (inv[..., 0] * miss[..., 0:1] + inv[..., 1] * miss[..., 1:2])
+    uv = _on_face(m, surface, uv0 + offset)
+    return deform(uv), valid
 
 
 def _worth_solving(
@@ -345,9 +456,9 @@ def _worth_solving(
     the lateral miss |target − lat0| (the skin's slope under the fingertip is below that).
     Samples that may leave the face (whose solve is clipped to its edge, nearer the axis) are
     always solved."""
-    up = np.einsum("fmi,fi->fm", rel0, axis)
-    d = _lower_depth(np.linalg.norm(target, axis=2), radius, depth)
-    miss = _SLOPE_BOUND * np.linalg.norm(target - lat0, axis=2)
+    up = _along(rel0, axis[:, None, None])[..., 0]
+    d = _lower_depth(_length(target), radius, depth)
+    miss = _SLOPE_BOUND * _length(target - lat0)
     low = np.where(valid, up + d - miss, -np.inf)
     best = np.maximum((radius - depth), low.max(axis=1))  # (F,)
     keep = up + d + miss >= best[:, None] - _PRUNE_MARGIN_MM
@@ -360,6 +471,19 @@ def _worth_solving(
         | (uv_guess[..., 1] > c.length_mm - reach)
     )
     return keep | near_edge
+
+
+def _along(d: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """(..., k) the projections Σᵢ dᵢ aₖᵢ of the vectors ``d`` (..., 3) onto ``axes``
+    (..., k, 3), broadcast (``np.einsum``'s, without its general loops)."""
+    return (
+        d[..., 0:1] * axes[..., 0] + d[..., 1:2] * axes[..., 1] + d[..., 2:3] * axes[..., 2]
+    )
+
+
+def _length(d: np.ndarray) -> np.ndarray:
+    """(...) the lengths of the vectors ``d`` (..., 2) (as ``np.linalg.norm(d, axis=-1)``)."""
+    return np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])
 
 
 def _on_face(m: Manipulator, surface: str, uv: np.ndarray) -> np.ndarray:

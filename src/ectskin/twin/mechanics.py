@@ -56,10 +56,21 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ectskin._check import EctskinError
+from ectskin.twin.mechanics_tables import (
+    POSE_FRAMES_KEPT,
+    POSES_KEPT,
+    bredt_torsion,
+    interp_rows,
+    pose_key,
+    rect_torsion,
+    remember,
+)
 from ectskin.twin.rod import PointLoad
 from ectskin.twin.rod import solve as solve_rod
 
 SIDE = {"front": 1.0, "back": -1.0}
+#: rows (values of φ) of the face's arc-length table (:meth:`Manipulator._face_pull_in`)
+_PULL_IN_PHIS = 41
 
 
 @dataclass(frozen=True)
@@ -201,6 +212,10 @@ class Manipulator:
             )
         self._zgrid = np.linspace(0.0, c.length_mm, c.beam_points)
         self._poses: dict = {}  # the last few rod solutions: one state is deformed many times
+        # per inflation state (by its bytes), the last few: the bulge heights (a root per
+        # chamber) and the pull-in's arc-length table (a placement maps a state a dozen times)
+        self._heights: dict[bytes, np.ndarray] = {}
+        self._arcs: dict[bytes, np.ndarray] = {}
 
     # ------------------------------------------------------------------ inflation
     def check_inflation(self, inflation_ml) -> np.ndarray:
@@ -232,6 +247,9 @@ class Manipulator:
         ∫cos² over l = l/2; f = 1/3 for the parabola).
         """
         p = self.check_inflation(inflation_ml)
+        key = p.tobytes()
+        if key in self._heights:
+            return self._heights[key].copy()
         c = self.config
         n = c.bulge_profile_exponent
         a4 = c.chamber_size_x_mm * c.chamber_size_z_mm * n / (2.0 * (n + 1.0))
@@ -245,6 +263,7 @@ class Manipulator:
                 return 2.0 * h * a4 + 1000.0 * c.wall_compliance_ml_per_kpa * self._pressure(h) - v
 
             out[k] = brentq(residual, 0.0, v / (2.0 * a4))
+        remember(self._heights, key, out.copy())
         return out
 
     def _pressure(self, h):
@@ -261,14 +280,22 @@ class Manipulator:
         c = self.config
         zc = np.asarray(c.chamber_centres_z_mm)[:, None]
         s = (np.reshape(z, (1, -1)) - zc) / c.chamber_size_z_mm
-        w = np.where(np.abs(s) < 0.5, np.cos(np.pi * s) ** 2, 0.0)
+        inside = np.abs(s) < 0.5
+        w = np.zeros(s.shape)
+        w[inside] = np.cos(np.pi * s[inside]) ** 2  # (only where a chamber spans z)
         return w.reshape((len(c.chamber_centres_z_mm),) + np.shape(z))
 
     def _window_x(self, x: np.ndarray) -> np.ndarray:
-        s = np.asarray(x) / self.config.chamber_size_x_mm
-        return np.where(np.abs(s) < 0.5, 1.0 - np.abs(2.0 * s) ** self.config.bulge_profile_exponent, 0.0)
+        """φ(x) = 1 − |2x/w|ⁿ across the chambers, 0 beyond their side walls."""
+        s = np.asarray(x, dtype=np.float64) / self.config.chamber_size_x_mm
+        inside = np.abs(s) < 0.5
+        out = np.zeros(s.shape)
+        out[inside] = 1.0 - np.abs(2.0 * s[inside]) ** self.config.bulge_profile_exponent
+        return out
 
-    def _face_pull_in(self, x: np.ndarray, z: np.ndarray, heights: np.ndarray) -> np.ndarray:
+    def _face_pull_in(
+        self, x: np.ndarray, z: np.ndarray, heights: np.ndarray, phi: np.ndarray | None = None
+    ) -> np.ndarray:
         """Axial pull-in z − ζ(x, z) of face points (mm) under the bulge.
 
         With S(ζ) = ∫_0^ζ √(1 + (∂b/∂z')²) dz' the arc length of the bulged face along z
@@ -277,30 +304,33 @@ class Manipulator:
         (pure pull-in), κ = 0 moves points only along the normal (ζ = z, full stretch). The local
         stretch along z is s / (κ s + 1 − κ) with s = √(1 + b'²) ≥ 1, so material never
         shortens. S depends on x only through φ(x): it is tabulated over φ and interpolated.
+        ``phi``: φ(x), if the caller has it.
         """
         kappa = self.config.face_axial_inextensibility
         if kappa == 0 or not np.any(heights):
             return np.zeros(np.shape(x))
         zg = self._zgrid
-        g = np.gradient(np.tensordot(heights, self._chamber_window_z(zg), axes=1), zg)  # (n_z,)
-        phis = np.linspace(0.0, 1.0, 41)
-        integrand = np.sqrt(1.0 + (phis[:, None] * g[None, :]) ** 2)
-        arc = np.concatenate(
-            [np.zeros((phis.size, 1)), np.cumsum(0.5 * (integrand[:, 1:] + integrand[:, :-1]) * np.diff(zg), axis=1)],
-            axis=1,
-        )
-        mixed = kappa * arc + (1.0 - kappa) * zg[None, :]  # increasing in ζ for every φ
+        key = np.asarray(heights, dtype=np.float64).tobytes()
+        mixed = self._arcs.get(key)
+        if mixed is None:
+            g = np.gradient(np.tensordot(heights, self._chamber_window_z(zg), axes=1), zg)  # (n_z,)
+            phis = np.linspace(0.0, 1.0, _PULL_IN_PHIS)
+            integrand = np.sqrt(1.0 + (phis[:, None] * g[None, :]) ** 2)
+            steps = 0.5 * (integrand[:, 1:] + integrand[:, :-1]) * np.diff(zg)
+            arc = np.concatenate([np.zeros((phis.size, 1)), np.cumsum(steps, axis=1)], axis=1)
+            mixed = kappa * arc + (1.0 - kappa) * zg[None, :]  # increasing in ζ for every φ
+            mixed.setflags(write=False)
+            remember(self._arcs, key, mixed)
+        n_phi = mixed.shape[0]
         zz = np.ravel(z).astype(np.float64)
-        phi = np.ravel(self._window_x(x))
-        fi = np.clip(phi * (phis.size - 1), 0, phis.size - 1 - 1e-9)
+        phi = np.ravel(self._window_x(x) if phi is None else phi)
+        fi = np.clip(phi * (n_phi - 1), 0, n_phi - 1 - 1e-9)
         i0 = fi.astype(int)
         wi = fi - i0
-        zeta = np.empty_like(zz)
-        for i in np.unique(i0):  # invert the two bracketing rows, blend linearly in φ
-            m = i0 == i
-            lo = np.interp(zz[m], mixed[i], zg)
-            hi = np.interp(zz[m], mixed[i + 1], zg)
-            zeta[m] = (1 - wi[m]) * lo + wi[m] * hi
+        # invert the two bracketing rows, blend linearly in φ
+        lo = interp_rows(zz, mixed, zg, i0)
+        hi = interp_rows(zz, mixed, zg, i0 + 1)
+        zeta = (1 - wi) * lo + wi * hi
         return (zz - zeta).reshape(np.shape(x))
 
     def bulge_mm(self, x, z, heights) -> np.ndarray:
@@ -316,6 +346,8 @@ class Manipulator:
         p = np.asarray(inflation_ml, dtype=np.float64)
         z = np.asarray(z, dtype=np.float64)
         out = z.copy()
+        if c.axial_strain_per_ml == 0:  # (every term below is +0)
+            return out
         for zc, pk in zip(c.chamber_centres_z_mm, p):
             lo = zc - c.chamber_size_z_mm / 2
             out = out + c.axial_strain_per_ml * pk * np.clip(z - lo, 0.0, c.chamber_size_z_mm)
@@ -337,12 +369,12 @@ class Manipulator:
         g = e / 3.0
         w, t = c.width_mm, c.thickness_mm
         cw, ct = c.chamber_size_x_mm, t - 2.0 * c.chamber_wall_mm
-        solid = np.array([w * t**3 / 12, t * w**3 / 12, _rect_torsion(w, t)])
+        solid = np.array([w * t**3 / 12, t * w**3 / 12, rect_torsion(w, t)])
         hollow = np.array(
             [
                 (w * t**3 - cw * ct**3) / 12,
                 (t * w**3 - ct * cw**3) / 12,
-                _bredt_torsion(w, t, (w - cw) / 2, c.chamber_wall_mm),
+                bredt_torsion(w, t, (w - cw) / 2, c.chamber_wall_mm),
             ]
         )
         window = np.clip(np.sum(self._chamber_window_z(np.asarray(z, float)), axis=0), 0, 1)
@@ -380,7 +412,7 @@ class Manipulator:
         touches, forces = touch_loads(force_n, touch)
         n_f = forces.shape[0]
         force = np.atleast_1d(np.asarray(force_n, dtype=np.float64))
-        key = _pose_key(force, touch, inflation_ml, handling)
+        key = pose_key(force, touch, inflation_ml, handling)
         if key in self._poses:
             return self._poses[key]
         zs = self.axial_position(self._zgrid, inflation_ml)
@@ -408,7 +440,12 @@ class Manipulator:
             loads.append(PointLoad(s_h, off, push))
         stiffness = self.section_stiffness(self._zgrid, inflation_ml)
         r, rot = solve_rod(zs, stiffness, loads, n_f, tol_mm=self.config.rod_tol_mm)
-        if len(self._poses) >= 8:
+        # the last 8 always, up to POSES_KEPT while their frames fit (a response field's grid
+        # row: each touch's pose is asked for by its cavity cells, electrodes and fingertip)
+        while len(self._poses) >= POSES_KEPT or (
+            len(self._poses) >= 8
+            and sum(v[1].shape[0] for v in self._poses.values()) + n_f > POSE_FRAMES_KEPT
+        ):
             self._poses.pop(next(iter(self._poses)))
         self._poses[key] = (zs, r, rot)
         return zs, r, rot
@@ -461,12 +498,13 @@ class Manipulator:
         if not per_frame:
             uv = uv.reshape(-1, 2)
         n_pts = uv.shape[-2]
-        heights = self.bulge_height_mm(p)
         if surface in SIDE:
-            side = SIDE[surface]
+            heights = self.bulge_height_mm(p)
             x = uv[..., 0]
-            z = uv[..., 1] - self._face_pull_in(x, uv[..., 1], heights)
-            offset = c.thickness_mm / 2 + self.bulge_mm(x, z, heights)  # (n,) or (F, n)
+            phi = self._window_x(x)
+            z = uv[..., 1] - self._face_pull_in(x, uv[..., 1], heights, phi)
+            # the bulge (bulge_mm), (n,) or (F, n)
+            offset = c.thickness_mm / 2 + phi * np.tensordot(heights, self._chamber_window_z(z), axes=1)
             offset = np.broadcast_to(offset, (n_f, n_pts)).copy()
             for k, t in enumerate(touches):  # each finger's dimple on this face
                 if t.surface != surface:
@@ -475,7 +513,7 @@ class Manipulator:
                 r2 = (x - t.uv_mm[0]) ** 2 + (z - t.uv_mm[1]) ** 2
                 bump = np.exp(-r2 / (2 * c.dimple_sigma_mm**2))
                 offset -= depth[:, None] * (bump if per_frame else bump[None, :])
-            yprime = side * offset
+            yprime = SIDE[surface] * offset
             xs = np.broadcast_to(x, yprime.shape)
         elif surface in ("right", "left"):
             x0 = c.width_mm / 2 * (1.0 if surface == "right" else -1.0)
@@ -488,20 +526,15 @@ class Manipulator:
             )
         zs, r, rot = self.pose(force_n, touch, p, handling)
         zq = self.axial_position(z, p)
-        # the axis and the section frame at each point's stretched axial position (per frame)
+        # the axis and the section frame at each point's stretched axial position (per frame):
+        # one table per frame and grid point of the axis and the frame's first two columns (the
+        # third meets a zero), (F n_z, 9), interpolated linearly
         j = np.clip(np.searchsorted(zs, zq) - 1, 0, zs.size - 2)
-        w = (zq - zs[j]) / (zs[j + 1] - zs[j])
-        if per_frame:  # frame f's points on frame f's axis
-            w = w[..., None]
-            rows = np.arange(n_f)[:, None]
-            axis = (1 - w) * r[rows, j] + w * r[rows, j + 1]  # (F, n, 3)
-            frames = (1 - w[..., None]) * rot[rows, j] + w[..., None] * rot[rows, j + 1]
-        else:
-            w = w[None, :, None]
-            axis = (1 - w) * r[:, j] + w * r[:, j + 1]  # (F, n, 3)
-            frames = (1 - w[..., None]) * rot[:, j] + w[..., None] * rot[:, j + 1]  # (F, n, 3, 3)
-        local = np.stack([xs, yprime, np.zeros_like(yprime)], axis=-1)  # (F, n, 3)
-        return axis + np.einsum("fnij,fnj->fni", frames, local)
+        w = np.broadcast_to((zq - zs[j]) / (zs[j + 1] - zs[j]), xs.shape)[..., None]
+        table = np.concatenate([r, rot[..., 0], rot[..., 1]], axis=-1).reshape(-1, 9)
+        at = np.broadcast_to(j + (np.arange(n_f) * zs.size)[:, None], xs.shape)  # (F, n)
+        a = (1 - w) * table[at] + w * table[at + 1]  # (F, n, 9)
+        return a[..., :3] + (a[..., 3:6] * xs[..., None] + a[..., 6:9] * yprime[..., None])
 
     def face_frame(
         self,
@@ -558,28 +591,3 @@ class Manipulator:
         flip = np.sign(n[..., axis]) != sign
         n[flip] *= -1
         return n
-
-
-def _rect_torsion(a: float, b: float) -> float:
-    """Torsion constant J of a solid a × b rectangle (a ≥ b), Saint-Venant's series (mm⁴)."""
-    a, b = max(a, b), min(a, b)
-    n = np.arange(1, 40, 2)
-    beta = (1 - 192 * b / (np.pi**5 * a) * np.sum(np.tanh(n * np.pi * a / (2 * b)) / n**5)) / 3
-    return float(beta * a * b**3)
-
-
-def _bredt_torsion(w: float, t: float, wall_side: float, wall_face: float) -> float:
-    """Torsion constant of a thin-walled rectangular tube (Bredt): 4 A_m² / ∮ds/t (mm⁴)."""
-    bm, hm = w - wall_side, t - wall_face  # median line
-    return float(4 * (bm * hm) ** 2 / (2 * bm / wall_face + 2 * hm / wall_side))
-
-
-def _pose_key(force, touch, inflation, handling) -> tuple:
-    """A hashable digest of a pose's inputs (arrays by their bytes)."""
-    def arr(a):
-        return None if a is None else np.ascontiguousarray(a, dtype=np.float64).tobytes()
-
-    h = None
-    if handling is not None:
-        h = (arr(handling.shear_n), handling.push, arr(handling.push_force_n))
-    return (arr(force), touch, arr(inflation), h)

@@ -1,0 +1,77 @@
+"""Numerical helpers of :mod:`ectskin.twin.mechanics`: the section's torsion constants, a
+row-wise ``np.interp`` (the face's pull-in), and the bounded caches of the per-state tables and
+the rod's poses (one state is deformed many times: a fingertip's placement maps its skin
+samples a dozen times per frame, a response field's grid row asks for each touch's pose from
+its cavity cells, electrodes and fingertip)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: per-state tables kept (bulge heights, arc lengths): the last this many states
+STATES_KEPT = 8
+#: rod poses kept (:meth:`~ectskin.twin.mechanics.Manipulator.pose`): at most this many, and
+#: beyond the last 8 only while they hold at most this many frames in all (a frame's pose is
+#: 61 × 12 numbers)
+POSES_KEPT = 64
+POSE_FRAMES_KEPT = 4096
+
+
+def rect_torsion(a: float, b: float) -> float:
+    """Torsion constant J of a solid a × b rectangle (a ≥ b), Saint-Venant's series (mm⁴)."""
+    a, b = max(a, b), min(a, b)
+    n = np.arange(1, 40, 2)
+    beta = (1 - 192 * b / (np.pi**5 * a) * np.sum(np.tanh(n * np.pi * a / (2 * b)) / n**5)) / 3
+    return float(beta * a * b**3)
+
+
+def bredt_torsion(w: float, t: float, wall_side: float, wall_face: float) -> float:
+    """Torsion constant of a thin-walled rectangular tube (Bredt): 4 A_m² / ∮ds/t (mm⁴)."""
+    bm, hm = w - wall_side, t - wall_face  # median line
+    return float(4 * (bm * hm) ** 2 / (2 * bm / wall_face + 2 * hm / wall_side))
+
+
+def interp_rows(x: np.ndarray, xp: np.ndarray, fp: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``np.interp(x[k], xp[rows[k]], fp)`` for every k at once, by the same arithmetic: ``x``
+    (k,), ``xp`` (n_rows, n) each row increasing, ``fp`` (n,), ``rows`` (k,) int.
+
+    Below a row's first node fp[0], from its last on fp[-1]; between, on the node j with
+    xp[j] ≤ x < xp[j + 1], fp[j] where x == xp[j], else slope · (x − xp[j]) + fp[j] with
+    slope = (fp[j + 1] − fp[j]) / (xp[j + 1] − xp[j]) (numpy's own formula)."""
+    n = xp.shape[1]
+    width = 1 << int(n).bit_length()  # > n: each row padded with +inf
+    table = np.full((xp.shape[0], width), np.inf)
+    table[:, :n] = xp
+    flat = table.ravel()
+    base = np.asarray(rows, dtype=np.intp) * width
+    count = np.zeros(x.shape, dtype=np.intp)  # #{nodes <= x}, by bisection
+    step = width >> 1
+    while step:
+        cand = count + step
+        count = np.where(flat.take(base + cand - 1) <= x, cand, count)
+        step >>= 1
+    j = np.clip(count - 1, 0, n - 2)
+    x0, x1 = flat.take(base + j), flat.take(base + j + 1)
+    f0 = fp.take(j)
+    slope = (fp.take(j + 1) - f0) / (x1 - x0)
+    out = np.where(x == x0, f0, slope * (x - x0) + f0)
+    out = np.where(count == 0, fp[0], out)
+    return np.where(count >= n, fp[n - 1], out)
+
+
+def remember(cache: dict, key, value) -> None:
+    """``cache[key] = value``, dropping the oldest entry beyond :data:`STATES_KEPT`."""
+    if len(cache) >= STATES_KEPT:
+        cache.pop(next(iter(cache)))
+    cache[key] = value
+
+
+def pose_key(force, touch, inflation, handling) -> tuple:
+    """A hashable digest of a pose's inputs (arrays by their bytes)."""
+    def arr(a):
+        return None if a is None else np.ascontiguousarray(a, dtype=np.float64).tobytes()
+
+    h = None
+    if handling is not None:
+        h = (arr(handling.shear_n), handling.push, arr(handling.push_force_n))
+    return (arr(force), touch, arr(inflation), h)
