@@ -62,8 +62,10 @@ def _die_with_parent(driver_pid: int) -> None:
 
 def _stop_workers(ex: ProcessPoolExecutor) -> None:
     """Cancel the queued jobs and terminate the running workers now (not after their jobs)."""
-    ex.shutdown(wait=False, cancel_futures=True)
+    # (taken before the shutdown: ProcessPoolExecutor.shutdown sets _processes to None, and the
+    # workers would then run their current jobs to the end, minutes for a sliding touch trial)
     procs = list((getattr(ex, "_processes", None) or {}).values())
+    ex.shutdown(wait=False, cancel_futures=True)
     for p in procs:
         if p.is_alive():
             p.terminate()
