@@ -15,6 +15,8 @@ HELP = "studies of the twin's reading of the paper (ablation, unseen inflation, 
 EXAMPLES = """\
   ectskin study reading --out study-reading --seeds 0 1 2   # the reading ablation
   ectskin study reading --out study-reading --table-only    # its table and figure again
+  ectskin study few-shot runs/contact new.h5 -o fewshot      # contact few-shot curves
+  ectskin study few-shot-touch runs/touch new.h5 -o fst      # touch few-shot curves
 """
 
 #: (subcommand, module) in the order ``ectskin study --help`` lists them
@@ -22,6 +24,7 @@ SUBCOMMANDS = (
     ("reading", "ectskin.study.reading"),
     ("unseen-inflation", "ectskin.study.inflation"),
     ("few-shot", "ectskin.study.fewshot"),
+    ("few-shot-touch", "ectskin.study.fewshot_touch"),
 )
 
 

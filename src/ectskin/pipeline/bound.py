@@ -13,6 +13,9 @@
                                             baselines and candidates on the test frames where
                                             the bound says force is observable, where it says
                                             it is not, and where there is no bound
+            OUT_DIR/runs/contact/force_sigma.<fmt>  the model's force against the true force
+                                            with its σ, coloured by that split
+                                            (ectskin.viz.contact.plot_force_sigma)
 
 :func:`bound_step` takes fields already built (the field step's {state: ResponseField}); the
 nuisance columns come from direct solves of each field's own sensor (``field_nuisances``).
@@ -53,8 +56,9 @@ from ectskin.twin.bound_field import (
     reduce,
 )
 from ectskin.twin.field import ResponseField
-from ectskin.viz import figure_file
+from ectskin.viz import DEFAULT_DPI, figure_file
 from ectskin.viz.bound import plot_bound_maps, plot_error_vs_bound
+from ectskin.viz.contact import plot_force_sigma
 
 log = logging.getLogger(__name__)
 
@@ -205,6 +209,8 @@ def contact_force_split(
     threshold_n: float = FORCE_THRESHOLD_N,
     seed: int = 0,
     baselines: bool = True,
+    figure: Path | None = None,
+    dpi: int = DEFAULT_DPI,
 ) -> dict[str, Any]:
     """The force split (:func:`ectskin.learn.tasks.contact.force_split_report`) of the contact
     run in ``run_dir`` on its test trials of ``rec`` (calibrated as ``ectskin evaluate`` does),
@@ -212,11 +218,13 @@ def contact_force_split(
     the run answers with, "models": {name: split}} for that model, every other candidate of its
     candidates.json and, with ``baselines``, the contact baselines refit on its training trials
     with ``seed`` (as the run's evaluation fits them). ``threshold_n``: the bound's own
-    (:data:`ectskin.twin.bound.FORCE_THRESHOLD_N`, the inversion's ``FORCE_OBSERVABLE_N``)."""
+    (:data:`ectskin.twin.bound.FORCE_THRESHOLD_N`, the inversion's ``FORCE_OBSERVABLE_N``).
+    With ``figure`` (a path) the run's model's force with its σ, split the same way
+    (:func:`ectskin.viz.contact.plot_force_sigma`), is saved there."""
     from ectskin.learn.baselines.contact import contact_baselines
     from ectskin.learn.contact_choice import candidate_predictions
     from ectskin.learn.evaluate import calibration, read_run
-    from ectskin.learn.tasks.contact import force_split_report
+    from ectskin.learn.tasks.contact import force_split_report, slot_columns
     run = read_run(run_dir)
     if run.task.name != "contact":
         raise EctskinError(f"{run_dir}: not a contact run (task {run.task.name!r})")
@@ -240,6 +248,12 @@ def contact_force_split(
         pred = run.task.predict(run.model, test)
     else:
         raise EctskinError(f"{run_dir}: the run has no model to answer with")
+    if figure is not None:
+        single = test.count == 1
+        p0 = slot_columns(pred, 0)
+        fig = plot_force_sigma(test.force[single, 0], p0["force_n"][single],
+                               p0["force_sigma_n"][single], sd[single], threshold_n=threshold_n)
+        save_figure_atomic(fig, figure, dpi=dpi)
     preds = {run.selected: pred}
     for name, (p, _) in candidate_predictions(run, test, pred, train).items():
         if p is not None:
@@ -334,11 +348,12 @@ def bound_step(
     trained = any((run_dir / f).is_file() for f in ("model.pt", "model.skops"))
     if data is not None and test and trained:
         force_file = run_dir / FORCE_FILE
+        force_figure = run_dir / figure_file("force_sigma", config.figure_format)
         force_settings = {
             **{k: settings[k] for k in ("fields", "nuisances", "prior_sd", "case", "data",
                                         "test_trials")},
             "run": digest(run_settings(config, CONTACT_RUN, dict(data[1]))),
-            "baselines": config.baselines, "seed": config.seed,
+            "baselines": config.baselines, "seed": config.seed, **config.figure_settings,
         }
 
         def split() -> None:
@@ -348,10 +363,11 @@ def bound_step(
                 bounds = frame_force_bounds(fields, state_columns(), rec, test, case=case,
                                             nuisances=nuisances, prior_sd=prior_sd)
             out = contact_force_split(run_dir, rec, bounds, seed=config.seed,
-                                      baselines=config.baselines)
+                                      baselines=config.baselines, figure=force_figure,
+                                      dpi=config.dpi)
             out.update(case=case, seconds=time.perf_counter() - t0)
             write_json_atomic(force_file, out)
 
-        runner.step("force_observable", force_settings, [force_file], split)
+        runner.step("force_observable", force_settings, [force_file, force_figure], split)
         result["force_split"] = read_json(force_file, "contact force split")
     return result

@@ -46,6 +46,10 @@ A new skin to try it on: :func:`simulate_new_skin` (``--simulate``) records the 
 protocol of :func:`new_skin_protocol` (method-of-moments solves) on :func:`new_skin_layout`, a
 member of the layout family (:mod:`ectskin.design.family`) with wider-spread, longer and
 wider wires than the paper's.
+
+The same study for a touch run (``ectskin study few-shot-touch``) is
+:mod:`ectskin.study.fewshot_touch`; it shares the draws, the networks' settings and the outputs
+defined here.
 """
 
 from __future__ import annotations
@@ -58,7 +62,7 @@ import tempfile
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -99,7 +103,9 @@ DRAW_TAG = 0xF5
 class FewShotConfig:
     """What :func:`few_shot_curve` does (module docstring). ``counts``: the new recording's
     trial split (train, val, test), default the contact task's; ``threads``: torch threads of
-    the trainings (default 1)."""
+    the trainings (default 1). :attr:`ALLOWED` the methods it knows."""
+
+    ALLOWED: ClassVar[tuple[str, ...]] = METHODS
 
     frames: tuple[int, ...] = (0, 100, 300, 1000)
     draws: int = 3
@@ -141,7 +147,7 @@ class FewShotConfig:
         if not self.methods:
             raise EctskinError("few-shot: methods must name at least one method, got ()")
         for m in self.methods:
-            check_option("method", m, METHODS, source="few-shot")
+            check_option("method", m, self.ALLOWED, source="few-shot")
         for name in ("finetune_lr", "scratch_lr"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
@@ -172,6 +178,7 @@ def new_skin_protocol(seed: int = 0):
         duration_s=10.0,
         touch_placement="uniform",
         touch_dwells=4,
+        dwell_slide_s=0.0,  # jumps from point to point, as when the study was measured
         lifts=True,
         hover=True,
         approach=True,
@@ -305,13 +312,12 @@ def few_shot_curve(
             "test_frames": test.n_samples,
             "test_single_contact_frames": base["n_single_contact_frames"],
         },
-        "draws": [
-            {"seed": [config.seed, DRAW_TAG, d], "frames": {str(n): _digest(pool, s[n]) for n in s}}
-            for d, s in enumerate(draws)
-        ],
+        "draws": draw_records(pool, draws, config.seed),
         "metrics": dict(METRICS),
         "source_on_new_skin": base,
-        "curve": {n: {m: _stats(v) for m, v in per.items() if v} for n, per in values.items()},
+        "curve": {
+            n: {m: draw_stats(v, METRICS) for m, v in per.items() if v} for n, per in values.items()
+        },
         "fit_seconds": seconds,
     }
     doc["seconds"] = time.perf_counter() - t0
@@ -344,7 +350,7 @@ def _source_run(source_run: str | Path):
     if run.task.name != "contact":
         raise EctskinError(
             f"few-shot: source_run {path}: field 'task' is {run.task.name!r}, expected "
-            "'contact' (a run of ectskin train contact)"
+            "'contact' (a run of ectskin train contact; a touch run: ectskin study few-shot-touch)"
         )
     if run.model is None:
         raise EctskinError(
@@ -354,7 +360,7 @@ def _source_run(source_run: str | Path):
     return run
 
 
-def _net_config(config: FewShotConfig, n_train: int, lr: float, seed: int):
+def net_config(config: FewShotConfig, n_train: int, lr: float, seed: int):
     """The networks' TrainConfig for ``n_train`` training frames (module docstring)."""
     from ectskin.learn.profiles import TrainConfig
 
@@ -390,10 +396,10 @@ def _fit_predict(method: str, run, sample, test, config: FewShotConfig, *, seed:
     tr, va = net_split(sample.n_samples, config.val_every)
     train_data, val_data = sample.take(tr), sample.take(va)
     if method == "finetune":
-        cfg = _net_config(config, len(tr), config.finetune_lr, seed)
+        cfg = net_config(config, len(tr), config.finetune_lr, seed)
         model, _ = finetune_run("contact", run.path, train_data, val_data, cfg)
     else:
-        cfg = _net_config(config, len(tr), config.scratch_lr, seed)
+        cfg = net_config(config, len(tr), config.scratch_lr, seed)
         with tempfile.TemporaryDirectory(prefix="ectskin-scratch-") as folder:
             train("contact", train_data, val_data, folder, cfg)
             model, _, _ = load_checkpoint(Path(folder) / "model.pt", kind=run.task.model_kind)
@@ -409,11 +415,11 @@ def _scores(test, pred: np.ndarray) -> dict[str, Any]:
     return {**out, "n_single_contact_frames": int(m["n_single_contact_frames"])}
 
 
-def _stats(runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """Per metric: mean, standard deviation (ddof 0) and the values over the draws (None where
-    a draw has none)."""
+def draw_stats(runs: list[dict[str, Any]], metrics: dict[str, str]) -> dict[str, Any]:
+    """Per metric of ``metrics``: mean, standard deviation (ddof 0) and the values over the
+    draws (None where a draw has none)."""
     out = {}
-    for key in METRICS:
+    for key in metrics:
         vals = [r[key] for r in runs]
         ok = [v for v in vals if v is not None]
         out[key] = {
@@ -424,17 +430,38 @@ def _stats(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def _digest(pool, idx: np.ndarray) -> str:
-    """A short digest of the drawn frames (trial name and frame of each, in draw order)."""
+def draw_records(pool, draws: list[dict[int, np.ndarray]], seed: int) -> list[dict[str, Any]]:
+    """Per draw: its seed and, per N, the digest of its frames (:func:`frames_digest`)."""
+    return [
+        {"seed": [seed, DRAW_TAG, d], "frames": {str(n): frames_digest(pool, s[n]) for n in s}}
+        for d, s in enumerate(draws)
+    ]
+
+
+def frames_digest(pool, idx: np.ndarray) -> str:
+    """A short digest of the drawn frames (trial name and frame of each, in draw order); data
+    without a ``frame`` field (touch) count each sample's place among its trial's samples."""
+    frame = getattr(pool, "frame", None)
+    if frame is None:
+        group = np.asarray(pool.group)
+        frame = np.empty(group.size, np.int64)
+        for g in np.unique(group):
+            rows = np.flatnonzero(group == g)
+            frame[rows] = np.arange(rows.size)
     h = hashlib.sha256()
     for i in idx:
-        h.update(f"{pool.group_names[pool.group[i]]}:{int(pool.frame[i])};".encode())
+        h.update(f"{pool.group_names[pool.group[i]]}:{int(frame[i])};".encode())
     return h.hexdigest()[:16]
 
 
 # ----------------------------------------------------------------------------- the command
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("run", help="the source: a trained contact run folder (ectskin train contact)")
+    common_arguments(p, "contact", METHODS)
+
+
+def common_arguments(p: argparse.ArgumentParser, task: str, methods: tuple[str, ...]) -> None:
+    """The options of ``ectskin study few-shot`` (``task`` "contact") and ``few-shot-touch``."""
+    p.add_argument("run", help=f"the source: a trained {task} run folder (ectskin train {task})")
     p.add_argument("data", help="the new skin's labelled recording (HDF5), same pair count")
     p.add_argument("-o", "--out", required=True, help="output folder (few_shot.json, few_shot.png)")
     p.add_argument(
@@ -443,7 +470,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--draws", type=int, default=3, help="frame draws per N (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the split and the draws")
     p.add_argument(
-        "--methods", default=",".join(METHODS), help=f"methods (default {','.join(METHODS)})"
+        "--methods", default=",".join(methods), help=f"methods (default {','.join(methods)})"
     )
     p.add_argument(
         "--steps", type=int, default=400, help="optimiser steps per network (default 400)"
@@ -460,13 +487,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    return run_study(args, FewShotConfig, few_shot_curve)
+
+
+def run_study(args: argparse.Namespace, config_type: type[FewShotConfig], curve: Any) -> int:
+    """The command: the options checked (``config_type``) before any work, the new skin
+    recorded with ``--simulate``, then ``curve(run, data, out, config)`` and its summary."""
     from ectskin._check import parse_floats
 
     frames = parse_floats("--frames", args.frames)
     if any(f != int(f) for f in frames):
         raise EctskinError(f"--frames must be whole frame counts, got {args.frames!r}")
     methods = tuple(m.strip() for m in str(args.methods).split(",") if m.strip())
-    config = FewShotConfig(
+    config = config_type(
         frames=tuple(int(f) for f in frames),
         draws=args.draws,
         seed=args.seed,
@@ -478,7 +511,7 @@ def run(args: argparse.Namespace) -> int:
         simulate_new_skin(
             args.data, seed=args.seed, workers=args.workers, progress=not args.no_progress
         )
-    doc = few_shot_curve(args.run, args.data, args.out, config)
+    doc = curve(args.run, args.data, args.out, config)
     for line in summary_lines(doc):
         log.info("%s", line)
     return 0

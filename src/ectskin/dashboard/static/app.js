@@ -711,7 +711,8 @@
       row.className = "cf-row absent";
       row.dataset.finger = k;
       row.innerHTML = '<span class="name"></span><span class="track"><span class="bar"></span>' +
-        '</span><span class="v">—</span><span class="where"></span>';
+        '<span class="fsig" hidden></span></span><span class="v">—</span>' +
+        '<span class="where"></span>';
       row.querySelector(".name").textContent = "finger " + (k + 1);
       list.appendChild(row);
     }
@@ -760,16 +761,28 @@
       contactView.forceScale = niceCeil(maxF);
       updateForceScale();
     }
+    // Each finger's force as a bar, and its standard deviation force_sigma_n (N, the model's
+    // own; absent or null from a run trained before the force had its σ) as a band over
+    // force ± 1σ on the bar and in the number; without σ the bar and number stand alone.
     const rows = $("contact-fingers").querySelectorAll(".cf-row");
     rows.forEach((row, k) => {
       const f = fingers[k];
       const force = f && isNum(f.force_n) ? f.force_n : null;
+      const sd = force !== null && isNum(f.force_sigma_n) && f.force_sigma_n > 0
+        ? f.force_sigma_n : null;
+      const pct = (v) => (100 * Math.max(0, v) / contactView.forceScale).toFixed(1) + "%";
       row.classList.toggle("absent", !f);
       row.dataset.force = force === null ? "" : String(force);
+      row.dataset.sigma = sd === null ? "" : String(sd);
       row.dataset.face = f ? f.face : "";
-      row.querySelector(".bar").style.width =
-        (force === null ? 0 : 100 * Math.max(0, force) / contactView.forceScale).toFixed(1) + "%";
-      row.querySelector(".v").textContent = force === null ? "—" : force.toFixed(2) + " N";
+      row.querySelector(".bar").style.width = force === null ? "0.0%" : pct(force);
+      const band = row.querySelector(".fsig");
+      band.hidden = sd === null;
+      band.style.left = sd === null ? "0%" : pct(force - sd);
+      band.style.width = sd === null ? "0%" : (parseFloat(pct(force + sd)) -
+        parseFloat(pct(force - sd))).toFixed(1) + "%";
+      row.querySelector(".v").textContent = force === null ? "—"
+        : force.toFixed(2) + (sd === null ? "" : " ± " + sd.toFixed(2)) + " N";
       row.querySelector(".where").textContent = f ? f.face + " (" + fmt(f.u_mm, 1) + ", " +
         fmt(f.v_mm, 1) + ") mm ± " + fmt(f.sigma_mm, 1) : "";
     });
