@@ -17,7 +17,7 @@ from ectskin.io.hdf5 import read_recording
 def test_simulate_writes_a_readable_recording(tmp_path, capsys):
     out = tmp_path / "d.h5"
     args = ["simulate", str(out), "--levels", "0,15", "--touch-trials", "2", "--duration", "1",
-            "--workers", "1", "--no-progress", "--seed", "4"]
+            "--dwells", "1", "--workers", "1", "--no-progress", "--seed", "4"]
     assert main(args) == 0
     rec = read_recording(out)
     assert rec.n_trials == 8 * 3 and rec.trials[0].n_frames == 30
@@ -31,8 +31,8 @@ def test_simulate_writes_a_readable_recording(tmp_path, capsys):
 def test_simulate_output_and_overwrite_options(tmp_path, capsys):
     """-o/--out (the positional OUT kept as an alias) and --overwrite (alias --force)."""
     out = tmp_path / "d.h5"
-    small = ["--levels", "0", "--touch-trials", "1", "--duration", "0.2", "--workers", "1",
-             "--no-progress"]
+    small = ["--levels", "0", "--touch-trials", "1", "--duration", "0.2", "--dwells", "1",
+             "--workers", "1", "--no-progress"]
     assert main(["simulate", "-o", str(out), *small]) == 0
     first = out.read_bytes()
     assert main(["simulate", "--out", str(out), *small, "--seed", "1"]) == 2

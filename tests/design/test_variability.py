@@ -142,6 +142,7 @@ def test_tiny_study_end_to_end_and_resumed(tmp_path, monkeypatch):
         touch_trials=3,
         duration_s=1.0,
         touch_placement="uniform",
+        touch_dwells=1,
         force_nodes=3,
     )
     cfg = VariabilityConfig(

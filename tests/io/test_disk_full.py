@@ -131,7 +131,7 @@ def test_simulate_enospc_is_one_clear_error(tmp_path, monkeypatch, capsys):
     out = tmp_path / "s.h5"
     monkeypatch.setattr("ectskin._files.os.fsync", _enospc)
     argv = ["simulate", "-o", str(out), "--levels", "0", "--touch-trials", "1", "--duration",
-            "0.2", "--workers", "1", "--no-progress"]
+            "0.2", "--dwells", "1", "--workers", "1", "--no-progress"]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "No space left on device" in err and "Traceback" not in err

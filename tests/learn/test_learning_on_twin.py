@@ -29,7 +29,8 @@ TRACK_AD_RATIO = 0.7  # test AD at most this fraction of the "markers do not mov
 
 @pytest.fixture(scope="module")
 def twin_file(tmp_path_factory):
-    protocol = Protocol(levels_ml=(0.0, 20.0), touch_trials=6, duration_s=2.0, force_nodes=2)
+    protocol = Protocol(levels_ml=(0.0, 20.0), touch_trials=6, duration_s=2.0, force_nodes=2,
+                        touch_dwells=1)
     rec = simulate_experiment(protocol, workers=1, progress=False, discretisation=COARSE)
     assert rec.n_trials == 56
     path = tmp_path_factory.mktemp("twin") / "tiny.h5"

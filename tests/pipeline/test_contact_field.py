@@ -68,7 +68,7 @@ def test_the_contact_step_builds_the_fields_then_reads_them(tmp_path, monkeypatc
     fields are built into the cache, their build time is recorded, every touch trial is read
     from its state's field, and a second call finds them cached."""
     monkeypatch.setitem(pfield.FIELD_GRIDS, "quick", SMALL_GRID)
-    protocol = Protocol(levels_ml=(0.0,), touch_trials=1, duration_s=2.0)
+    protocol = Protocol(levels_ml=(0.0,), touch_trials=1, duration_s=2.0, touch_dwells=1)
     config = ReproduceConfig(tmp_path / "out", protocol=protocol, workers=1, progress=False,
                              field_cache=tmp_path / "cache")
     contact = config.contact_protocol()

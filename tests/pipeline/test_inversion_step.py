@@ -39,7 +39,7 @@ def world(tmp_path_factory):
     root = tmp_path_factory.mktemp("inversion_step")
     with pytest.MonkeyPatch.context() as mp:
         mp.setitem(pfield.FIELD_GRIDS, "quick", SMALL_GRID)
-        protocol = Protocol(levels_ml=(0.0,), touch_trials=1, duration_s=2.0)
+        protocol = Protocol(levels_ml=(0.0,), touch_trials=1, duration_s=2.0, touch_dwells=1)
         config = ReproduceConfig(root / "out", protocol=protocol, workers=1, progress=False,
                                  field_cache=root / "cache")
         rec = _simulate_contact(config.contact_protocol(), config, None)

@@ -401,7 +401,8 @@ def test_reproduce_tiny_twin_experiment(tmp_path, monkeypatch):
     small = FieldGrid(spacing_mm=(10.0, 27.5), force_nodes=4, height_nodes=4)
     monkeypatch.setitem(pfield.FIELD_GRIDS, "quick", small)
     out = tmp_path / "tiny"
-    protocol = Protocol(levels_ml=(0.0, 20.0), touch_trials=1, duration_s=2.0, seed=0)
+    protocol = Protocol(levels_ml=(0.0, 20.0), touch_trials=1, duration_s=2.0, seed=0,
+                        touch_dwells=1)
     config = ReproduceConfig(
         out,
         protocol=protocol,

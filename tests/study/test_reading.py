@@ -18,6 +18,7 @@ from ectskin.learn.splits import TOUCH_SPLIT
 from ectskin.study import reading_eval
 from ectskin.study.reading import run_reading
 from ectskin.study.reading_rows import (
+    ONE_POINT,
     ROW_NAMES,
     ROWS,
     SPLIT_COUNTS,
@@ -39,7 +40,7 @@ def _flat(d, prefix=""):
 
 @pytest.mark.parametrize("seed", [0, 2])
 def test_each_row_changes_exactly_the_fields_it_names(seed):
-    base = _flat(Protocol(seed=seed).to_dict())
+    base = _flat(replace(Protocol(seed=seed), **ONE_POINT).to_dict())
     for row in ROWS:
         proto = _flat(row.protocol(seed).to_dict())
         changed = {k for k in base if base[k] != proto[k]}
@@ -48,15 +49,18 @@ def test_each_row_changes_exactly_the_fields_it_names(seed):
             assert proto[k] == v, (row.name, k)
     # the named rows the brief asks for, each changing what its name says
     by = {r.name: dict(r.changes) for r in ROWS}
-    assert by["default"] == {} and by["random_split"] == {}
+    assert by["one_point"] == {} and by["random_split"] == {}
     assert by["dwells_8"] == {"touch_dwells": 8}
-    assert by["sliding"] == {"touch_dwells": 8, "dwell_slide_s": 30.0 / 8}
+    assert by["sliding"] == {"touch_dwells": 8, "dwell_slide_s": None}
+    # the sliding row is today's default reading, the one-point row the earlier one
+    assert get_rows(["sliding"])[0].protocol(seed) == Protocol(seed=seed)
+    assert get_rows(["one_point"])[0].protocol(seed).slide_s == 0.0
     assert by["hand_off"] == {"push_max_n": 0.0}
     assert by["noise_x3"] == {"readout.noise_scale": 3.0}
     assert by["fingers_same"] == {"finger_variability": False}
     # only the diagnostic splits by frame, and it reads the default row's data
     assert [r.name for r in ROWS if r.split == "frame"] == ["random_split"]
-    assert get_rows(["random_split"])[0].data_name == "default"
+    assert get_rows(["random_split"])[0].data_name == "one_point"
     with pytest.raises(EctskinError, match="unknown row"):
         get_rows(["dwells_16"])
     assert SPLIT_COUNTS == TOUCH_SPLIT  # the split every row's cell trains on
@@ -103,15 +107,15 @@ def _write_cell(out, row, seed, body):
 
 
 def test_the_table_from_hand_made_results(tmp_path):
-    _write_cell(tmp_path, "default", 0, _cell(0.80, 1, 0.96, "logreg", 0.94))
-    _write_cell(tmp_path, "default", 1, _cell(0.91, 8, 1.00, "logreg", 0.9575))
+    _write_cell(tmp_path, "one_point", 0, _cell(0.80, 1, 0.96, "logreg", 0.94))
+    _write_cell(tmp_path, "one_point", 1, _cell(0.91, 8, 1.00, "logreg", 0.9575))
     _write_cell(tmp_path, "hand_off", 0, _cell(0.995, 12, 0.999, "knn", 0.97))
     (tmp_path / "results" / "notes.json").write_text("{}")  # not a result: ignored
     table, figure = write_table(tmp_path)
     text = table.read_text()
     lines = {ln.split("|")[1].strip(): ln for ln in text.splitlines() if ln.startswith("| `")}
-    assert list(lines) == ["`default`", "`hand_off`"]  # in ROWS order
-    cells = [c.strip() for c in lines["`default`"].split("|")[2:-1]]
+    assert list(lines) == ["`one_point`", "`hand_off`"]  # in ROWS order
+    cells = [c.strip() for c in lines["`one_point`"].split("|")[2:-1]]
     assert cells[0] == "80.00 (1/30) · 96.00 · logreg 94.00"
     assert cells[1] == "91.00 (8/30) · 100.00 · logreg 95.75"
     # the mean over the two seeds, by hand: (80 + 91) / 2, (96 + 100) / 2, (94 + 95.75) / 2
@@ -131,15 +135,15 @@ def test_cells_are_resumable_and_run_seed_by_seed(tmp_path):
         calls.append((row.name, protocol.seed, keep))
         return _cell(0.5 + protocol.seed / 10, 1, 0.9, "logreg", 0.8)
 
-    rows = ["hand_off", "random_split", "default"]
+    rows = ["hand_off", "random_split", "one_point"]
     run_reading(tmp_path, [0, 1], rows, measure=fake)
     assert [(r, s) for r, s, _ in calls] == [  # RUN_ORDER, seed by seed
-        ("default", 0), ("random_split", 0), ("hand_off", 0),
-        ("default", 1), ("random_split", 1), ("hand_off", 1),
+        ("one_point", 0), ("random_split", 0), ("hand_off", 0),
+        ("one_point", 1), ("random_split", 1), ("hand_off", 1),
     ]
     # the default's data is kept for the diagnostic that reads it, not after
-    assert [k for r, _, k in calls if r == "default"] == [True, True]
-    assert not any(k for r, _, k in calls if r != "default")
+    assert [k for r, _, k in calls if r == "one_point"] == [True, True]
+    assert not any(k for r, _, k in calls if r != "one_point")
     calls.clear()
     run_reading(tmp_path, [0, 1], rows, measure=fake)  # everything there: nothing computed
     assert calls == []
@@ -168,9 +172,9 @@ def test_the_command_line(tmp_path, capsys):
 def test_a_tiny_cell_end_to_end(tmp_path):
     """One inflation state, 6 touch trials of 1 s: the real simulation, split, both trainings
     and the baselines, for the default row and the diagnostic on the same data."""
-    base = replace(Protocol(), levels_ml=(0.0,), duration_s=1.0)
-    run_reading(tmp_path, [0], ["default", "random_split"], workers=1, base=base)
-    default = read_json(result_path(tmp_path, "default", 0))
+    base = replace(Protocol(), levels_ml=(0.0,), duration_s=1.0, **ONE_POINT)
+    run_reading(tmp_path, [0], ["one_point", "random_split"], workers=1, base=base)
+    default = read_json(result_path(tmp_path, "one_point", 0))
     diag = read_json(result_path(tmp_path, "random_split", 0))
     assert default["settings"]["protocol"]["levels_ml"] == [0.0]
     for doc in (default, diag):

@@ -53,7 +53,8 @@ def test_the_bound_is_on_bytes_as_well_as_trials(layout):
     few_long = Protocol(levels_ml=(0.0,), touch_trials=1, duration_s=90_000.0, frame_rate_hz=100.0)
     with pytest.raises(EctskinError, match=r"2 trials .* x 9000000 frames = 18000000 frames"):
         check_recording_size(few_long, layout)
-    check_recording_size(Protocol(levels_ml=(0.0,), touch_trials=MAX_TRIALS - 1, duration_s=0.1),
+    check_recording_size(Protocol(levels_ml=(0.0,), touch_trials=MAX_TRIALS - 1, duration_s=0.1,
+                                  touch_dwells=1),
                          layout)
 
 

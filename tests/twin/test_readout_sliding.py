@@ -25,7 +25,7 @@ def test_segments_are_the_dwells_unless_a_solved_finger_slides():
     aims = np.array([[0.0, 20.0], [10.0, 40.0], [-5.0, 30.0]])
     n = 90
     shares = np.array_split(np.arange(n), 3)
-    for proto in (Protocol(touch_dwells=3), Protocol(touch_dwells=3, dwell_slide_s=10.0,
+    for proto in (Protocol(touch_dwells=3, dwell_slide_s=0.0), Protocol(touch_dwells=3, dwell_slide_s=10.0,
                                                      response="field")):
         got = readout_segments(n, 30.0, aims, proto)
         assert len(got) == 3 and all(np.array_equal(a, b) for a, b in zip(got, shares))

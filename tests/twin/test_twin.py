@@ -224,7 +224,9 @@ def test_protocol_rejects_bad_parameters():
 
 
 def test_simulation_is_deterministic_and_independent_of_workers(layout):
-    proto = Protocol(levels_ml=(0.0, 20.0), n_chambers=3, touch_trials=1, duration_s=2.0, seed=3)
+    # (two points per trial, sliding from one to the other: the default reading's solves, cheaper)
+    proto = Protocol(levels_ml=(0.0, 20.0), n_chambers=3, touch_trials=1, duration_s=2.0, seed=3,
+                     touch_dwells=2)
     a = simulate_experiment(proto, workers=1, progress=False)
     b = simulate_experiment(proto, workers=2, progress=False)
     assert a.n_trials == 16 and a.trials[0].n_frames == 60
@@ -247,7 +249,8 @@ def test_a_subset_of_trials_and_the_hand_off_are_the_same_trials():
     difference to the trial with the hand is the hand's smooth effect alone. (With the hand's
     random numbers skipped when it is off, the noise was drawn anew: the difference's
     second derivative was 0.32-0.39 fF against 0.005-0.04 fF now.)"""
-    proto = Protocol(levels_ml=(0.0, 20.0), n_chambers=3, touch_trials=1, duration_s=2.0, seed=3)
+    proto = Protocol(levels_ml=(0.0, 20.0), n_chambers=3, touch_trials=1, duration_s=2.0, seed=3,
+                     touch_dwells=1)
     full = simulate_experiment(proto, workers=1, progress=False)
     by_name = {t.name: t for t in full.trials}
     touch = [t.name for t in full.trials if t.meta["kind"] == "touch"][:3]
@@ -362,6 +365,7 @@ def test_touch_dwells_move_the_finger_within_its_region(layout):
         no_contact_trial=False,
         duration_s=3.0,
         touch_dwells=3,
+        dwell_slide_s=0.0,
         seed=2,
     )
     t = simulate_experiment(proto, workers=1, progress=False).trials[0]
@@ -402,7 +406,7 @@ def test_each_dwell_has_its_own_readout_model(sensor, layout):
     trial's mean point (before dwells had their own) was far off."""
     from ectskin.twin.simulate import _rows, _touch_segment
 
-    proto = Protocol(touch_dwells=2, push_max_n=0.0)
+    proto = Protocol(touch_dwells=2, dwell_slide_s=0.0, push_max_n=0.0)
     reg = layout.region(5)
     lo, hi = region_bounds(reg, proto.touch_margin)
     aims = np.array([lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo)])  # the region's far corners

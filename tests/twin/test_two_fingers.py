@@ -44,7 +44,8 @@ def sensor(layout):
 
 def _small(**kw) -> Protocol:
     """The baseline's protocol: one state (10 ml each), a trial without and two with touch, 1 s."""
-    return Protocol(levels_ml=(10.0,), touch_trials=2, duration_s=1.0, seed=3, **kw)
+    return Protocol(levels_ml=(10.0,), touch_trials=2, duration_s=1.0, seed=3,
+                    **{"touch_dwells": 1, **kw})
 
 
 @pytest.fixture(scope="module")

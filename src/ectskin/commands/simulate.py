@@ -75,16 +75,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--dwells",
         type=integer(1),
-        default=1,
-        help="finger placements per touch trial: it moves to a new point D-1 times (default 1)",
+        default=8,
+        help="finger placements per touch trial: it moves to a new point of its region D-1 "
+        "times (default 8, the twin's reading of the paper: docs/paper-reading.md; 1: one point "
+        "held)",
     )
     p.add_argument(
         "--slide",
         type=float,
-        default=0.0,
+        default=None,
         metavar="S",
         help="seconds at the end of each dwell in which the finger slides, in contact, to the "
-        "next point (default 0: it jumps)",
+        "next point (default: the whole dwell, one continuous contact; 0: it jumps)",
     )
     p.add_argument(
         "--response",

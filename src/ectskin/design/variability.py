@@ -115,6 +115,7 @@ DEFAULT_PROTOCOL = Protocol(
     touch_trials=6,
     duration_s=4.0,
     touch_placement="uniform",
+    touch_dwells=1,  # one point per trial, as when this study was made
     force_nodes=3,
     seed=0,
 )

@@ -235,7 +235,8 @@ class ReproduceConfig:
             second_finger=0.3, stream=CONTACT_STREAM,
         )
         if self.contact_response == "solve":
-            return replace(base, touch_trials=4, touch_dwells=2, response="solve", **common)
+            return replace(base, touch_trials=4, touch_dwells=2, dwell_slide_s=0.0,
+                           response="solve", **common)
         dwells = max(1, min(base.n_frames, int(round(base.duration_s / CONTACT_DWELL_S))))
         return replace(
             base,

@@ -22,6 +22,7 @@ from ectskin import __version__
 from ectskin._check import EctskinError
 from ectskin._files import write_text_atomic
 from ectskin.report.contact import contact_sections
+from ectskin.report.reading import reading_paragraph
 from ectskin.report.tables import (
     ROBUST_LABEL,
     ablation_note,
@@ -138,6 +139,10 @@ def _sections(metrics: Mapping[str, Any], figures: list[tuple[str, Path]]) -> li
     if isinstance(data, Mapping) and data:
         desc = ", ".join(f"{k}: {v}" for k, v in data.items())
         s.append(("p", f"Data: {desc}."))
+    lead = reading_paragraph(metrics)
+    if lead:
+        s.append(("h2", "Paper recipe on this reading of the experiment"))
+        s.append(("p", lead))
     s.append(("h2", "Results"))
     s.append(("table", (("metric", "paper", "this run", "baselines"), results_table(metrics))))
     robust = lookup(metrics, "touch.robust")
@@ -149,12 +154,7 @@ def _sections(metrics: Mapping[str, Any], figures: list[tuple[str, Path]]) -> li
             + (f": {recipe}" if recipe else "")
             + ". It is evaluated on the same test trials. On the twin the paper's recipe fits the "
             "training trials exactly and keeps the weights of one of its first epochs (its "
-            "validation loss rises from then on): the test trials are other trials. Which "
-            "choices of the experiment's reading move it is measured by `ectskin study reading` "
-            "(docs/paper-reading.md): more touch points per trial raise it on every seed "
-            "measured; the readout noise, the force range, the pad's slide, the hand and the "
-            "fingers move it less than the seed does; split by frame instead of by trial "
-            "(which leaks trials) every model reaches 100 %."
+            "validation loss rises from then on): the test trials are other trials."
         )
         s.append(("p", text))
     margins = margin_text(metrics)

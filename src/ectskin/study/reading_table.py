@@ -6,7 +6,9 @@
 (%), the epoch it kept of how many, the robust recipe's accuracy and the strongest baseline's
 name and accuracy; per row the mean of the three accuracies over the seeds it has.
 :func:`plot_reading` draws the same numbers (per seed small, the mean large) beside the paper's
-99.88 %. :func:`write_table` writes ``OUT/reading_ablation.md`` and ``OUT/reading_ablation.png``.
+99.88 %. :func:`write_table` writes ``OUT/reading_ablation.md``, ``OUT/reading_ablation.png`` and
+``OUT/reading_ablation.json`` (:func:`summary_document`: the cells' accuracies per row and seed, the
+form the report reads: ``ectskin.report.reading``).
 """
 
 from __future__ import annotations
@@ -18,13 +20,15 @@ from typing import Any
 
 import numpy as np
 
-from ectskin._files import save_figure_atomic, write_text_atomic
+from ectskin._files import save_figure_atomic, write_json_atomic, write_text_atomic
 from ectskin.study.reading_rows import RESULTS, ROW_NAMES, ROWS, read_result
 
 #: the paper's TouchMLP test accuracy (paper §4.1.3: 34 of 28 800 frames wrong)
 PAPER_ACCURACY = 1.0 - 34 / 28800
 TABLE_FILE = "reading_ablation.md"
 FIGURE_FILE = "reading_ablation.png"
+SUMMARY_FILE = "reading_ablation.json"
+SUMMARY_FORMAT = "ectskin.study.reading.summary"
 _NAME = re.compile(r"^(?P<row>[a-z0-9_]+)_s(?P<seed>\d+)\.json$")
 
 
@@ -156,7 +160,37 @@ def write_table(
         table_markdown(summary) if summary else "No results yet.\n"
     )
     table = write_text_atomic(out / TABLE_FILE, text)
+    write_json_atomic(out / SUMMARY_FILE, summary_document(summary))
     if not summary:
         return table, None
     figure = save_figure_atomic(plot_reading(summary), out / FIGURE_FILE, dpi=120)
     return table, figure
+
+
+def summary_document(summary: dict[str, dict[int, dict[str, Any]]]) -> dict[str, Any]:
+    """The summary as a JSON document: per row its description, the fields it changes and per
+    seed the paper recipe's, the robust recipe's and the strongest baseline's test accuracy and
+    the epoch the paper recipe kept (what ``ectskin.report.reading`` reads)."""
+    import datetime
+
+    by_name = {r.name: r for r in ROWS}
+    rows: dict[str, Any] = {}
+    for name, cells in summary.items():
+        row = by_name.get(name)
+        rows[name] = {
+            "what": row.what if row else "",
+            "changes": dict(row.changes) if row else {},
+            "split": row.split if row else "trial",
+            "seeds": {
+                str(s): {k: c[k] for k in ("paper", "robust", "baseline", "baseline_accuracy",
+                                           "epoch", "epochs")}
+                for s, c in cells.items()
+            },
+        }
+    return {
+        "format": SUMMARY_FORMAT,
+        "version": 1,
+        "created_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "paper_accuracy": PAPER_ACCURACY,
+        "rows": rows,
+    }

@@ -178,7 +178,7 @@ def _write_figures(
     touch_frames = np.flatnonzero((t >= 15.0) & (t < 27.0))
     proto = Protocol(
         force_range_n=(0.5 * force_n, 1.5 * force_n), approach=True, push_max_n=0.0,
-        approach_s=1.5,
+        approach_s=1.5, touch_dwells=1,
     )
     path = finger_path(
         touch_frames.size, fps, np.asarray([reg.centre_mm]), lo, hi, proto, rng

@@ -141,12 +141,12 @@ def finger_path(
 ) -> FingerPath:
     """The finger over one touch trial; ``aimed_uv`` (D, 2) are the aimed points of its dwells
     (the finger moves to the next one for each equal share of the trial, sliding there for the
-    last ``protocol.dwell_slide_s`` of each: :func:`dwell_points`), kept in [lo, hi]."""
+    last ``protocol.slide_s`` of each: :func:`dwell_points`), kept in [lo, hi]."""
     f_lo, f_hi = protocol.force_range_n
     force = smooth_walk(n, fps, protocol.force_knot_s, f_lo, f_hi, rng)
     force = force * (1.0 + protocol.tremor_rel * tremor(n, fps, protocol.tremor_hz, rng))
     force = np.maximum(force, 0.05 * f_lo)
-    uv = dwell_points(n, fps, np.asarray(aimed_uv, dtype=np.float64), protocol.dwell_slide_s)
+    uv = dwell_points(n, fps, np.asarray(aimed_uv, dtype=np.float64), protocol.slide_s)
     if protocol.slide_mm > 0:
         uv = uv + ou_walk(n, fps, protocol.slide_mm, protocol.slide_tau_s, rng)
     uv = np.clip(uv, lo_uv, hi_uv)
@@ -173,7 +173,7 @@ def finger_path(
     # above the skin the finger hovers over the trial's mean contact point (it lands within a
     # millimetre of it: the roll and slide of the pressed pad); a finger that slides between
     # dwells (dwell_slide_s) hovers over its way instead
-    if not contact.all() and protocol.dwell_slide_s == 0:
+    if not contact.all() and protocol.slide_s == 0:
         uv[~contact] = uv[contact].mean(axis=0) if contact.any() else np.mean(aimed_uv, axis=0)
     force = np.where(contact, force, 0.0)
     height = np.where(contact, 0.0, np.maximum(height, 0.5))

@@ -109,7 +109,10 @@ class Protocol:
     touch_placement: str = "aimed"  # (assumed: the paper's sub-regions are marked on the robot)
     touch_scatter_mm: float = 3.0  # (assumed) human aiming scatter, per axis
     touch_margin: float = 0.15  # keep touches this fraction of the region size inside each edge
-    touch_dwells: int = 1  # finger placements per touch trial: it slides to a new point D-1 times
+    # finger placements per touch trial: it moves to a new point of the region D-1 times (the
+    # paper's "randomly touch a sub-region": docs/paper-reading.md says why 8, sliding, is the
+    # default reading)
+    touch_dwells: int = 8
     lifts: bool = False  # lift the finger now and then (lift and re-press), per-frame labels
     finger_radius_mm: float = 8.0  # (assumed) every fingertip's radius without finger_variability
     # people differ (ectskin.twin.human.trial_fingers): each trial's fingers (the second its own)
@@ -124,8 +127,10 @@ class Protocol:
     # (ectskin.twin.field_response; simulate_experiment needs the fields)
     response: str = "solve"
     # seconds at the end of each dwell in which the finger slides, in contact, to the next dwell's
-    # point (a raised-cosine path); 0 = it jumps there between two frames
-    dwell_slide_s: float = 0.0
+    # point (a raised-cosine path); 0 = it jumps there between two frames; None = the whole dwell
+    # (duration_s / touch_dwells: one continuous contact that moves over the region). Read it
+    # through Protocol.slide_s
+    dwell_slide_s: float | None = None
     # which random streams the experiment draws from (Protocol.rng): 0 = (seed, ...), as always;
     # another number gives another experiment with the same seed streams of its own
     stream: int = 0
@@ -174,7 +179,9 @@ class Protocol:
             raise EctskinError(f"protocol: touch_scatter_mm must be >= 0, got {self.touch_scatter_mm}")
         if not 0 <= self.touch_margin < 0.5:
             raise EctskinError(f"protocol: touch_margin must be in [0, 0.5), got {self.touch_margin}")
-        _check_whole("touch_dwells", self.touch_dwells, 1, self.n_frames, "the frames of a trial")
+        # (a protocol without touch trials never uses it, however short its trials)
+        _check_whole("touch_dwells", self.touch_dwells, 1,
+                     self.n_frames if self.touch_trials else None, "the frames of a trial")
         lo_hz, hi_hz = self.tremor_hz
         if not 0 < lo_hz <= hi_hz < self.frame_rate_hz / 2:
             raise EctskinError(
@@ -220,12 +227,13 @@ class Protocol:
             )
         check_option("response", self.response, RESPONSES, source="protocol")
         v = self.dwell_slide_s
-        if isinstance(v, bool) or not isinstance(v, int | float) or not (
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int | float) or not (
             np.isfinite(v) and 0 <= v <= self.duration_s / self.touch_dwells
-        ):
+        )):
             raise EctskinError(
                 f"protocol: dwell_slide_s must be a number of seconds from 0 to duration_s / "
-                f"touch_dwells ({self.duration_s / self.touch_dwells:.4g}, one dwell), got {v!r}"
+                f"touch_dwells ({self.duration_s / self.touch_dwells:.4g}, one dwell), or None "
+                f"(the whole dwell), got {v!r}"
             )
         _check_whole("stream", self.stream, 0)
         if self.force_nodes < 2:
@@ -258,12 +266,26 @@ class Protocol:
             return np.random.default_rng([self.seed, *keys])
         return np.random.default_rng([self.seed, STREAM_TAG, self.stream, *keys])
 
+    @property
+    def slide_s(self) -> float:
+        """Seconds at the end of each dwell in which the finger slides to the next dwell's point:
+        ``dwell_slide_s``, or the whole dwell (``duration_s / touch_dwells``) when it is None;
+        0 with one dwell (there is no next point)."""
+        if self.touch_dwells <= 1:
+            return 0.0
+        if self.dwell_slide_s is None:
+            return self.duration_s / self.touch_dwells
+        return float(self.dwell_slide_s)
+
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Protocol:
         d = dict(d)
+        # written before the sliding reading became the default: one point held per trial
+        d.setdefault("touch_dwells", 1)
+        d.setdefault("dwell_slide_s", 0.0)
         known = {f.name for f in fields(cls)}
         unknown = set(d) - known
         if unknown:

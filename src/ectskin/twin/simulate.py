@@ -200,9 +200,9 @@ def readout_segments(
     :data:`SLIDE_SEGMENT_MM`: one quadratic model around a single point would be off by several
     fF at the ends of a slide of 5 mm or more."""
     dwells = np.array_split(np.arange(n), len(aimed_uv))
-    if protocol.dwell_slide_s <= 0 or protocol.response != "solve":
+    if protocol.slide_s <= 0 or protocol.response != "solve":
         return dwells
-    way = dwell_points(n, fps, np.asarray(aimed_uv, dtype=np.float64), protocol.dwell_slide_s)
+    way = dwell_points(n, fps, np.asarray(aimed_uv, dtype=np.float64), protocol.slide_s)
     out: list[np.ndarray] = []
     for rows in dwells:
         along = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(way[rows], axis=0), axis=1))]
