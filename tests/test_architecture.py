@@ -2,7 +2,7 @@
 
 The order (documented in ``docs/architecture.md``), lowest first::
 
-    _check, _files, _dask → layout → viz → electrostatics → io → twin → learn → report → pipeline
+    _check, _files, _dask, _malloc → layout → viz → electrostatics → io → twin → learn → report → pipeline
       → design → live → dashboard → commands → cli
 
 ``viz`` sits low on purpose: plot functions take arrays (and the layout, to draw the faces) and
@@ -23,7 +23,7 @@ import ectskin
 SRC = Path(ectskin.__file__).resolve().parent
 
 LAYERS = (
-    ("_check", "_files", "_dask", "__init__"),
+    ("_check", "_files", "_dask", "_malloc", "__init__"),
     ("layout",),
     ("viz",),
     ("electrostatics",),

@@ -14,6 +14,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from ectskin._check import EctskinError
+from ectskin._malloc import MALLOC_ENV
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +71,8 @@ def dask_client(
         processes=True,
         dashboard_address=":0",  # any free port: never clashes with another cluster
         silence_logs=logging.WARNING,
-        env={"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},
+        env={"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+             **MALLOC_ENV},
     )
     client = Client(cluster)
     log.info("%s: LocalCluster with %d worker(s) at %s", what, n_workers, cluster.scheduler_address)

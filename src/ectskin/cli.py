@@ -10,6 +10,7 @@ import sys
 
 from ectskin import __version__
 from ectskin._check import EctskinError
+from ectskin._malloc import keep_freed_memory
 from ectskin.commands import COMMANDS
 
 
@@ -47,6 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "_run", None):
         parser.print_help()
         return 2
+    keep_freed_memory()  # the solves' large arrays reused, not zero-filled anew (ectskin._malloc)
     try:
         return int(args._run(args) or 0)
     except EctskinError as exc:

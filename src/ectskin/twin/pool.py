@@ -26,6 +26,8 @@ from typing import Any, TypeVar
 
 from threadpoolctl import threadpool_limits
 
+from ectskin._malloc import keep_freed_memory
+
 log = logging.getLogger(__name__)
 
 J = TypeVar("J")
@@ -75,6 +77,7 @@ def _stop_workers(ex: ProcessPoolExecutor) -> None:
 
 def _start_worker(driver_pid: int, init: Callable[..., None], initargs: tuple) -> None:
     _die_with_parent(driver_pid)
+    keep_freed_memory()
     _LIMITS.append(threadpool_limits(1))
     init(*initargs)
 
