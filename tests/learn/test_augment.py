@@ -106,8 +106,47 @@ def test_mixup_and_label_smoothing_loss_by_hand():
     xb, yb = torch.randn(8, 4), torch.tensor([0, 1, 2, 0, 1, 2, 0, 1])
     got = task.loss(model, (xb, yb), np.random.default_rng(9))
     xa, y_a, y_b, lam = augment_touch_batch(
-        xb, yb, np.random.default_rng(9), state_means=means, mixup_alpha=1.0, mixup_pairs="class"
+        xb,
+        yb,
+        np.random.default_rng(9),
+        state_means=means,
+        mixup_alpha=1.0,
+        mixup_pairs="class",
+        channel_gain=0.1,
     )
     want = mixup_cross_entropy(model(xa), y_a, y_b, lam, 0.1)
     assert torch.equal(got, want)
     assert torch.equal(TouchCriterion().loss(model, (xb, yb), None), F.cross_entropy(model(xb), yb))
+
+
+def test_the_gain_per_channel_by_hand():
+    """``channel_gain``: every value times its own exp(g), g ~ N(0, sigma²) drawn (B, P) after
+    the shift's draws and before mixup's, replayed here from the same generator. Catches one
+    gain per frame (all channels alike), gains drawn in another order (the shift's or mixup's
+    numbers), a gain added instead of multiplied; and the spread of log-gains is sigma."""
+    x = torch.arange(1, 13, dtype=torch.float32).reshape(3, 4)
+    y = torch.tensor([1, 1, 2])
+    means = torch.tensor([[0.0, 0, 0, 0], [1.0, 2, 3, 4]])
+    out, _, y_b, lam = augment_touch_batch(
+        x, y, np.random.default_rng(8), state_means=means, mixup_alpha=1.0, channel_gain=0.1
+    )
+    rng = np.random.default_rng(8)
+    a, b = rng.integers(0, 2, size=(2, 3))
+    g = np.exp(rng.normal(0.0, 0.1, size=(3, 4))).astype(np.float32)
+    lam_h = rng.beta(1.0, 1.0, size=3).astype(np.float32)
+    perm = rng.permutation(3)
+    scaled = (x.numpy() + (means.numpy()[a] - means.numpy()[b])) * g
+    want = lam_h[:, None] * scaled + (1 - lam_h[:, None]) * scaled[perm]
+    np.testing.assert_allclose(out.numpy(), want, rtol=1e-6)
+    np.testing.assert_array_equal(lam.numpy(), lam_h)
+    assert y_b.tolist() == y.numpy()[perm].tolist()
+
+    ones = torch.ones(4000, 5)
+    got, *_ = augment_touch_batch(
+        ones, torch.zeros(4000), np.random.default_rng(0), channel_gain=0.2
+    )
+    logs = np.log(got.numpy())
+    assert logs.std() == pytest.approx(0.2, rel=0.03) and abs(logs.mean()) < 0.01
+    assert np.abs(np.corrcoef(logs[:, 0], logs[:, 1])[0, 1]) < 0.05  # channels independent
+    same, *_ = augment_touch_batch(ones, torch.zeros(4000), np.random.default_rng(0))
+    assert torch.equal(same, ones)  # 0: no gain

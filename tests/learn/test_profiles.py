@@ -34,11 +34,12 @@ def test_paper_profile_is_the_papers_settings(blobs):
 def test_robust_profile_settings_and_track_refusal(tmp_path):
     s = PROFILES["robust"]["touch"]
     assert (s.epochs, s.batch_size, s.lr, s.step_size, s.gamma) == (20, 256, 1e-3, 5, 1 / 1.2)
-    assert (s.inflation_shift, s.mixup_alpha, s.label_smoothing, s.select) == (
+    assert (s.inflation_shift, s.mixup_alpha, s.label_smoothing, s.select, s.channel_gain) == (
         True,
         1.0,
         0.1,
         "val_metric",
+        0.1,
     )
     for name in ("paper", "quick"):  # the paper's recipe: no augmentation, lowest val loss
         for task in ("touch", "track"):
@@ -49,6 +50,7 @@ def test_robust_profile_settings_and_track_refusal(tmp_path):
                 0.0,
                 "val_loss",
             )
+            assert t.channel_gain == 0.0 and not t.augments
         # contact (ours, not the paper's): the inflation shift only, the best localisation kept
         c = PROFILES[name]["contact"]
         assert (c.inflation_shift, c.mixup_alpha, c.label_smoothing, c.select) == (
@@ -72,6 +74,10 @@ def test_robust_profile_settings_and_track_refusal(tmp_path):
         profile_settings("touch", "robust", mixup_alpha=-1)
     with pytest.raises(EctskinError, match="allowed values are 'val_loss', 'val_metric'"):
         profile_settings("touch", "robust", select="best")
+    with pytest.raises(EctskinError, match="'channel_gain' must be >= 0"):
+        profile_settings("touch", "robust", channel_gain=-0.1)
+    with pytest.raises(EctskinError, match="'channel_gain' apply to task 'touch' only"):
+        profile_settings("contact", "quick", channel_gain=0.1)
 
 
 def test_cli_refuses_robust_for_track_naming_the_profiles(tmp_path, capsys, cli, make_recording):
@@ -99,6 +105,11 @@ def test_describe_recipe():
     assert describe_recipe(recipe) == (
         "inflation shift over 25 no-contact training states, mixup (Beta 0.4, 0.4), label "
         "smoothing 0.1, weights of the best validation accuracy"
+    )
+    assert describe_recipe({**recipe, "channel_gain": 0.1}) == (
+        "inflation shift over 25 no-contact training states, mixup (Beta 0.4, 0.4), a gain per "
+        "channel (log-normal, sigma 0.1), label smoothing 0.1, weights of the best validation "
+        "accuracy"
     )
     skipped = {**recipe, "inflation_shift_states": 0, "mixup_alpha": 0, "select": "val_loss"}
     assert describe_recipe(skipped) == (

@@ -59,6 +59,7 @@ def test_robust_training_is_deterministic_and_resumes_exactly(tmp_path, states_d
         "mixup_pairs": "class",
         "label_smoothing": 0.1,
         "select": "val_metric",
+        "channel_gain": 0.1,
         "inflation_shift_states": 6,
     }
     # model.pt holds the epoch of the best validation accuracy (ties: the lower loss)

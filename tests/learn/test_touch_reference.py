@@ -70,6 +70,32 @@ def test_state_reference_is_eq2_against_the_states_own_rest_mean():
     np.testing.assert_allclose(touch_dataset(rec, reference="rest").x[ds.group == 3], 1.7)
 
 
+def test_state_offset_subtracts_the_states_rest_and_divides_by_the_rest_states():
+    """The robust profile's reference: c = (c_t − c_0(p)) / c_0(0). The recording of the test
+    above: state B's touch (2.7 pF, its rest mean 2.25 pF, the 0-ml rest 1.0 pF) reads
+    (2.7 − 2.25) / 1.0 = 0.45, state A's (rest 1.0 pF) (1.1 − 1.0) / 1.0 = 0.1 (= "state",
+    its own rest is the 0-ml rest). Catches dividing by the state's own rest (0.2, "state"),
+    subtracting the 0-ml rest (1.7, "rest"), and the profile's reference changing unnoticed."""
+    rec = Recording(
+        LAYOUT,
+        [
+            _trial("a_rest", 1.0, (0.0, 0.0)),
+            _trial("a_touch", 1.1, (0.0, 0.0), region=3),
+            _trial("b_rest1", 1.5, (10.0, 0.0), n=2),
+            _trial("b_touch", 2.7, (10.0, 0.0), region=12),
+            _trial("b_rest2", 2.5, (10.0, 0.0), n=6),
+        ],
+        30.0,
+    )
+    ds = touch_dataset(rec, reference="state-offset")
+    x = {n: ds.x[ds.group == g] for g, n in enumerate(ds.group_names)}
+    np.testing.assert_allclose(x["b_touch"], 0.45, rtol=1e-6)
+    np.testing.assert_allclose(x["a_touch"], 0.1, rtol=1e-6)
+    np.testing.assert_allclose(x["b_rest2"], 2.5 - 2.25, rtol=1e-6)
+    assert ds.reference == {"mode": "state-offset"}
+    assert PROFILE_REFERENCE["robust"] == "state-offset"
+
+
 def test_state_reference_refuses_a_state_without_a_no_contact_trial():
     """The error names the state and a trial of it (catches a silent fallback to the rest)."""
     rec = Recording(

@@ -3,7 +3,8 @@
 * :func:`no_contact_means`: the mean calibrated frame of each no-contact trial of a split (one
   per inflation state in the paper's protocol).
 * :func:`augment_touch_batch`: adds to each frame the difference between two drawn states'
-  means ("the same touch seen at another inflation"), then mixes the batch up.
+  means ("the same touch seen at another inflation"), scales each value by a gain of its own,
+  then mixes the batch up.
 * :func:`mixup_cross_entropy`: the cross-entropy of a mixed batch, with label smoothing.
 
 Every random draw comes from a numpy generator the caller seeds (from (seed, epoch, rank) in
@@ -47,6 +48,7 @@ def augment_touch_batch(
     state_means: torch.Tensor | None = None,
     mixup_alpha: float = 0.0,
     mixup_pairs: str = "any",
+    channel_gain: float = 0.0,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
     """The ``robust`` recipe's augmentation of one touch batch.
 
@@ -55,21 +57,27 @@ def augment_touch_batch(
        independently from the S states (a_i = b_i adds 0): the same touch seen at another
        inflation. The model normalises its input per pair with a fixed affine map, so adding
        the raw difference equals adding the difference of the normalised means.
-    2. Mixup (when ``mixup_alpha`` > 0) on the shifted batch: λ_i ~ Beta(α, α) per sample and a
-       random partner j = perm(i) within the batch; x_i ← λ_i x_i + (1 − λ_i) x_j.
+    2. Gain per channel (when ``channel_gain`` > 0): every value x_ij is multiplied by its own
+       exp(g_ij), g_ij ~ N(0, ``channel_gain``²): how much a touch changes each pair's readout
+       varies with the inflation and the finger beyond what the calibration removes.
+    3. Mixup (when ``mixup_alpha`` > 0) on the shifted, scaled batch: λ_i ~ Beta(α, α) per
+       sample and a random partner j = perm(i) within the batch; x_i ← λ_i x_i + (1 − λ_i) x_j.
        ``mixup_pairs`` "class": the partner is drawn among the frames of the same class (a
        permutation within each class of the batch), so the mixed frame keeps its label: a touch
        of the same region between two training trials (other placements, states, fingers).
 
     Every draw comes from ``rng`` (numpy; the caller seeds it from (seed, epoch, rank)), in the
-    order a, b (each (B,)), λ (B,), perm (B,; "class": one permutation per class present, in
-    class order). Returns ``(x, y_a, y_b, lam)``: y_a = y and y_b = y[perm], lam (B,) float32,
-    both None without mixup. Shapes: x (B, P), y (B,).
+    order a, b (each (B,)), g (B, P), λ (B,), perm (B,; "class": one permutation per class
+    present, in class order). Returns ``(x, y_a, y_b, lam)``: y_a = y and y_b = y[perm], lam
+    (B,) float32, both None without mixup. Shapes: x (B, P), y (B,).
     """
     n = int(x.shape[0])
     if state_means is not None and len(state_means) >= 2:
         ab = torch.from_numpy(rng.integers(0, len(state_means), size=(2, n))).to(x.device)
         x = x + (state_means[ab[0]] - state_means[ab[1]])  # (B, P)
+    if channel_gain > 0:
+        gain = np.exp(rng.normal(0.0, channel_gain, size=tuple(x.shape))).astype(np.float32)
+        x = x * torch.from_numpy(gain).to(x.device)  # (B, P)
     if mixup_alpha <= 0:
         return x, y, None, None
     lam = torch.from_numpy(rng.beta(mixup_alpha, mixup_alpha, size=n).astype(np.float32))

@@ -21,16 +21,24 @@ choice); it is what :func:`ectskin.learn.train.train` and ``train_from_recording
   window and keep the weights with the lowest validation localisation error.
 * ``robust`` (touch only; ours, not the paper's): the paper's TouchMLP, unchanged, trained with
   a recipe meant to generalise to unseen (inflation state, touch placement) combinations. Its
-  frames are calibrated by Eq. 2 against the rest readout of their own inflation state
-  (reference ``"state"``: c = (c_t − c_0(p)) / c_0(p), c_0(p) the mean of the state's
-  no-contact trial(s), :mod:`ectskin.io.inflation_reference`; :data:`PROFILE_REFERENCE`,
-  ``TrainConfig.reference`` overrides it). Per training frame it adds
+  frames are the touch's change of the readout from the rest readout of their own inflation
+  state, in units of the rest state's readout (reference ``"state-offset"``: c = (c_t −
+  c_0(p)) / c_0(0), c_0(p) the mean of the state's no-contact trial(s), c_0(0) that of the
+  uninflated state, :mod:`ectskin.io.inflation_reference`; :data:`PROFILE_REFERENCE`,
+  ``TrainConfig.reference`` overrides it). Subtracting c_0(p) removes what the inflation does
+  to the untouched readout; dividing by c_0(p) instead, as reference ``"state"`` does, would
+  also rescale each channel by c_0(0) / c_0(p) with the inflation, while the touch's change
+  c_t − c_0(p) follows c_0(p) only in part (chosen by validation accuracy, see
+  ``BENCHMARKS.md``). Per training frame it adds
   an *inflation shift*, the difference between the mean no-contact frames of two training
   inflation states drawn at random ("the same touch seen at another inflation", see
   :mod:`ectskin.learn.augment`; about zero once each state's rest is subtracted, it matters
-  with the rest reference), then mixes each frame with a frame of the *same class* (mixup
-  within each class, Beta(1, 1), a λ per sample: a touch of the same region between two
-  training trials), uses cross-entropy with label smoothing 0.1, Adam 1e-3 divided by 1.2 every
+  with the rest reference), scales each of its values by a gain of its own, exp(N(0, 0.1²))
+  (a *gain per channel*: how much a touch changes each pair's readout varies with the state
+  and the finger by some ten per cent that the reference does not remove), then mixes each
+  frame with a frame of the *same class* (mixup within each class, Beta(1, 1), a λ per
+  sample: a touch of the same region between two training trials), uses
+  cross-entropy with label smoothing 0.1, Adam 1e-3 divided by 1.2 every
   5 epochs, batch 256, 20 epochs, and keeps the weights with the best validation *accuracy*,
   ties broken by the lower validation loss.
 
@@ -72,10 +80,11 @@ class TrainSettings:
     mixup_pairs: str = "any"  # mixup partners: any frame of the batch, or one of the same class
     label_smoothing: float = 0.0  # of the training cross-entropy (validation loss: plain CE)
     select: str = "val_loss"  # keep the weights of the lowest val_loss or the best val_metric
+    channel_gain: float = 0.0  # > 0: each value scaled by exp(N(0, channel_gain)), per channel
 
     @property
     def augments(self) -> bool:
-        return self.inflation_shift or self.mixup_alpha > 0
+        return self.inflation_shift or self.mixup_alpha > 0 or self.channel_gain > 0
 
 
 #: profile → task → settings (see the module docstring).
@@ -112,6 +121,7 @@ PROFILES: dict[str, dict[str, TrainSettings]] = {
             mixup_pairs="class",
             label_smoothing=0.1,
             select="val_metric",
+            channel_gain=0.1,
         ),
     },
 }
@@ -123,13 +133,20 @@ RECIPE_TASKS = ("touch",)
 #: calibrated frames)
 SHIFT_TASKS = ("touch", "contact")
 #: The fields of the touch recipe, stored as ``recipe`` in config.json and metrics.json.
-RECIPE_FIELDS = ("inflation_shift", "mixup_alpha", "mixup_pairs", "label_smoothing", "select")
+RECIPE_FIELDS = (
+    "inflation_shift",
+    "mixup_alpha",
+    "mixup_pairs",
+    "label_smoothing",
+    "select",
+    "channel_gain",
+)
 #: ``TrainSettings.mixup_pairs``: partners among all frames of the batch, or of the same class
 MIXUP_PAIRS = ("any", "class")
 #: profile → the Eq. 2 reference its touch data is calibrated with
 #: (:func:`ectskin.io.calibration.touch_reference`) unless ``TrainConfig.reference`` says
 #: otherwise: "auto" (the rest state, the paper's) or one that follows the inflation
-PROFILE_REFERENCE = {"paper": "auto", "quick": "auto", "robust": "state"}
+PROFILE_REFERENCE = {"paper": "auto", "quick": "auto", "robust": "state-offset"}
 #: Tasks whose data set takes a ``reference`` other than "auto" from :class:`TrainConfig`
 REFERENCE_TASKS = ("touch",)
 #: ``TrainConfig.reference`` values: ectskin.io.calibration.REFERENCE_OPTIONS, listed here because
@@ -162,13 +179,13 @@ def profile_settings(task: str, profile: str = "paper", **overrides: Any) -> Tra
     settings = replace(PROFILES[profile][task], **overrides)
     _check_settings(settings)
     shift = settings.inflation_shift and task not in SHIFT_TASKS
-    others = settings.mixup_alpha > 0 or settings.label_smoothing > 0
+    others = settings.mixup_alpha > 0 or settings.label_smoothing > 0 or settings.channel_gain > 0
     if task not in RECIPE_TASKS and (shift or others):
         raise EctskinError(
-            "training settings 'inflation_shift', 'mixup_alpha' and 'label_smoothing' apply to "
-            f"task {' or '.join(repr(t) for t in RECIPE_TASKS)} only, got "
-            f"{settings.inflation_shift!r}, {settings.mixup_alpha!r}, "
-            f"{settings.label_smoothing!r} for {task!r}"
+            "training settings 'inflation_shift', 'mixup_alpha', 'label_smoothing' and "
+            f"'channel_gain' apply to task {' or '.join(repr(t) for t in RECIPE_TASKS)} only, "
+            f"got {settings.inflation_shift!r}, {settings.mixup_alpha!r}, "
+            f"{settings.label_smoothing!r}, {settings.channel_gain!r} for {task!r}"
         )
     return settings
 
@@ -291,6 +308,11 @@ def _check_settings(settings: TrainSettings) -> None:
             f"training setting 'label_smoothing' must be in [0, 1), got "
             f"{settings.label_smoothing!r}"
         )
+    if not (settings.channel_gain >= 0 and math.isfinite(settings.channel_gain)):
+        raise EctskinError(
+            f"training setting 'channel_gain' must be >= 0 (0: no gain), got "
+            f"{settings.channel_gain!r}"
+        )
     check_option("select", settings.select, SELECT)
     check_option("mixup_pairs", settings.mixup_pairs, MIXUP_PAIRS)
 
@@ -320,6 +342,9 @@ def describe_recipe(recipe: Mapping[str, Any] | None, metric: str = "accuracy") 
     if alpha > 0:
         within = " within each class" if recipe.get("mixup_pairs") == "class" else ""
         parts.append(f"mixup{within} (Beta {alpha:g}, {alpha:g})")
+    gain = float(recipe.get("channel_gain") or 0)
+    if gain > 0:
+        parts.append(f"a gain per channel (log-normal, sigma {gain:g})")
     smoothing = float(recipe.get("label_smoothing") or 0)
     if smoothing > 0:
         parts.append(f"label smoothing {smoothing:g}")

@@ -58,12 +58,13 @@ class TouchCriterion(Criterion):
         self.label_smoothing = float(settings.label_smoothing) if settings is not None else 0.0
         self.mixup_alpha = float(settings.mixup_alpha) if settings is not None else 0.0
         self.mixup_pairs = str(settings.mixup_pairs) if settings is not None else "any"
+        self.channel_gain = float(settings.channel_gain) if settings is not None else 0.0
         self.state_means = state_means  # (n_states, P) or None: no inflation shift
         self.shift_states = 0 if state_means is None else len(state_means)
 
     @property
     def augments(self) -> bool:
-        return self.state_means is not None or self.mixup_alpha > 0
+        return self.state_means is not None or self.mixup_alpha > 0 or self.channel_gain > 0
 
     def loss(
         self, model: nn.Module, batch: tuple[torch.Tensor, ...], rng: np.random.Generator | None
@@ -80,6 +81,7 @@ class TouchCriterion(Criterion):
             state_means=self.state_means,
             mixup_alpha=self.mixup_alpha,
             mixup_pairs=self.mixup_pairs,
+            channel_gain=self.channel_gain,
         )
         return mixup_cross_entropy(model(x), y_a, y_b, lam, self.label_smoothing)
 
