@@ -187,7 +187,8 @@ def test_the_score_is_identical_across_runs_and_worker_counts(tmp_path):
 
     def numbers(design, folder):
         entries = [
-            {k: v for k, v in e.items() if k != "information_seconds"} for e in design["layouts"]
+            {k: v for k, v in e.items() if not k.startswith("information_")}
+            for e in design["layouts"]
         ]
         maps = [
             json.loads((folder / e["folder"] / INFORMATION_FILE).read_text())["maps"]["states"]
@@ -197,6 +198,8 @@ def test_the_score_is_identical_across_runs_and_worker_counts(tmp_path):
 
     ref = numbers(runs["serial"], tmp_path / "serial")
     assert [e["name"] for e in ref[0]] == ["paper", "design-0000"]
+    # each layout's cost: wall and this process's CPU time
+    assert all(e["information_cpu_seconds"] > 0 for e in runs["serial"]["layouts"])
     assert all(e["bound_mm_p95"] > 0 for e in ref[0])
     for name in ("again", "dask"):
         got = numbers(runs[name], tmp_path / name)
@@ -291,3 +294,15 @@ def test_an_unresolved_worst_case_ranks_as_infinite_not_dropped(tmp_path):
     want = [p["name"] for p in pareto_front(e, BOUND_FRONT_KEYS)]
     assert want and design["search"]["front"] == want
     assert (tmp_path / "figures" / "front.png").is_file()
+
+
+def test_the_worst_case_is_inf_when_its_percentile_reaches_an_unresolved_point():
+    from ectskin.design.information import worst_case
+
+    x = np.arange(1.0, 21.0)  # 20 points: the 95th percentile sits at rank 18.05 (0-based)
+    assert worst_case(x) == pytest.approx(np.percentile(x, 95))  # 19.05
+    x[-1] = np.inf  # rank 18.05 interpolates between 19 and the unresolved point: inf
+    assert worst_case(x) == np.inf
+    x = np.r_[np.arange(1.0, 40.0), np.inf]  # 40 points: rank 37.05 lies among finite ones
+    assert worst_case(x) == pytest.approx(38.05)
+    assert worst_case(np.full(3, np.inf)) == np.inf

@@ -45,6 +45,26 @@ def test_sampled_designs_are_manufacturable_across_the_space():
     assert min(counts) < 8 < max(counts)
 
 
+@pytest.mark.parametrize("routing", ["straight", "fan"])
+def test_the_longest_widest_wires_stay_on_the_skin(routing):
+    # the corner of the space: both wires as long as the room allows and 2 mm wide; the wire's
+    # end cap (half its width past its end) must stay inside the skin (it did not: 1 mm out)
+    params = {}
+    for face in ("front", "back"):
+        params.update({
+            f"{face}_n_wires": 2, f"{face}_routing": routing, f"{face}_order": "ascending",
+            f"{face}_width_mm": 2.0, f"{face}_span": 1.0, f"{face}_length_a_mm": 105.0,
+            f"{face}_length_b_mm": 105.0,
+        })
+    rules, base = ManufacturingRules(), default_layout()
+    design = sample_design(optuna.trial.FixedTrial(params), SearchSpace(), rules, base)
+    layout = build_layout(design, "corner", rules=rules)
+    check_manufacturable(layout, rules)
+    top = max(sk.v_mm[1] for sk in base.skins)
+    ends = [e.polyline_mm[:, 1].max() + e.width_mm / 2 for e in layout.electrodes]
+    assert max(ends) == pytest.approx(top, abs=0.01)  # as long as fits, and no longer
+
+
 def test_pareto_front_by_hand():
     pts = [
         {"name": "a", "n_electrodes": 4, "loc_mm_mean": 20.0},

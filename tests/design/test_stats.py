@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 
 from ectskin._check import EctskinError
-from ectskin.design.stats import aggregate, compare_with, paired_comparison, t_interval
+from ectskin.design.stats import (
+    aggregate,
+    compare_with,
+    goal_layouts,
+    paired_comparison,
+    rank_agreement,
+    t_interval,
+)
 
 
 def test_the_interval_of_a_hand_computed_sample():
@@ -63,3 +70,51 @@ def test_aggregate_and_compare_over_seeds():
         paired_comparison([1.0, 2.0], [1.0])
     with pytest.raises(EctskinError, match="missing"):
         t_interval([1.0, None])
+
+
+def _entries(bounds, errors):
+    return [
+        {"name": f"L{i}", "bound_mm_p95": b, "loc_mm_mean": t}
+        for i, (b, t) in enumerate(zip(bounds, errors))
+    ]
+
+
+def test_the_rank_agreement_is_spearman_by_hand():
+    # no ties: rho = 1 - 6 sum d^2 / (n (n^2 - 1)); d = (1, 1, 1, 1, 0): 1 - 24 / 120 = 0.8
+    got = rank_agreement(_entries([1.0, 2.0, 3.0, 4.0, 5.0], [2.0, 1.0, 4.0, 3.0, 5.0]))
+    assert got["rho"] == pytest.approx(0.8) and got["n"] == 5 and got["agree"]
+    # reversed: -1, no agreement
+    got = rank_agreement(_entries([1.0, 2.0, 3.0], [3.0, 2.0, 1.0]))
+    assert got["rho"] == pytest.approx(-1.0) and not got["agree"]
+    # ties take their mean rank: (1.5, 1.5, 3) against (1, 2, 3): 1.5 / sqrt(1.5 * 2)
+    got = rank_agreement(_entries([1.0, 1.0, 2.0], [1.0, 2.0, 3.0]))
+    assert got["rho"] == pytest.approx(1.5 / np.sqrt(3.0))
+    # an unresolved bound (None) ranks as the worst, not dropped
+    got = rank_agreement(_entries([None, 1.0, 2.0], [3.0, 1.0, 2.0]))
+    assert got["rho"] == pytest.approx(1.0) and got["n"] == 3
+    # layouts without a trained score are left out; fewer than 3: no ranking
+    few = _entries([1.0, 2.0], [1.0, 2.0]) + [{"name": "x", "bound_mm_p95": 3.0}]
+    assert rank_agreement(few) is None
+    # one score ties all: no rho
+    assert rank_agreement(_entries([1.0, 1.0, 1.0], [1.0, 2.0, 3.0]))["rho"] is None
+
+
+def test_the_goal_needs_few_electrodes_half_the_bound_and_a_shown_gain():
+    def entry(name, n, p95, verdict=None):
+        e = {"name": name, "n_electrodes": n, "bound_mm_p95": p95}
+        if verdict:
+            e["vs_paper"] = {"loc_mm_mean": {"verdict": verdict}}
+        return e
+
+    layouts = [
+        entry("paper", 8, 2.0),
+        entry("a", 8, 0.9, "better"),  # all three: met
+        entry("b", 8, 1.0, "not shown"),  # exactly half the bound, the gain not shown
+        entry("c", 10, 0.5, "better"),  # too many electrodes
+        entry("d", 6, 1.1, "better"),  # bound above half
+        entry("e", 4, None, "better"),  # unresolved bound
+    ]
+    got = goal_layouts(layouts)
+    assert got["paper_bound_mm_p95"] == 2.0
+    assert got["half_bound"] == ["a", "b"] and got["met"] == ["a"]
+    assert goal_layouts(layouts[1:])["met"] == []  # no paper: nothing to compare with

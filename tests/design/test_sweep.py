@@ -146,3 +146,32 @@ def test_scoring_regions_by_hand():
         (3, "back", (-20.0, 20.0), (5.0, 60.0)),
         (4, "back", (-20.0, 20.0), (60.0, 115.0)),
     ]
+
+
+def test_the_mesh_option_reaches_the_simulation_and_the_settings(tmp_path, monkeypatch):
+    from ectskin.design import score as score_mod
+    from ectskin.design.score import score_layout
+    from ectskin.twin.bound import COARSE
+
+    default, coarse = ScoreConfig(), ScoreConfig(mesh="coarse")
+    assert "mesh" not in default.settings()  # scores made before the option resume
+    assert coarse.settings()["mesh"] == "coarse"
+    assert ScoreConfig.from_dict(coarse.to_dict()) == coarse
+    assert ScoreConfig.from_dict(default.to_dict()) == default
+    with pytest.raises(EctskinError, match="mesh"):
+        ScoreConfig(mesh="fine")
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_simulate(protocol, **kw):
+        seen.append(kw["discretisation"])
+        raise Stop
+
+    monkeypatch.setattr(score_mod, "simulate_experiment", fake_simulate)
+    a, _ = _layouts()
+    for cfg in (coarse, default):
+        with pytest.raises(Stop):
+            score_layout(a, tmp_path / "a", cfg)
+    assert seen[0] == COARSE and seen[1] != COARSE

@@ -322,3 +322,17 @@ def test_a_nuisance_never_lowers_the_bound(twin_bounds):
                 assert point[case][k] >= point["none"][k] * (1 - 1e-9), case
                 assert point["all"][k] >= point[case][k] * (1 - 1e-9), case
             assert point["push"][k] > point["none"][k]
+
+
+def test_a_quantile_that_reaches_an_unresolved_point_is_unresolved():
+    """20 points, 1 unresolved: the 95th percentile interpolates between the largest finite
+    bound (the 19th) and the unresolved one, so it is unresolved (inf), not a number near 1e300;
+    the median of the finite ones is a plain number."""
+    from ectskin.twin.bound import _stats
+
+    x = np.r_[np.arange(1.0, 20.0), np.inf]
+    s = _stats(x)
+    assert s["p95"] == np.inf and s["mean"] == np.inf
+    assert s["median"] == pytest.approx(10.5)
+    clean = _stats(np.arange(1.0, 21.0))  # all resolved: plain percentiles
+    assert clean["p95"] == pytest.approx(np.percentile(np.arange(1.0, 21.0), 95))

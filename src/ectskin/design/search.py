@@ -36,6 +36,7 @@ from ectskin._check import EctskinError, check_option
 from ectskin._files import save_figure_atomic, to_jsonable
 from ectskin.design.cluster import open_runner
 from ectskin.design.family import (
+    FAN_RISE_MM,
     MAX_PAD_MM,
     MIN_PAD_MM,
     ORDERS,
@@ -188,7 +189,13 @@ def _span_range(n, routing, width, width_skin, rules) -> tuple[float, float] | N
     flags = []
     for s in spans:
         pad = _pad(n, routing, s, width_skin, gap)
-        wire_ok = s / (n - 1) >= width + gap and s / 2 + width / 2 <= width_skin / 2 - m
+        reach = s / 2 + width / 2
+        lean = s / 2 - (width_skin / 2 - gap - pad / 2)  # outer fanned lead: outwards by this
+        if routing == "fan" and lean > 0:
+            # its diagonal's square end at the bend reaches (w/2)(sin φ + cos φ) past the wire
+            phi = np.arctan(lean / FAN_RISE_MM)
+            reach = s / 2 + width / 2 * (np.sin(phi) + np.cos(phi))
+        wire_ok = s / (n - 1) >= width + gap and reach <= width_skin / 2 - m
         pad_ok = pad >= MIN_PAD_MM and (routing == "fan" or s / 2 + pad / 2 <= width_skin / 2 - m)
         flags.append(bool(wire_ok and pad_ok))
     ok = np.asarray(flags)
@@ -220,7 +227,11 @@ def sample_design(trial, space: SearchSpace, rules: ManufacturingRules, base: Se
                 f"{face}: {n} wires of {width:.2f} mm with {routing} routing do not fit"
             )
         pad = _pad(n, routing, rng[1], w_skin, rules.min_spacing_mm)
-        room = sk.v_mm[1] - sk.v_mm[0] - max(pad, MIN_PAD_MM) - rules.edge_margin_mm
+        # the wire's end cap reaches half its width past its end
+        room = (
+            sk.v_mm[1] - sk.v_mm[0] - max(pad, MIN_PAD_MM) - rules.edge_margin_mm
+            - round(width, 3) / 2
+        )
         lo, hi = sorted((min(a, room), min(b, room)))
         faces[face] = FaceDesign(
             n_wires=n,

@@ -117,4 +117,79 @@ def compare_with(
     return out
 
 
-__all__ = ["LEVEL", "METRICS", "aggregate", "compare_with", "paired_comparison", "t_interval"]
+#: the issue's goal for a proposal: at most this many electrodes, a worst-case position bound at
+#: most this share of the paper's, and a trained localisation error shown lower than the paper's
+GOAL_MAX_ELECTRODES = 8
+GOAL_BOUND_SHARE = 0.5
+#: the rank agreement asked of the two scores (Spearman's rho at least this)
+AGREEMENT_RHO = 0.7
+
+
+def rank_agreement(layouts: Sequence[Mapping[str, Any]]) -> dict[str, Any] | None:
+    """Spearman's rank correlation between the information score's worst-case position bound
+    (``bound_mm_p95``; None, an unresolved point, ranks as the worst) and the trained score's
+    mean localisation error (``loc_mm_mean``) over the layouts that have both (ties get their
+    mean rank). None with fewer than 3 such layouts (no ranking to compare)."""
+    both = [
+        (e["name"], np.inf if e["bound_mm_p95"] is None else float(e["bound_mm_p95"]),
+         float(e["loc_mm_mean"]))
+        for e in layouts
+        if "bound_mm_p95" in e and e.get("loc_mm_mean") is not None
+    ]
+    if len(both) < 3:
+        return None
+    from scipy.stats import rankdata
+
+    rb = rankdata([b for _, b, _ in both])
+    rt = rankdata([t for _, _, t in both])
+    if np.ptp(rb) == 0 or np.ptp(rt) == 0:  # one score ties every layout: no ranking
+        rho = None
+    else:
+        rho = float(np.corrcoef(rb, rt)[0, 1])
+    return {
+        "rho": rho,
+        "n": len(both),
+        "layouts": [n for n, _, _ in both],
+        "agree": rho is not None and rho >= AGREEMENT_RHO,
+        "threshold": AGREEMENT_RHO,
+    }
+
+
+def goal_layouts(layouts: Sequence[Mapping[str, Any]], paper: str = "paper") -> dict[str, Any]:
+    """Which layouts meet the issue's goal against the layout named ``paper``: at most
+    :data:`GOAL_MAX_ELECTRODES` electrodes, ``bound_mm_p95`` at most :data:`GOAL_BOUND_SHARE` of
+    the paper's, and a ``better`` paired verdict on ``loc_mm_mean`` (its interval excludes zero).
+    ``met`` lists them; ``half_bound`` the layouts meeting the first two only."""
+    ref = next((e for e in layouts if e["name"] == paper), None)
+    ref_p95 = None if ref is None else ref.get("bound_mm_p95")
+    half, met = [], []
+    for e in layouts:
+        if e["name"] == paper or ref_p95 is None or e.get("bound_mm_p95") is None:
+            continue
+        if e["n_electrodes"] <= GOAL_MAX_ELECTRODES and (
+            e["bound_mm_p95"] <= GOAL_BOUND_SHARE * ref_p95
+        ):
+            half.append(e["name"])
+            verdict = e.get("vs_paper", {}).get("loc_mm_mean", {}).get("verdict")
+            if verdict == "better":
+                met.append(e["name"])
+    return {
+        "paper_bound_mm_p95": ref_p95,
+        "max_electrodes": GOAL_MAX_ELECTRODES,
+        "bound_share": GOAL_BOUND_SHARE,
+        "half_bound": half,
+        "met": met,
+    }
+
+
+__all__ = [
+    "AGREEMENT_RHO",
+    "LEVEL",
+    "METRICS",
+    "aggregate",
+    "compare_with",
+    "goal_layouts",
+    "paired_comparison",
+    "rank_agreement",
+    "t_interval",
+]

@@ -41,7 +41,7 @@ from ectskin.design.information import (
 )
 from ectskin.design.report import write_report
 from ectskin.design.score import ScoreConfig, finished_score, score_layout, score_to_dict
-from ectskin.design.stats import METRICS, aggregate, compare_with
+from ectskin.design.stats import METRICS, aggregate, compare_with, goal_layouts, rank_agreement
 from ectskin.layout import SensorLayout, default_layout
 
 log = logging.getLogger(__name__)
@@ -233,6 +233,7 @@ def with_information(score: Mapping[str, Any], info: Mapping[str, Any]) -> dict[
         "ambiguity": info["ambiguity"],
         "maps": info["maps"],
         "information_seconds": info["information_seconds"],
+        "information_cpu_seconds": info.get("information_cpu_seconds"),
     }
 
 
@@ -252,7 +253,9 @@ def write_design(
     out, named, scores, config, runner, seconds, extra=None, to_entry: Callable = _entry
 ) -> dict[str, Any]:
     """Write ``design.json``: the settings, the engine and one entry per scored layout
-    (``to_entry`` of its score, with its name and folder)."""
+    (``to_entry`` of its score, with its name and folder); with both scores on 3 or more
+    layouts the ``rank_agreement`` (:func:`~ectskin.design.stats.rank_agreement`), with paired
+    comparisons the ``goal`` (:func:`~ectskin.design.stats.goal_layouts`)."""
     entries = []
     for name, _ in named:
         if name in scores:
@@ -270,5 +273,10 @@ def write_design(
         "layouts": entries,
         **(extra or {}),
     }
+    agreement = rank_agreement(entries)
+    if agreement is not None:
+        design["rank_agreement"] = agreement
+    if any("vs_paper" in e for e in entries):
+        design["goal"] = goal_layouts(entries)
     write_json_atomic(Path(out) / DESIGN_FILE, design)
     return design

@@ -466,8 +466,12 @@ def skin_grid(layout: SensorLayout, face: str, spacing_mm: float) -> tuple[np.nd
 def _stats(x: np.ndarray) -> dict[str, float]:
     """mean (inf if any point is unresolved), median and 95th percentile."""
     big = 1e300
-    q = np.percentile(np.where(np.isfinite(x), x, big), [50, 95])
-    q = np.where(q >= big, np.inf, q)
+    finite = np.isfinite(x)
+    q = np.percentile(np.where(finite, x, big), [50, 95])
+    # a quantile between the largest finite bound and an unresolved point is unresolved too (the
+    # interpolation would give a huge finite number: 8.5e299 mm was seen)
+    top = x[finite].max() if finite.any() else -np.inf
+    q = np.where(q > top, np.inf, q)
     return {"mean": float(np.mean(x)), "median": float(q[0]), "p95": float(q[1])}
 
 
