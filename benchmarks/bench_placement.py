@@ -46,6 +46,7 @@ def main() -> None:
     ap.add_argument("--grid", choices=sorted(FIELD_GRIDS), default="quick")
     ap.add_argument("--rows", type=int, default=3, help="grid rows (u) timed of each kind")
     ap.add_argument("--build", action="store_true", help="also build the whole field cold")
+    ap.add_argument("--out", default=None, help="write results as JSON here")
     args = ap.parse_args()
     state = tuple(float(x) for x in args.state.split(","))
     spec = contact_field_spec(default_layout(), state, FIELD_GRIDS[args.grid])
@@ -89,7 +90,11 @@ def main() -> None:
             "eight_states_two_workers_s": round(8 * cpu / 2, 1),
         }
     out["load_after"] = os.getloadavg()[0]
-    print(json.dumps(out))
+    text = json.dumps(out)
+    print(text)
+    if args.out:
+        with open(args.out, "w", encoding="utf-8") as f:
+            f.write(text + "\n")
 
 
 if __name__ == "__main__":
