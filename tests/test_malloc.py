@@ -1,11 +1,16 @@
-"""``ectskin._malloc``: with glibc's thresholds raised, a large array freed and allocated again
-comes from the heap instead of a fresh mmap that the kernel zero-fills page by page. Measured by
-the page faults (``ru_minflt``) of 30 allocate-fill-free cycles of a 40 MB array in a fresh
-process, with and without :func:`keep_freed_memory`. Catches a wrong ``mallopt`` option number or
-a threshold below the array's size (then every cycle faults its pages in again)."""
+"""``ectskin._malloc``: with glibc's thresholds raised, a large array comes from the heap (and is
+reused from it when freed) instead of a fresh ``mmap`` that the kernel zero-fills page by page.
+
+Read from glibc's own accounting (``mallinfo2``: ``hblkhd``, the bytes held in mmapped blocks)
+while a 40 MB array is alive, in a fresh process, without and with :func:`keep_freed_memory`
+(and with :data:`MALLOC_ENV`, the Dask workers' form). 40 MB is above glibc's largest dynamic
+mmap threshold (32 MiB), so by default it is always mapped. Catches a wrong ``mallopt`` option
+number or a threshold below the array's size. (Page-fault counts were tried first: the kernel's
+huge pages made them vary tenfold between runs.)"""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -13,37 +18,35 @@ import pytest
 
 from ectskin._malloc import MALLOC_ENV, keep_freed_memory
 
-CYCLES = """
-import resource, sys
+MAPPED = """
+import ctypes, sys
 import numpy as np
 from ectskin._malloc import keep_freed_memory
+
+class Mallinfo2(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in (
+        "arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks",
+        "fordblks", "keepcost")]
+
+mallinfo2 = ctypes.CDLL("libc.so.6").mallinfo2
+mallinfo2.restype = Mallinfo2
 if sys.argv[1] == "keep":
     assert keep_freed_memory()
-np.ones(5_000_000).sum()  # the first one faults in either way
-before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-for _ in range(30):
-    a = np.ones(5_000_000)  # 40 MB: above glibc's largest dynamic mmap threshold (32 MiB)
-    del a
-print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+a = np.ones(5_000_000)  # 40 MB
+print(mallinfo2().hblkhd)
 """
 
 
-def _faults(mode: str, env: dict[str, str] | None = None) -> int:
-    out = subprocess.run([sys.executable, "-c", CYCLES, mode], capture_output=True, text=True,
+def _mapped_bytes(mode: str, env: dict[str, str] | None = None) -> int:
+    out = subprocess.run([sys.executable, "-c", MAPPED, mode], capture_output=True, text=True,
                          check=True, env=env)
     return int(out.stdout.strip())
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
-def test_freed_arrays_are_reused_not_faulted_in_again():
-    import os
-
-    default = _faults("default")
-    kept = _faults("keep")
-    # glibc's default maps every cycle's array anew and faults it in (17 040 faults measured:
-    # fewer than its 9 766 pages per cycle where the kernel backs it with huge pages)
-    assert default > 30 * 100
-    assert kept < 100  # reused from the heap: no new page after the first array (0 measured)
-    # the environment form (what the Dask workers get) does the same
-    assert _faults("default", {**os.environ, **MALLOC_ENV}) < 100
+def test_a_large_array_comes_from_the_heap_not_a_fresh_mmap():
+    size = 5_000_000 * 8
+    assert _mapped_bytes("default") >= size  # glibc's default: mapped anew
+    assert _mapped_bytes("keep") < size  # from the heap, reused when freed
+    assert _mapped_bytes("default", {**os.environ, **MALLOC_ENV}) < size
     assert keep_freed_memory() is True

@@ -457,7 +457,8 @@ def finetune_config(task: str, config: VariabilityConfig) -> TrainConfig:
     """The :class:`TrainConfig` of the study's fine-tunes (recovery c): the task's profile with
     ``finetune_epochs`` epochs of Adam at a constant ``finetune_lr`` (``step_size`` = the epochs)
     in batches of :data:`FINETUNE_BATCH`, every sample once per epoch, no augmentation (no
-    inflation shift, mixup or label smoothing), the epoch of the lowest validation loss kept."""
+    inflation shift, gain per pair, mixup or label smoothing), the epoch of the lowest
+    validation loss kept."""
     epochs = config.finetune_epochs
     return TrainConfig(
         profile=_profile(task, config),
@@ -470,6 +471,7 @@ def finetune_config(task: str, config: VariabilityConfig) -> TrainConfig:
             "samples_per_epoch": None,
             "val_samples": None,
             "inflation_shift": False,
+            "channel_gain": 0.0,
             "mixup_alpha": 0.0,
             "label_smoothing": 0.0,
             "select": "val_loss",
