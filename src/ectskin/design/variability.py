@@ -114,8 +114,7 @@ DEFAULT_PROTOCOL = Protocol(
     levels_ml=(0.0, 20.0),
     touch_trials=6,
     duration_s=4.0,
-    touch_placement="uniform",
-    touch_dwells=1,  # one point per trial, as when this study was made
+    touch_placement="uniform", touch_dwells=1,  # one point per trial, as when it was made
     force_nodes=3,
     seed=0,
 )
@@ -456,9 +455,8 @@ def _finetuned_score(
 def finetune_config(task: str, config: VariabilityConfig) -> TrainConfig:
     """The :class:`TrainConfig` of the study's fine-tunes (recovery c): the task's profile with
     ``finetune_epochs`` epochs of Adam at a constant ``finetune_lr`` (``step_size`` = the epochs)
-    in batches of :data:`FINETUNE_BATCH`, every sample once per epoch, no augmentation (no
-    inflation shift, gain per pair, mixup or label smoothing), the epoch of the lowest
-    validation loss kept."""
+    in batches of :data:`FINETUNE_BATCH`, every sample once per epoch, no augmentation (none of
+    the profile's), the epoch of the lowest validation loss kept."""
     epochs = config.finetune_epochs
     return TrainConfig(
         profile=_profile(task, config),

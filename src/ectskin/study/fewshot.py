@@ -273,29 +273,14 @@ def few_shot_curve(
         base["force_mae_n"] or math.nan,
         base["count_accuracy"] or math.nan,
     )
-    values: dict[str, dict[str, list[dict[str, Any]]]] = {
-        str(n): {m: [] for m in config.methods} for n in config.frames
-    }
-    seconds: dict[str, float] = dict.fromkeys(config.methods, 0.0)
-    for d, sets in enumerate(draws):
-        for n in config.frames:
-            sample = pool.take(sets[n])
-            for method in config.methods:
-                if n == 0:
-                    if method == "finetune":
-                        values["0"][method].append(base)
-                    continue
-                t1 = time.perf_counter()
-                pred = _fit_predict(method, run, sample, test, config, seed=config.seed + d)
-                seconds[method] += time.perf_counter() - t1
-                values[str(n)][method].append(_scores(test, pred))
-                log.info(
-                    "few-shot draw %d, N = %d, %s: %.2f mm",
-                    d,
-                    n,
-                    method,
-                    values[str(n)][method][-1]["loc_mm_mean"] or math.nan,
-                )
+    values, seconds = curve_values(
+        draws, config, pool, base,
+        lambda method, sample, d: _fit_predict(method, run, sample, test, config,
+                                               seed=config.seed + d),
+        lambda pred: _scores(test, pred),
+        lambda d, n, method, v: log.info("few-shot draw %d, N = %d, %s: %.2f mm", d, n, method,
+                                         v["loc_mm_mean"] or math.nan),
+    )
     doc = {
         "format": FORMAT,
         "version": VERSION,
@@ -325,6 +310,32 @@ def few_shot_curve(
         write_outputs(out, doc)
     return doc
 
+
+
+def curve_values(draws, config, pool, base, fit_predict, score, report):
+    """The curve's scores ({str(N): {method: [scores per draw]}}) and each method's fitting
+    seconds: for every draw and N, each method fitted on the draw's N frames
+    (``fit_predict(method, sample, draw)``) and scored (``score(pred)``); at N = 0 the source
+    run's own ``base`` scores for "finetune" (nothing to fit). ``report(draw, N, method,
+    scores)`` logs each. Shared by the contact and touch studies."""
+    values: dict[str, dict[str, list[dict[str, Any]]]] = {
+        str(n): {m: [] for m in config.methods} for n in config.frames
+    }
+    seconds: dict[str, float] = dict.fromkeys(config.methods, 0.0)
+    for d, sets in enumerate(draws):
+        for n in config.frames:
+            sample = pool.take(sets[n])
+            for method in config.methods:
+                if n == 0:
+                    if method == "finetune":
+                        values["0"][method].append(base)
+                    continue
+                t1 = time.perf_counter()
+                pred = fit_predict(method, sample, d)
+                seconds[method] += time.perf_counter() - t1
+                values[str(n)][method].append(score(pred))
+                report(d, n, method, values[str(n)][method][-1])
+    return values, seconds
 
 def write_outputs(out: str | Path, doc: dict[str, Any]) -> dict[str, Path]:
     """``few_shot.json`` and ``few_shot.png`` of ``doc`` into ``out`` (atomically)."""

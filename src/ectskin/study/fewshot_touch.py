@@ -57,6 +57,7 @@ from ectskin.study.fewshot import (
     VERSION,
     FewShotConfig,
     common_arguments,
+    curve_values,
     draw_frames,
     draw_records,
     draw_stats,
@@ -145,29 +146,14 @@ def few_shot_touch_curve(
         base["accuracy"],
         base["touch_accuracy"] if base["touch_accuracy"] is not None else math.nan,
     )
-    values: dict[str, dict[str, list[dict[str, Any]]]] = {
-        str(n): {m: [] for m in config.methods} for n in config.frames
-    }
-    seconds: dict[str, float] = dict.fromkeys(config.methods, 0.0)
-    for d, sets in enumerate(draws):
-        for n in config.frames:
-            sample = pool.take(sets[n])
-            for method in config.methods:
-                if n == 0:
-                    if method == "finetune":
-                        values["0"][method].append(base)
-                    continue
-                t1 = time.perf_counter()
-                pred = _fit_predict(method, run, sample, test, config, seed=config.seed + d)
-                seconds[method] += time.perf_counter() - t1
-                values[str(n)][method].append(scores(test, pred))
-                log.info(
-                    "few-shot-touch draw %d, N = %d, %s: accuracy %.4f",
-                    d,
-                    n,
-                    method,
-                    values[str(n)][method][-1]["accuracy"],
-                )
+    values, seconds = curve_values(
+        draws, config, pool, base,
+        lambda method, sample, d: _fit_predict(method, run, sample, test, config,
+                                               seed=config.seed + d),
+        lambda pred: scores(test, pred),
+        lambda d, n, method, v: log.info("few-shot-touch draw %d, N = %d, %s: accuracy %.4f",
+                                         d, n, method, v["accuracy"]),
+    )
     doc = {
         "format": FORMAT,
         "version": VERSION,
