@@ -54,10 +54,14 @@ def test_the_reading_in_words_follows_the_protocol():
 
 
 def test_the_paragraph_sets_the_run_beside_the_ablation():
-    metrics = {"touch": {"accuracy": 0.9304}, "protocol": Protocol().to_dict()}
+    metrics = {"touch": {"accuracy": 0.9304, "baselines": {"logreg": {"accuracy": 0.9503},
+                                                           "knn": {"accuracy": 0.5989}}},
+               "protocol": Protocol().to_dict()}
     text = reading_paragraph(metrics, ABLATION)
     assert text is not None
     assert "93.04 % on this run's test trials, against the paper's 99.88 %" in text
+    # the strongest baseline of the same test trials beside it (logreg, not k-NN)
+    assert "strongest baseline on the same test trials, 'logistic regression', gets 95.03 %" in text
     assert "8 points per trial, the finger sliding" in text
     # means by hand: one_point (80 + 90) / 2, sliding (85 + 92) / 2, hand_off (83 + 89) / 2
     assert "`one_point` 85.00 % (2 seeds)" in text

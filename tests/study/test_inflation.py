@@ -139,3 +139,18 @@ def test_config_refusals():
         UnseenInflationConfig(test_levels_ml=(0.0, 10.0))
     with pytest.raises(EctskinError, match="'profile'"):
         UnseenInflationConfig(profiles=("fast",))
+
+
+def test_a_simulated_recording_of_another_protocol_is_not_replaced_without_overwrite(tmp_path):
+    """OUT/data/<name>.h5 holding another protocol (here: a recording with the protocol of
+    seed 5) is refused with the differing fields named, before any simulation; it was
+    re-simulated in place silently before."""
+    path = tmp_path / "data" / "train_s0.h5"
+    path.parent.mkdir()
+    rec = _recording((0.0, 10.0, 20.0), seed=0)
+    rec.meta["protocol"] = Protocol(seed=5).to_dict()
+    write_recording(rec, path)
+    before = path.read_bytes()
+    with pytest.raises(EctskinError, match=r"train_s0\.h5: protocol: .*\['seed'\].*--overwrite"):
+        inflation._simulated(path, Protocol(seed=0), None, UnseenInflationConfig(seeds=(0,)))
+    assert path.read_bytes() == before

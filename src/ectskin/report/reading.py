@@ -17,7 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from ectskin._check import EctskinError
-from ectskin.report.wording import lookup, pct
+from ectskin.report.tables import strongest_baseline
+from ectskin.report.wording import baseline_name, lookup, pct
 
 #: the ablation summary's format (ectskin.study.reading_table.SUMMARY_FORMAT)
 SUMMARY_FORMAT = "ectskin.study.reading.summary"
@@ -117,8 +118,13 @@ def reading_paragraph(
     paper = 1.0 - 34 / 28800
     text = (
         f"Touch with the paper's recipe (the TouchMLP, trained as the paper trains it): "
-        f"{pct(acc)} on this run's test trials, against the paper's {pct(paper)}."
+        f"{pct(acc)} on this run's test trials, against the paper's {pct(paper)}"
     )
+    best = strongest_baseline(metrics, "touch")
+    if best is not None:
+        text += (f"; the strongest baseline on the same test trials, '{baseline_name(best[0])}', "
+                 f"gets {pct(best[1])}")
+    text += "."
     protocol = lookup(metrics, "protocol")
     if not isinstance(protocol, Mapping):
         return text

@@ -72,7 +72,8 @@ class UnseenInflationConfig:
     recording paths with ``{seed}`` for the seed (None: simulated into ``OUT/data``);
     ``epochs``, ``counts``: overrides of the profiles' epochs and of the trial split (default
     the task's); ``own_split``: also evaluate each run on its own test split of the training
-    recording (seen levels); ``workers``: simulation processes."""
+    recording (seen levels); ``workers``: simulation processes; ``overwrite``: replace a
+    simulated recording in ``OUT/data`` that holds another protocol (else refused)."""
 
     seeds: tuple[int, ...] = (0, 1, 2)
     train_levels_ml: tuple[float, ...] = (0.0, 10.0, 20.0)
@@ -88,6 +89,7 @@ class UnseenInflationConfig:
     workers: int | None = None
     progress: bool = False
     test_stream: int = TEST_STREAM
+    overwrite: bool = False  # a simulated recording of OUT/data of another protocol is replaced
 
     def __post_init__(self) -> None:
         if not self.seeds or not self.profiles or not self.references:
@@ -123,7 +125,8 @@ def unseen_protocol(train_protocol: Any, levels_ml: tuple[float, ...], stream: i
 
 def _simulated(path: Path, protocol: Any, like: Any, config: UnseenInflationConfig) -> Path:
     """``path`` holding the simulation of ``protocol`` (on the layout and body of the recording
-    ``like``, else the paper's): reused when it exists with the same protocol."""
+    ``like``, else the paper's): reused when it exists with the same protocol; one of another
+    protocol is replaced only with ``config.overwrite``."""
     from ectskin._files import to_jsonable
     from ectskin.io import read_recording, write_recording
     from ectskin.twin.mechanics import recording_manipulator
@@ -131,10 +134,17 @@ def _simulated(path: Path, protocol: Any, like: Any, config: UnseenInflationConf
 
     want = to_jsonable(protocol.to_dict())
     if path.exists():
-        if to_jsonable(read_recording(path).meta.get("protocol")) == want:
+        found = to_jsonable(read_recording(path).meta.get("protocol")) or {}
+        if found == want:
             log.info("reusing %s (same protocol)", path)
             return path
-        log.info("%s holds another protocol: simulating it again", path)
+        if not config.overwrite:
+            differ = sorted(k for k in want if found.get(k) != want[k])
+            raise EctskinError(
+                f"{path}: protocol: expected the study's, found another (differs in {differ}); "
+                "pass --overwrite to simulate it again in its place, or use another --out"
+            )
+        log.info("%s holds another protocol: simulating it again (--overwrite)", path)
     kw: dict[str, Any] = {}
     if like is not None:
         kw["layout"] = like.layout
@@ -456,6 +466,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--workers", type=int, default=None, help="simulation processes")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace a simulated recording in OUT/data of another protocol")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -474,6 +486,7 @@ def run(args: argparse.Namespace) -> int:
         own_split=not args.no_own_split,
         workers=args.workers,
         progress=not args.no_progress,
+        overwrite=args.overwrite,
     )
     doc = unseen_inflation(args.out, config)
     for line in summary_lines(doc):
