@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import itertools
 import json
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -154,3 +156,44 @@ def test_a_simulated_recording_of_another_protocol_is_not_replaced_without_overw
     with pytest.raises(EctskinError, match=r"train_s0\.h5: protocol: .*\['seed'\].*--overwrite"):
         inflation._simulated(path, Protocol(seed=0), None, UnseenInflationConfig(seeds=(0,)))
     assert path.read_bytes() == before
+
+
+def test_robust_runs_also_train_on_the_coverage_trials_of_the_training_protocol(
+    tmp_path, monkeypatch
+):
+    """A training recording that names its twin protocol: the robust run's training split is
+    joined by the coverage trials of that protocol (its levels only, so the test levels stay
+    unseen); the paper's recipe and coverage=False train without them."""
+    from ectskin.io import read_recording
+    from ectskin.twin.coverage import coverage_protocol
+
+    base = Protocol(seed=0, touch_trials=2)
+    rec = _recording((0.0, 10.0, 20.0), seed=0)
+    rec = Recording(rec.layout, rec.trials, 30.0, meta={"protocol": base.to_dict()})
+    train, test = tmp_path / "train_0.h5", tmp_path / "test_0.h5"
+    write_recording(rec, train)
+    write_recording(_recording((0.0, 5.0, 15.0), seed=1), test)
+    asked = []
+
+    def fake_simulated(path, protocol, like, config):  # the twin's coverage trials, stood in for
+        asked.append(protocol)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_recording(_recording((0.0, 10.0, 20.0), seed=2), path)
+        return path
+
+    monkeypatch.setattr(inflation, "_simulated", fake_simulated)
+    config = UnseenInflationConfig(
+        seeds=(0,), profiles=("quick", "robust"), references=("state-offset",),
+        train_data=str(tmp_path / "train_{seed}.h5"), test_data=str(tmp_path / "test_{seed}.h5"),
+        epochs=1, counts=(45, 18, 18), baselines=False, own_split=False,
+    )
+    doc = unseen_inflation(tmp_path / "study", config)
+    assert asked == [coverage_protocol(base, LAYOUT)]
+    cover = doc["data"]["0"]["coverage"]
+    quick, robust = doc["results"]
+    assert quick["extra_train"] == [] and robust["extra_train"] == [cover]
+    split = json.loads((tmp_path / "study" / robust["run"] / "split.json").read_text())
+    assert [e["file"] for e in split["extra_train"]] == [str(Path(cover).resolve())]
+    assert len(split["extra_train"][0]["trial_digests"]) == read_recording(cover).n_trials
+    off = unseen_inflation(tmp_path / "off", replace(config, coverage=False))
+    assert "coverage" not in off["data"]["0"] and off["results"][1]["extra_train"] == []

@@ -97,6 +97,12 @@ def add_common_arguments(p: argparse.ArgumentParser, *, default_profile: str) ->
         action="store_true",
         help="skip the TouchMLP trained with the robust recipe (runs/touch_robust)",
     )
+    p.add_argument(
+        "--no-coverage",
+        action="store_true",
+        help="train the robust recipe without the twin's coverage trials (every region in every "
+        "inflation state, coverage.h5; ectskin.twin.coverage)",
+    )
     p.add_argument("--no-baselines", action="store_true", help="skip the baselines")
     p.add_argument("--device", default=None, help="training device (default: CUDA if available)")
     p.add_argument(
@@ -142,6 +148,7 @@ def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
         epochs=args.epochs,
         ablations=not args.no_ablations,
         robust=not args.no_robust,
+        coverage=not args.no_coverage,
         touch_model=args.touch_model,
         contact=not args.no_contact,
         baselines=not args.no_baselines,

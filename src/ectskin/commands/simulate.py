@@ -29,6 +29,7 @@ EXAMPLES = """\
   ectskin simulate -o quick.h5 --levels 0,20 --touch-trials 2 --duration 5
   ectskin simulate -o twin.h5 --overwrite --workers 2  # replace an earlier twin.h5
   ectskin simulate -o two.h5 --second-finger 0.3       # 30 % of touch trials: two fingers
+  ectskin simulate -o cover.h5 --coverage              # every region in every state, 3 s each
   ectskin simulate -o c.h5 --placement uniform --dwells 3 --lifts --hover  # contact training data
   ectskin simulate -o dense.h5 --response field --placement uniform --dwells 60 --slide 0.17
 """
@@ -126,6 +127,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="FRACTION",
         help="fraction of touch trials in which a second finger also presses (default 0)",
     )
+    p.add_argument(
+        "--coverage",
+        action="store_true",
+        help="simulate the coverage trials of the experiment the other options describe instead "
+        "of the experiment: every touch region once in every inflation state, one point held "
+        "for 3 s, random streams of their own (training data for ectskin train --extra-train; "
+        "ectskin.twin.coverage)",
+    )
     p.add_argument("--layout", help="layout JSON file (default: the paper's layout)")
     add_seed(p, help="seed of every random draw of the experiment (default 0)")
     p.add_argument(
@@ -161,6 +170,10 @@ def run(args: argparse.Namespace) -> int:
         readout=ReadoutConfig(gain_snr_db=args.snr_db),
     )
     layout = load_layout(args.layout) if args.layout else default_layout()
+    if args.coverage:
+        from ectskin.twin.coverage import coverage_protocol
+
+        protocol = coverage_protocol(protocol, layout)
     try:
         check_recording_size(protocol, layout)
     except EctskinError as exc:

@@ -105,6 +105,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "(ectskin.learn.finetune)",
     )
     p.add_argument(
+        "--extra-train",
+        metavar="FILE",
+        nargs="+",
+        default=(),
+        help="recordings whose trials join the training split only (validation and test stay "
+        "DATA's), each calibrated against its own rest readouts: e.g. the twin's coverage trials "
+        "(ectskin simulate OUT --coverage; ectskin.learn.extra_train)",
+    )
+    p.add_argument(
         "--batch-size", type=integer(1), default=None, help="override the profile's batch size"
     )
     p.add_argument(
@@ -155,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
         model=args.model,
         init_from=args.init_from,
         reference=args.reference,
+        extra_train=tuple(args.extra_train),
     )
     summary = train_from_recording(args.task, args.data, out, config)
     if int(os.environ.get("RANK", "0")) != 0:

@@ -12,12 +12,11 @@ The stages, each a short function:
    curves;
 4. ``metrics.json``, written atomically.
 
-A touch run trained with a model choice (``--model auto`` or a classical model, see
-:mod:`ectskin.learn.candidates`) is evaluated with the model its ``candidates.json`` selects (the
-main metrics, with ``selected_model``); ``candidates`` adds every candidate's test accuracy beside
-its validation accuracy: the MLP from ``model.pt``, the selected classical model from
-``model.skops``, the other classical candidates refit on the train split of the evaluated data
-with their recorded settings and seed (the same models training fit on the same data).
+A touch run trained with a model choice (``--model auto`` or a classical model,
+:mod:`ectskin.learn.candidates`) is evaluated with the model its ``candidates.json`` selects
+(``selected_model``); ``candidates`` adds each candidate's test accuracy beside its validation
+accuracy: the MLP (``model.pt``), the selected classical model (``model.skops``), the others refit
+on the train split with their recorded settings and seed (as training fit them).
 
 Which trials are test data (``test_trials``, ``--test-trials``; :func:`choose_test_trials`): by
 default ("auto") every trial of the recording except those the run was trained or validated on,
@@ -74,6 +73,7 @@ from ectskin.learn.channels import measured_channels
 from ectskin.learn.checkpoint import check_channels, check_layout, load_checkpoint
 from ectskin.learn.data import SampleData
 from ectskin.learn.data.touch import stored_touch_reference
+from ectskin.learn.extra_train import with_extra
 from ectskin.learn.runfiles import (
     check_outputs,
     check_run_dir,
@@ -110,8 +110,7 @@ __all__ = [
     "read_run",
 ]
 
-#: The stem of the learning-curves figure ``evaluate_run`` writes beside the task's figures
-#: (not with an evaluation on other data in the run folder: the curves belong to the run).
+#: The learning-curves figure's stem (not written for other data: the curves are the run's).
 CURVES_FIGURE = "learning_curves"
 #: checkpoint ``extra`` fields copied into the metrics' ``training``
 EXTRA_TRAINING_FIELDS = ("device", "profile", "seed", "world_size")
@@ -149,8 +148,7 @@ def read_run(run_dir: str | Path) -> Run:
     """Read a run directory of ``ectskin train``: the model, its task and the run's files.
 
     Raises EctskinError naming the file for a missing folder or model, a malformed
-    ``split.json``, ``config.json`` or ``metrics.csv``, or files of another task.
-    """
+    ``split.json``, ``config.json`` or ``metrics.csv``, or files of another task."""
     run = Path(run_dir)
     check_run_dir(run)
     candidates = read_candidates(run)
@@ -283,10 +281,9 @@ def evaluate_run(
     baselines : bool
         Also fit the task's baselines (:mod:`ectskin.learn.baselines`) on the run's training
         trials and score them on the same test frames (touch: majority, logistic regression,
-        random forest, k-NN; tracking: markers do not move, mean pose, ridge regression). The
-        training trials come from ``data`` when it holds them, else from the training recording
-        named in ``split.json``; without either the baselines are skipped
-        (``baselines_skipped`` says why).
+        random forest, k-NN; tracking: markers do not move, mean pose, ridge regression) on the
+        run's training trials (from ``data``, else the training recording that ``split.json``
+        names, with its extra training trials; else skipped, ``baselines_skipped`` says why).
     figures : bool
         Write the task's figures (Fig. 7 for touch, Fig. 9 and Fig. 10 for tracking) and, on the
         run's own data, the learning curves.
@@ -503,7 +500,10 @@ def _test_case(
     else:
         pred = task.predict(run.model, test)
     case = EvalCase(data=ds, test=test, pred=pred, recording=rec, config=run.config)
-    return case, chosen, _training_trials(run, rec, ds, chosen)
+    train = _training_trials(run, rec, ds, chosen)  # with the run's extra training trials:
+    data, note = with_extra(train.data, train.note, run.split, task, reference=calib.value,
+                            options=task.dataset_options(run.config))
+    return case, chosen, _Train(data, note)
 
 
 def _training_trials(run: Run, rec: Recording, ds: SampleData, chosen: EvaluatedTrials) -> _Train:

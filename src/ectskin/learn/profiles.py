@@ -228,6 +228,9 @@ class TrainConfig:
         (:func:`ectskin.io.calibration.touch_reference`: "auto", "rest", "meta", "state",
         "inflation"); None: the profile's (:data:`PROFILE_REFERENCE`). Read by
         ``train_from_recording`` only; the run stores it and evaluation re-applies it.
+    extra_train : recordings whose trials join the training split only, each calibrated against
+        its own rest readouts with the run's reference (:mod:`ectskin.learn.extra_train`; e.g. the
+        twin's coverage trials, :mod:`ectskin.twin.coverage`); ``train_from_recording`` only.
     """
 
     profile: str = "paper"
@@ -247,6 +250,7 @@ class TrainConfig:
     settings: dict[str, Any] | None = None
     init_from: str | None = None
     reference: str | None = None
+    extra_train: tuple[str, ...] = ()
 
     def reference_for(self, task: str) -> str:
         """The Eq. 2 reference of ``task``'s data set: :attr:`reference`, else the profile's
@@ -348,6 +352,8 @@ def describe_recipe(recipe: Mapping[str, Any] | None, metric: str = "accuracy") 
     smoothing = float(recipe.get("label_smoothing") or 0)
     if smoothing > 0:
         parts.append(f"label smoothing {smoothing:g}")
+    for extra in recipe.get("extra_train") or []:
+        parts.append(f"{int(extra['trials'])} extra training trials of {extra['file']}")
     if recipe.get("select") == "val_metric":
         parts.append(f"weights of the best validation {metric}")
     elif parts:

@@ -62,6 +62,7 @@ from ectskin.learn.engine import (
     train_one_epoch,
     val_indices,
 )
+from ectskin.learn.extra_train import extra_training_data, join_training
 from ectskin.learn.profiles import RECIPE_FIELDS, TrainConfig, TrainSettings
 from ectskin.learn.runfiles import (
     RunState,
@@ -139,6 +140,12 @@ def train_from_recording(
         "split_seed": split_seed,
         **data_identity(rec),
     }
+    if config.extra_train:  # trials for the training split alone (ectskin.learn.extra_train)
+        options = {"window": config.window, "prior": config.prior}
+        extras, split["extra_train"] = extra_training_data(
+            t, config.extra_train, reference=config.reference_for(task), options=options
+        )
+        parts["train"] = join_training(parts["train"], extras, config.extra_train)
     if getattr(data, "reference", None):  # touch: the Eq. 2 reference, re-applied by evaluate
         split["touch_reference"] = data.reference
     summary = train(task, parts["train"], parts["val"], out, config, split=split)
@@ -290,6 +297,11 @@ def _train(job: _Job, train_data: SampleData, val_data: SampleData) -> dict[str,
     recipe["inflation_shift_states"] = criterion.shift_states
     if getattr(train_data, "reference", None):  # touch: which Eq. 2 reference calibrated it
         recipe["reference"] = train_data.reference.get("mode")
+    extra = (job.split or {}).get("extra_train") or []
+    if extra:  # trials that joined the training split only (ectskin.learn.extra_train)
+        recipe["extra_train"] = [
+            {"file": Path(x["file"]).name, "trials": len(x["trial_digests"])} for x in extra
+        ]
     rank_batch = math.ceil(s.batch_size / d.world_size)
     if d.main:
         _write_header(job, m, recipe, rank_batch, train_data, val_data)

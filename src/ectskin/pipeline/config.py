@@ -35,9 +35,11 @@ from typing import Any
 
 from ectskin._check import EctskinError, check_option, check_type
 from ectskin.io import Recording
+from ectskin.layout import default_layout
 from ectskin.learn.candidates import TOUCH_MODELS
 from ectskin.learn.threads import resolve_threads
 from ectskin.twin import Protocol
+from ectskin.twin.coverage import coverage_protocol
 from ectskin.twin.field_spec import FIELD_GRIDS
 from ectskin.viz import DEFAULT_DPI, check_figure_options
 
@@ -110,6 +112,10 @@ class ReproduceConfig:
         Include the two tracking ablations, the baselines, the twin's characterisation.
     robust : bool
         Also train and evaluate the TouchMLP with the ``robust`` profile.
+    coverage : bool
+        The ``robust`` run also trains on the twin's coverage trials (every touch region in
+        every inflation state of the simulated protocol, :mod:`ectskin.twin.coverage`; training
+        split only); ignored with a given recording.
     touch_model : str
         The model of the ``touch`` run: ``mlp`` (the paper's TouchMLP) or a choice of
         :mod:`ectskin.learn.candidates` (``auto``: every candidate, selected on the validation
@@ -159,6 +165,7 @@ class ReproduceConfig:
     baselines: bool = True
     characterize: bool = True
     robust: bool = True
+    coverage: bool = True
     contact: bool = True
     touch_model: str = "mlp"
     device: str | None = None
@@ -246,6 +253,15 @@ class ReproduceConfig:
             response="field",
             **common,
         )
+
+    def coverage_protocol(self) -> Protocol | None:
+        """The coverage trials of the simulated protocol (:func:`ectskin.twin.coverage.
+        coverage_protocol` on the paper's layout) that the ``robust`` run adds to its training
+        split; None without a ``robust`` run or ``coverage``, or with a given recording."""
+        base = self.simulation_protocol()
+        if base is None or not (self.robust and self.coverage):
+            return None
+        return coverage_protocol(base, default_layout())
 
     def simulation_protocol(self) -> Protocol | None:
         """The protocol to simulate: ``protocol``, else the paper's with ``seed``; None when a

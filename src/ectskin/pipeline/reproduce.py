@@ -3,6 +3,8 @@
 :func:`reproduce` is what ``ectskin reproduce OUT_DIR`` and ``ectskin demo`` run. It writes::
 
     data.h5                       the simulated experiment (paper §3 protocol)
+    coverage.h5                   the twin's coverage trials (every region in every state) that
+                                  the robust run adds to its training split (ectskin.twin.coverage)
     contact.h5                    the contact experiment (ours, see ectskin.pipeline.config)
     characterize/                 Fig. 3, Fig. 4 and characterize.json of the twin
     runs/<run>/                   one training per run of :data:`ectskin.pipeline.config.RUNS`
@@ -24,7 +26,8 @@ Profiles: ``quick`` trains with the ``quick`` settings of :mod:`ectskin.learn.tr
 ablations for :data:`~ectskin.pipeline.config.QUICK_ABLATION_EPOCHS` epochs), ``paper`` with the
 paper's (meant for a GPU). Both simulate the paper's protocol (189 trials of 30 s) unless a
 protocol is given, and both also train the TouchMLP with the ``robust`` profile on the same split
-(``touch.robust`` in metrics.json).
+(``touch.robust`` in metrics.json), its training split joined by the twin's coverage trials of the
+simulated protocol (``coverage``; validation and test stay the experiment's trials).
 """
 
 from __future__ import annotations
@@ -53,7 +56,13 @@ from ectskin.pipeline.field import contact_fields
 from ectskin.pipeline.inversion import inversion_step
 from ectskin.pipeline.metrics import combine_metrics, copy_figures, handling_block
 from ectskin.pipeline.runner import StepRunner
-from ectskin.pipeline.steps import characterise, evaluate_runs, simulate_or_load, train_runs
+from ectskin.pipeline.steps import (
+    characterise,
+    coverage_data,
+    evaluate_runs,
+    simulate_or_load,
+    train_runs,
+)
 from ectskin.report import write_report
 from ectskin.viz import figure_file
 
@@ -104,6 +113,7 @@ def _run(config: ReproduceConfig, threads: int) -> dict[str, Any]:
     data_path, data_settings = simulate_or_load(runner, config)
     if config.characterize and config.recording is None:
         characterise(runner, config)
+    coverage_data(runner, config)
     train_runs(runner, config, data_path, data_settings, threads)
     results = evaluate_runs(runner, config, data_path, data_settings)
     contact = ect = off = found = bound = inversion = None

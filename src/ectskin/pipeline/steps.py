@@ -4,6 +4,8 @@ Each function runs one kind of step through a :class:`~ectskin.pipeline.runner.S
 the settings that decide whether an earlier result in the output folder can be reused::
 
     simulate        OUT_DIR/data.h5              twin (protocol) or the given recording
+    simulate_coverage OUT_DIR/coverage.h5        the twin's coverage trials of the protocol
+                                                 (training split of the robust run only)
     characterize    OUT_DIR/characterize/        Fig. 3, Fig. 4, characterize.json of the twin
     train_<run>     OUT_DIR/runs/<run>/          model.pt, last.pt, metrics.csv, split.json ...
     evaluate_<run>  OUT_DIR/runs/<run>/metrics.json (+ figures; baselines for touch and track)
@@ -34,6 +36,8 @@ from ectskin.twin.characterize import characterize as characterize_twin
 log = logging.getLogger(__name__)
 
 DATA_FILE = "data.h5"
+#: the twin's coverage trials (ectskin.twin.coverage), added to the robust run's training split
+COVERAGE_FILE = "coverage.h5"
 #: the runs evaluated against the baselines, each on its own calibrated inputs (the touch runs
 #: may differ in their Eq. 2 reference; the ablations are compared to ``track``)
 MAIN_RUNS = ("touch", "touch_robust", "track")
@@ -102,6 +106,33 @@ def simulate_or_load(runner: StepRunner, config: ReproduceConfig) -> tuple[Path,
     return path, settings
 
 
+def coverage_settings(config: ReproduceConfig) -> dict[str, Any] | None:
+    """The settings of step "simulate_coverage" (None when the config has no coverage trials)."""
+    protocol = config.coverage_protocol()
+    if protocol is None:
+        return None
+    return {"source": "ectskin.twin", "protocol": protocol.to_dict()}
+
+
+def coverage_data(runner: StepRunner, config: ReproduceConfig) -> Path | None:
+    """Step "simulate_coverage": ``OUT_DIR/coverage.h5``, the twin's coverage trials of the
+    simulated protocol (:meth:`ReproduceConfig.coverage_protocol`) that the robust run adds to
+    its training split; None when there are none (no robust run, ``coverage`` off, or a given
+    recording)."""
+    settings = coverage_settings(config)
+    protocol = config.coverage_protocol()
+    if settings is None or protocol is None:
+        return None
+    path = runner.out / COVERAGE_FILE
+
+    def make() -> None:
+        rec = simulate_experiment(protocol, workers=config.workers, progress=config.progress)
+        write_recording(rec, path, overwrite=True)
+
+    runner.step("simulate_coverage", settings, [path], make)
+    return path
+
+
 def characterise(runner: StepRunner, config: ReproduceConfig) -> None:
     """Step "characterize": the twin's §2.2 characterisation into ``OUT_DIR/characterize``."""
     char_dir = runner.out / "characterize"
@@ -129,6 +160,9 @@ def run_settings(
         s = profile_settings(task, profile)
         model["reference"] = TrainConfig(profile=profile).reference_for(task)
         model["recipe"] = {k: getattr(s, k) for k in RECIPE_FIELDS}
+        coverage = coverage_settings(config) if name == "touch_robust" else None
+        if coverage is not None:  # the twin's coverage trials join its training split
+            model["extra_train"] = {"coverage": digest(coverage)}
     return {
         **model,
         "data": digest(data_settings),
@@ -190,6 +224,7 @@ def train_job(
         progress=config.progress and progress,
         threads=threads,
         model=settings.get("model", "mlp"),
+        extra_train=(str(runner.out / COVERAGE_FILE),) if "extra_train" in settings else (),
     )
     log.info(
         "train %s: %s, window %d, prior %s, profile %s", name, *RUNS[name], settings["profile"]

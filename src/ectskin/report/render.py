@@ -156,6 +156,15 @@ def _sections(metrics: Mapping[str, Any], figures: list[tuple[str, Path]]) -> li
             "training trials exactly and keeps the weights of one of its first epochs (its "
             "validation loss rises from then on): the test trials are other trials."
         )
+        extra = lookup(robust, "training.recipe.extra_train") or []
+        if any(e.get("file") == "coverage.h5" for e in extra):
+            text += (
+                " Its training split also holds the twin's coverage trials (coverage.h5: every "
+                "region touched at two points in every inflation state, 3 s each, "
+                "ectskin.twin.coverage), since the experiment touches each region in about a "
+                "third of the states; validation and test are the experiment's trials, and the "
+                "baselines beside it are fitted on the same training trials."
+            )
         s.append(("p", text))
     margins = margin_text(metrics)
     if margins:

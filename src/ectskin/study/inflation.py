@@ -73,7 +73,10 @@ class UnseenInflationConfig:
     ``epochs``, ``counts``: overrides of the profiles' epochs and of the trial split (default
     the task's); ``own_split``: also evaluate each run on its own test split of the training
     recording (seen levels); ``workers``: simulation processes; ``overwrite``: replace a
-    simulated recording in ``OUT/data`` that holds another protocol (else refused)."""
+    simulated recording in ``OUT/data`` that holds another protocol (else refused);
+    ``coverage``: the ``robust`` runs also train on the twin's coverage trials of the training
+    protocol (:mod:`ectskin.twin.coverage`; the training levels only, so the test levels stay
+    unseen; ``OUT/data/coverage_s<seed>.h5``), as the demo's robust run does."""
 
     seeds: tuple[int, ...] = (0, 1, 2)
     train_levels_ml: tuple[float, ...] = (0.0, 10.0, 20.0)
@@ -90,6 +93,7 @@ class UnseenInflationConfig:
     progress: bool = False
     test_stream: int = TEST_STREAM
     overwrite: bool = False  # a simulated recording of OUT/data of another protocol is replaced
+    coverage: bool = True  # robust runs also train on the twin's coverage trials (train levels)
 
     def __post_init__(self) -> None:
         if not self.seeds or not self.profiles or not self.references:
@@ -155,9 +159,12 @@ def _simulated(path: Path, protocol: Any, like: Any, config: UnseenInflationConf
     return write_recording(rec, path, overwrite=True)
 
 
-def recordings(out: Path, seed: int, config: UnseenInflationConfig) -> tuple[Path, Path]:
+def recordings(
+    out: Path, seed: int, config: UnseenInflationConfig
+) -> tuple[Path, Path, Path | None]:
     """The training and test recordings of ``seed`` (module docstring), checked to share no
-    trial (by readouts)."""
+    trial (by readouts), and the coverage trials of the training protocol (None without
+    ``config.coverage``, a robust profile, or a training protocol to derive them from)."""
     from ectskin.io import read_recording
     from ectskin.learn.splits import trial_digests
     from ectskin.twin.protocol import Protocol
@@ -171,7 +178,8 @@ def recordings(out: Path, seed: int, config: UnseenInflationConfig) -> tuple[Pat
                 f"{train_path}: has no twin protocol (meta 'protocol') to simulate the test "
                 "levels from; give the test recording too (--test-data)"
             )
-        base = Protocol.from_dict(train_rec.meta["protocol"]) if config.test_data is None else None
+        proto = train_rec.meta.get("protocol")
+        base = Protocol.from_dict(proto) if proto is not None else None
     else:
         base = Protocol(levels_ml=tuple(config.train_levels_ml), seed=seed)
         train_path = _simulated(out / "data" / f"train_s{seed}.h5", base, None, config)
@@ -179,6 +187,7 @@ def recordings(out: Path, seed: int, config: UnseenInflationConfig) -> tuple[Pat
     if config.test_data is not None:
         test_path = Path(config.test_data.replace("{seed}", str(seed)))
     else:
+        assert base is not None  # a training recording without a protocol was refused above
         proto = unseen_protocol(base, tuple(config.test_levels_ml), config.test_stream)
         test_path = _simulated(out / "data" / f"test_s{seed}.h5", proto, train_rec, config)
     test_rec = read_recording(test_path)
@@ -188,7 +197,13 @@ def recordings(out: Path, seed: int, config: UnseenInflationConfig) -> tuple[Pat
             f"{test_path}: {len(shared)} trial(s) have the readouts of a trial of {train_path}; "
             "the test trials must be new draws (another Protocol.stream)"
         )
-    return train_path, test_path
+    cover = None
+    if config.coverage and "robust" in config.profiles and base is not None:
+        from ectskin.twin.coverage import coverage_protocol
+
+        cover_protocol = coverage_protocol(base, train_rec.layout)
+        cover = _simulated(out / "data" / f"coverage_s{seed}.h5", cover_protocol, train_rec, config)
+    return train_path, test_path, cover
 
 
 # ----------------------------------------------------------------------------- the study
@@ -247,13 +262,14 @@ def _one_run(
     seed: int,
     profile: str,
     reference: str,
-    paths: tuple[Path, Path],
+    paths: tuple[Path, Path, Path | None],
     baselines: bool,
     config: UnseenInflationConfig,
 ) -> dict[str, Any]:
     from ectskin.learn.train import TrainConfig, train_from_recording
 
-    train_path, test_path = paths
+    train_path, test_path, cover = paths
+    extra = (str(cover),) if cover is not None and profile == "robust" else ()
     run = out / "runs" / f"s{seed}" / f"{profile}_{reference}"
     tc = TrainConfig(
         profile=profile,
@@ -262,6 +278,7 @@ def _one_run(
         counts=config.counts,
         progress=config.progress,
         reference=reference,
+        extra_train=extra,
     )
     summary = train_from_recording("touch", train_path, run, tc)
     evals = out / "evals" / f"s{seed}" / f"{profile}_{reference}"
@@ -286,6 +303,7 @@ def _one_run(
         "n_test_frames": m["n_test_frames"],
         "n_misclassified": m["n_misclassified"],
         "best_epoch": summary.get("best_epoch"),
+        "extra_train": list(extra),
         "calibration": m["reference"]["text"],
         "test_trials": m["test_data"]["n_trials"],
         "per_state": per_state,
@@ -372,6 +390,8 @@ def unseen_inflation(out: str | Path, config: UnseenInflationConfig | None = Non
     for seed in config.seeds:
         paths = recordings(out, seed, config)
         data[str(seed)] = {"train": str(paths[0]), "test": str(paths[1])}
+        if paths[2] is not None:
+            data[str(seed)]["coverage"] = str(paths[2])
         for reference in config.references:
             for i, profile in enumerate(config.profiles):
                 baselines = config.baselines and i == 0
@@ -468,6 +488,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--overwrite", action="store_true",
                    help="replace a simulated recording in OUT/data of another protocol")
+    p.add_argument("--no-coverage", action="store_true",
+                   help="train the robust runs without the twin's coverage trials")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -487,6 +509,7 @@ def run(args: argparse.Namespace) -> int:
         workers=args.workers,
         progress=not args.no_progress,
         overwrite=args.overwrite,
+        coverage=not args.no_coverage,
     )
     doc = unseen_inflation(args.out, config)
     for line in summary_lines(doc):

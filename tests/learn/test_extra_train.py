@@ -1,0 +1,88 @@
+"""Trials that join a run's training split only (TrainConfig.extra_train)."""
+
+import json
+from dataclasses import replace
+
+import pytest
+
+from ectskin._check import EctskinError
+from ectskin.io import read_recording, write_recording
+from ectskin.learn.extra_train import join_training
+from ectskin.learn.profiles import TrainConfig, describe_recipe
+from ectskin.learn.splits import trial_digests
+from ectskin.learn.tasks import get_task
+from ectskin.learn.train import train_from_recording
+
+REGIONS = (1, 5, 10, 14)
+
+
+@pytest.fixture
+def files(tmp_path, make_recording):
+    main, extra = tmp_path / "data.h5", tmp_path / "extra.h5"
+    write_recording(make_recording(n_frames=40, regions=REGIONS, occluded=(), no_markers=()), main)
+    # another session of the skin: other readouts (seed), shorter trials
+    write_recording(
+        make_recording(n_frames=20, seed=1, regions=REGIONS, occluded=(), no_markers=()), extra
+    )
+    return main, extra
+
+
+def test_extra_trials_join_the_training_split_alone(tmp_path, files):
+    main, extra = files
+    config = TrainConfig(profile="robust", epochs=2, counts=(6, 2, 2), progress=False)
+    plain = train_from_recording("touch", main, tmp_path / "plain", config)
+    joined = train_from_recording(
+        "touch", main, tmp_path / "joined", replace(config, extra_train=(str(extra),))
+    )
+    a, b = (json.loads((tmp_path / r / "split.json").read_text()) for r in ("plain", "joined"))
+    # the run's own split is the same trial for trial: validation and test mean what they meant
+    assert [a[k] for k in ("train", "val", "test")] == [b[k] for k in ("train", "val", "test")]
+    assert (plain["n_val"], plain["n_test"]) == (joined["n_val"], joined["n_test"])
+    # every extra trial (2 states x (rest + 4 regions) of 20 frames) joined the training samples
+    assert joined["n_train"] == plain["n_train"] + 10 * 20
+    (item,) = b["extra_train"]
+    assert item["file"] == str(extra.resolve())
+    assert item["trial_digests"] == trial_digests(read_recording(extra))
+    recipe = json.loads((tmp_path / "joined" / "config.json").read_text())["recipe"]
+    assert recipe["extra_train"] == [{"file": "extra.h5", "trials": 10}]
+    assert "10 extra training trials of extra.h5" in describe_recipe(recipe)
+    assert "extra_train" not in a and "extra" not in describe_recipe(
+        json.loads((tmp_path / "plain" / "config.json").read_text())["recipe"]
+    )
+
+
+def test_extra_data_of_another_skin_or_no_file_is_refused(tmp_path, files, make_recording):
+    main, extra = files
+    task = get_task("touch")
+    train = task.dataset(read_recording(main), reference="state-offset")
+    other = replace(train, pair_names=[f"x{i}" for i in range(train.n_pairs)])
+    with pytest.raises(EctskinError, match=r"other\.h5: its pair_names differ"):
+        join_training(train, [other], ["other.h5"])
+    config = TrainConfig(profile="robust", epochs=1, counts=(6, 2, 2), progress=False,
+                         extra_train=(str(tmp_path / "nope.h5"),))
+    with pytest.raises(EctskinError, match="nope.h5"):
+        train_from_recording("touch", main, tmp_path / "run", config)
+
+
+def test_the_baselines_are_fitted_on_the_run_s_extra_trials_too(tmp_path, files, monkeypatch):
+    from ectskin.learn.evaluate import evaluate_run
+    from ectskin.learn.tasks.touch import TouchTask
+
+    main, extra = files
+    config = TrainConfig(profile="robust", epochs=1, counts=(6, 2, 2), progress=False,
+                         extra_train=(str(extra),))
+    train_from_recording("touch", main, tmp_path / "run", config)
+    fitted = []
+    real = TouchTask.baseline_metrics
+
+    def spy(self, train, test, **kw):
+        fitted.append(train.n_samples)
+        return real(self, train, test, **kw)
+
+    monkeypatch.setattr(TouchTask, "baseline_metrics", spy)
+    m = evaluate_run(tmp_path / "run", main, figures=False, write=False)["touch"]
+    assert fitted == [6 * 40 + 10 * 20] and m["baselines"]
+    # the extra recording changed since training: no baselines, and the reason said
+    write_recording(read_recording(main), extra, overwrite=True)
+    m = evaluate_run(tmp_path / "run", main, figures=False, write=False)["touch"]
+    assert not m["baselines"] and "extra.h5 changed since training" in m["baselines_skipped"]
