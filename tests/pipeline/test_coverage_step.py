@@ -4,6 +4,7 @@ the twin is stood in for by hand-made recordings, so the wiring runs in seconds.
 from __future__ import annotations
 
 import json
+import shutil
 from dataclasses import replace
 
 import pytest
@@ -55,6 +56,13 @@ def test_the_robust_run_alone_trains_on_the_coverage_trials(tmp_path, monkeypatc
         (out / "runs" / "touch_robust" / "split.json").read_text()
     )
     assert "extra training" not in off["touch"]["robust"]["recipe_description"]
+    # a coverage.h5 made beforehand (`ectskin simulate --coverage`) is adopted, not made again
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    shutil.copy(out / "coverage.h5", fresh / "coverage.h5")
+    n = len(asked)
+    assert "simulate_coverage" in reproduce(replace(config, out_dir=fresh))["reused"]
+    assert asked[n:] == [protocol]  # data.h5 alone
 
 
 def test_no_coverage_without_a_robust_run_or_for_a_given_recording():

@@ -118,12 +118,16 @@ def coverage_data(runner: StepRunner, config: ReproduceConfig) -> Path | None:
     """Step "simulate_coverage": ``OUT_DIR/coverage.h5``, the twin's coverage trials of the
     simulated protocol (:meth:`ReproduceConfig.coverage_protocol`) that the robust run adds to
     its training split; None when there are none (no robust run, ``coverage`` off, or a given
-    recording)."""
+    recording). A coverage.h5 found without a record is adopted as data.h5 is."""
     settings = coverage_settings(config)
     protocol = config.coverage_protocol()
     if settings is None or protocol is None:
         return None
     path = runner.out / COVERAGE_FILE
+    if path.exists() and runner.state.settings("simulate_coverage") is None and not runner.force:
+        _check_adoptable(path, settings["protocol"])  # e.g. `ectskin simulate --coverage`'s
+        log.info("simulate_coverage: %s holds the same protocol; reusing it", path)
+        runner.adopt("simulate_coverage", settings)
 
     def make() -> None:
         rec = simulate_experiment(protocol, workers=config.workers, progress=config.progress)
