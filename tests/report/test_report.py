@@ -217,8 +217,15 @@ def test_the_robust_run_is_set_beside_its_own_baselines(tmp_path):
     assert "logistic regression 96.88 %" in row and "k-NN 94.83 %" in row
     # 97.00 - 96.88 = +0.12 points over the most accurate of its own baselines (not the k-NN
     # of the paper-recipe run, 91.23 %)
-    assert "+0.12 points versus 'logistic regression' on the same calibrated inputs" in md
-    del robust["baselines"]  # without its own: the paper-recipe run's strongest (k-NN 91.23 %)
+    assert "+0.12 points versus 'logistic regression' on the same calibrated inputs)" in md
+    # trained with extra (coverage) trials: its baselines were fitted on them too, and the
+    # report says so, and why the run has them
+    cover = [{"file": "coverage.h5", "trials": 999}]
+    robust["training"] = {"recipe": {"extra_train": cover}}
+    md = write_report(tmp_path, m)[0].read_text()
+    assert "'logistic regression' on the same calibrated inputs and training trials)" in md
+    assert "Its training split also holds the twin's coverage trials" in md
+    del robust["training"], robust["baselines"]  # without its own: the paper-recipe run's strongest (k-NN 91.23 %)
     md = write_report(tmp_path, m)[0].read_text()
     assert "+5.77 points versus 'k-NN'" in md
 

@@ -241,9 +241,10 @@ def margin_text(metrics: Mapping[str, Any]) -> list[str]:
         own = _best_accuracy(lookup(metrics, "touch.robust.baselines", {}) or {})
         if own is not None:  # the baselines fitted on the robust run's own calibrated inputs
             name, b = own
+            extra = lookup(metrics, "touch.robust.training.recipe.extra_train") or []
             text += (
                 f", {100 * (racc - b):+.2f} points versus '{baseline_name(name)}' on the same "
-                "calibrated inputs"
+                "calibrated inputs" + (" and training trials" if extra else "")
             )
         elif best_touch is not None:
             name, b = best_touch
