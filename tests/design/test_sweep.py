@@ -153,8 +153,9 @@ def test_the_mesh_option_reaches_the_simulation_and_the_settings(tmp_path, monke
     from ectskin.design.score import score_layout
     from ectskin.twin.bound import COARSE
 
-    default, coarse = ScoreConfig(), ScoreConfig(mesh="coarse")
-    assert "mesh" not in default.settings()  # scores made before the option resume
+    coarse, default = ScoreConfig(), ScoreConfig(mesh="default")  # coarse is the default
+    assert coarse.mesh == "coarse" and coarse.protocol.touch_trials == 6
+    assert "mesh" not in default.settings()  # scores on the twin's mesh made before it resume
     assert coarse.settings()["mesh"] == "coarse"
     assert ScoreConfig.from_dict(coarse.to_dict()) == coarse
     assert ScoreConfig.from_dict(default.to_dict()) == default

@@ -51,8 +51,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--touch-trials",
         type=integer(0),
-        default=2,
-        help="touch trials per inflation state (default 2)",
+        default=6,
+        help="touch trials per inflation state (default 6)",
     )
     p.add_argument(
         "--duration", type=number(0, above=True), default=3.0, help="seconds per trial (default 3)"
@@ -65,9 +65,9 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-track", action="store_true", help="skip the tracking model")
     p.add_argument(
         "--mesh",
-        default="default",
-        help="trained score: the twin's mesh for the simulation, default (default) or coarse "
-        "(about 5x faster, the information score's mesh)",
+        default="coarse",
+        help="trained score: the twin's mesh for the simulation, coarse (default: the "
+        "information score's mesh, about 5x faster) or default (the twin's own)",
     )
     p.add_argument(
         "--min-width",
