@@ -116,3 +116,12 @@ def test_describe_recipe():
         "inflation shift skipped (fewer than 2 no-contact training trials), label smoothing 0.1, "
         "weights of the lowest validation loss"
     )
+
+
+def test_the_finger_mix_is_a_contact_probability_off_by_default():
+    assert all(s.finger_mix == 0 for per_task in PROFILES.values() for s in per_task.values())
+    assert profile_settings("contact", "quick", finger_mix=0.25).finger_mix == 0.25
+    with pytest.raises(EctskinError, match="'finger_mix' applies to task 'contact' only"):
+        profile_settings("touch", "quick", finger_mix=0.25)
+    with pytest.raises(EctskinError, match="'finger_mix' must be a probability from 0 to 1"):
+        profile_settings("contact", "quick", finger_mix=1.5)

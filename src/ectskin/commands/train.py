@@ -114,6 +114,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "(ectskin simulate OUT --coverage; ectskin.learn.extra_train)",
     )
     p.add_argument(
+        "--finger-mix",
+        type=float,
+        default=None,
+        metavar="P",
+        help="contact: each training window takes another training finger's signal with "
+        "probability P (a hovering finger, or a second touch labelled as one; default 0; "
+        "ectskin.learn.tasks.contact_mix)",
+    )
+    p.add_argument(
         "--batch-size", type=integer(1), default=None, help="override the profile's batch size"
     )
     p.add_argument(
@@ -165,6 +174,7 @@ def run(args: argparse.Namespace) -> int:
         init_from=args.init_from,
         reference=args.reference,
         extra_train=tuple(args.extra_train),
+        settings=None if args.finger_mix is None else {"finger_mix": args.finger_mix},
     )
     summary = train_from_recording(args.task, args.data, out, config)
     if int(os.environ.get("RANK", "0")) != 0:

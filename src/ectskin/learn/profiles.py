@@ -81,6 +81,10 @@ class TrainSettings:
     label_smoothing: float = 0.0  # of the training cross-entropy (validation loss: plain CE)
     select: str = "val_loss"  # keep the weights of the lowest val_loss or the best val_metric
     channel_gain: float = 0.0  # > 0: each value scaled by exp(N(0, channel_gain)), per channel
+    # --- contact: a training window takes another training finger's signal with this
+    # probability (ectskin.learn.tasks.contact_mix; off in every profile, measured in
+    # BENCHMARKS.md: two fingers counted right, one finger a little less often)
+    finger_mix: float = 0.0
 
     @property
     def augments(self) -> bool:
@@ -180,6 +184,11 @@ def profile_settings(task: str, profile: str = "paper", **overrides: Any) -> Tra
     _check_settings(settings)
     shift = settings.inflation_shift and task not in SHIFT_TASKS
     others = settings.mixup_alpha > 0 or settings.label_smoothing > 0 or settings.channel_gain > 0
+    if settings.finger_mix and task != "contact":
+        raise EctskinError(
+            f"training setting 'finger_mix' applies to task 'contact' only, got "
+            f"{settings.finger_mix!r} for {task!r}"
+        )
     if task not in RECIPE_TASKS and (shift or others):
         raise EctskinError(
             "training settings 'inflation_shift', 'mixup_alpha', 'label_smoothing' and "
@@ -306,6 +315,11 @@ def _check_settings(settings: TrainSettings) -> None:
         raise EctskinError(
             f"training setting 'mixup_alpha' must be >= 0 (0: no mixup), got "
             f"{settings.mixup_alpha!r}"
+        )
+    if not (isinstance(settings.finger_mix, int | float) and 0 <= settings.finger_mix <= 1):
+        raise EctskinError(
+            f"training setting 'finger_mix' must be a probability from 0 to 1, got "
+            f"{settings.finger_mix!r}"
         )
     if not 0 <= settings.label_smoothing < 1:
         raise EctskinError(

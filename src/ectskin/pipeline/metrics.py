@@ -166,8 +166,13 @@ def contact_blocks(run: Mapping[str, Any]) -> dict[str, Any]:
         arch=c.get("arch"),
         training=c.get("training"),
         split=c.get("split"),
+        by_other_finger=c.get("by_other_finger"),
         baselines={
-            b: {**{k: v.get(k) for k in CONTACT_KEYS}, "per_state": v.get("per_state")}
+            b: {
+                **{k: v.get(k) for k in CONTACT_KEYS},
+                "per_state": v.get("per_state"),
+                "by_other_finger": v.get("by_other_finger"),
+            }
             for b, v in baselines.items()
         },
     )

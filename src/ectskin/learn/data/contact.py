@@ -4,16 +4,20 @@ One sample per frame: the window of the last ``k`` calibrated frames (paper Eq. 
 touch reference, as for touch classification; the first frames of a trial are padded with
 copies of its frame 0) and what the fingers do at the window's last frame:
 
-==============  ================  ==========================================================
-``count``       (n,) int64        fingers on the skin: 0, 1 or 2
-``face``        (n, S) int64      index into ``faces`` of each finger's face, −1 = no finger
-``uv``          (n, S, 2) float   each finger's point on its face (u, v) = (x, z) in mm
-``force``       (n, S) float      each finger's normal force in N (0 without a finger)
-``hover``       (n,) float        1 when no finger is on the skin and one is above it at a
-                                  height of at most ``hover_max_mm``, else 0
-``height``      (n,) float        the lowest finger's height above the skin in mm, NaN
-                                  without a finger (0 in contact)
-==============  ================  ==========================================================
+================  ================  ========================================================
+``count``         (n,) int64        fingers on the skin: 0, 1 or 2
+``face``          (n, S) int64      index into ``faces`` of each finger's face, −1 = no finger
+``uv``            (n, S, 2) float   each finger's point on its face (u, v) = (x, z) in mm
+``force``         (n, S) float      each finger's normal force in N (0 without a finger)
+``hover``         (n,) float        1 when no finger is on the skin and one is above it at a
+                                    height of at most ``hover_max_mm``, else 0
+``height``        (n,) float        the lowest finger's height above the skin in mm, NaN
+                                    without a finger (0 in contact)
+``other_height``  (n,) float        the lowest height above the skin (mm) of the fingers that
+                                    are over it but not on it, NaN where there is none (every
+                                    finger of the frame on the skin, or away): with one finger
+                                    on the skin, where the hand's other finger is
+================  ================  ========================================================
 
 S = :data:`MAX_FINGERS` slots, filled from the trial's fingers axis
 (:class:`~ectskin.io.recording.Trial`): the fingers on the skin in a frame take the slots in the
@@ -81,6 +85,7 @@ class ContactData(SampleData):
         "force",
         "hover",
         "height",
+        "other_height",
         "group",
         "frame",
         "state",
@@ -94,6 +99,7 @@ class ContactData(SampleData):
     force: np.ndarray
     hover: np.ndarray
     height: np.ndarray
+    other_height: np.ndarray
     group: np.ndarray
     frame: np.ndarray
     state: np.ndarray
@@ -176,7 +182,7 @@ def contact_dataset(
     states = list(dict.fromkeys(t.inflation for t in chosen))
     cols: dict[str, list[np.ndarray]] = {
         k: []
-        for k in ("x", "count", "face", "uv", "force", "hover", "height", "group", "frame", "state")
+        for k in ContactData.SAMPLE_FIELDS
     }
     for g, t in enumerate(chosen):
         n = t.n_frames
@@ -207,8 +213,11 @@ def contact_dataset(
             )
         # the lowest finger's height (NaN where every finger is away)
         height = np.full(n, np.nan)
+        other = np.full(n, np.nan)
         if t.finger_height_mm is not None and t.n_fingers:
             height = np.fmin.reduce(t.finger_height_mm, axis=1)
+            on_skin = t.finger_height_mm == 0 if t.contact is None else t.contact
+            other = np.fmin.reduce(np.where(on_skin, np.nan, t.finger_height_mm), axis=1)
         hover = (count == 0) & np.isfinite(height) & (height <= hover_max_mm)
         cols["x"].append(np.ascontiguousarray(x))
         cols["count"].append(count)
@@ -217,6 +226,7 @@ def contact_dataset(
         cols["force"].append(force.astype(np.float32))
         cols["hover"].append(hover.astype(np.float32))
         cols["height"].append(np.where(count > 0, 0.0, height).astype(np.float32))
+        cols["other_height"].append(other.astype(np.float32))
         cols["group"].append(np.full(n, g, np.int64))
         cols["frame"].append(np.arange(n, dtype=np.int64))
         cols["state"].append(np.full(n, states.index(t.inflation), np.int64))

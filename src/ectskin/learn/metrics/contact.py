@@ -8,6 +8,8 @@ side edge). A model that names the wrong face is thus charged at least the body'
 
 * :func:`localisation_metrics`: the error of one finger's point (mean / median / p90, per face,
   per inflation state, and a map over each face);
+* :func:`other_finger_split`: that error split by where the hand's other finger is (none
+  above the skin, hovering close to it, or higher);
 * :func:`force_metrics`: MAE and relative error of the force;
 * :func:`force_coverage`: the share of frames whose true force lies within ±1σ and ±2σ of the
   predicted force, σ the model's own standard deviation of it;
@@ -143,6 +145,52 @@ def localisation_metrics(
             for k, f in enumerate(faces)
             if f in face_extent and np.any(true_face == k)
         }
+    return out
+
+
+#: the parts of :func:`other_finger_split`
+OTHER_FINGER_PARTS = ("alone", "other_hovering", "other_above")
+
+
+def other_finger_split(
+    distance: np.ndarray,
+    other_height_mm: np.ndarray,
+    hover_max_mm: float,
+    *,
+    state: np.ndarray | None = None,
+    state_names: Sequence[str] | None = None,
+) -> dict[str, Any]:
+    """The error ``distance`` (n,) mm of frames with one finger on the skin, split by the height
+    ``other_height_mm`` (n,) of the lowest other finger above the skin (NaN: none there):
+    ``alone`` (none), ``other_hovering`` (one at most ``hover_max_mm`` above it: its own signal
+    adds to the touch's) and ``other_above`` (higher). Each part: the mean / median / p90 error,
+    ``n_frames``, ``share`` (of all frames) and, with ``state``, ``per_state`` (the states
+    holding frames of the part, named by ``state_names``)."""
+    d, h = np.asarray(distance, float), np.asarray(other_height_mm, float)
+    if d.shape != h.shape or d.ndim != 1:
+        raise EctskinError(
+            f"other_finger_split: distance and other_height_mm must be one-dimensional of one "
+            f"shape, got {d.shape} and {h.shape}"
+        )
+    near = np.isfinite(h) & (h <= hover_max_mm)
+    parts = {
+        "alone": ~np.isfinite(h),
+        "other_hovering": near,
+        "other_above": np.isfinite(h) & ~near,
+    }
+    out: dict[str, Any] = {"hover_max_mm": float(hover_max_mm)}
+    for name, m in parts.items():
+        part: dict[str, Any] = dict(_summary(d[m]))
+        part["share"] = float(m.mean()) if d.size else None
+        if state is not None:
+            st = np.asarray(state)
+            part["per_state"] = {
+                (state_names[s] if state_names is not None else str(int(s))): _summary(
+                    d[m & (st == s)]
+                )
+                for s in np.unique(st[m])
+            }
+        out[name] = part
     return out
 
 

@@ -18,6 +18,10 @@ Training loss (:class:`ContactCriterion`), per frame:
   the window). One finger is slot 0; two are matched to the slots in the cheaper of the two
   orders (permutation-invariant).
 
+Augmentation: the inflation shift, and the finger mix (``settings.finger_mix``, the
+probability that a window with one finger on the skin takes another finger's signal, hovering
+or touching: :mod:`ectskin.learn.tasks.contact_mix`).
+
 Validation metric: the mean distance (mm) between each finger's true and predicted points,
 slot 0 for one finger, matched for two; a wrong face is charged the body's thickness across.
 The validation pass also calibrates the force's σ on those held-out frames (a model with
@@ -28,7 +32,8 @@ scale. A network's errors on frames it trained on are smaller than on others; wi
 its σ would be too small on new frames.
 Test localisation errors are distances over the skin (:func:`ectskin.layout.geometry.on_skin_distance`:
 around the body's side edge between front and back). Test metrics: localisation (mean / median / p90, per face,
-per inflation state, a map per face), force, hover detection against height, finger count and
+per inflation state, a map per face, and split by where the other finger is:
+``by_other_finger``), force, hover detection against height, finger count and
 per-finger error after Hungarian matching, the calibration of the force's σ (the share of
 frames within ±1σ and ±2σ), each beside the baselines of
 :mod:`ectskin.learn.baselines.contact` on the same test frames. :func:`force_split_report` splits
@@ -65,6 +70,7 @@ from ectskin.learn.metrics.contact import (
     hover_metrics,
     localisation_metrics,
     multi_metrics,
+    other_finger_split,
     rest_points,
 )
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS, ContactNet, ContactNetConfig
@@ -72,6 +78,13 @@ from ectskin.learn.normalizer import Normalizer
 from ectskin.learn.predict.base import forward_batches
 from ectskin.learn.profiles import TrainSettings
 from ectskin.learn.tasks.base import Criterion, EvalCase, Task, as_tensor, build_config
+from ectskin.learn.tasks.contact_mix import (
+    MIX_FAR_MM,
+    MIX_HOVER_MAX_MM,
+    FingerSignals,
+    finger_signals,
+    mix_fingers,
+)
 from ectskin.viz.contact import plot_error_maps, plot_force_scatter, plot_hover_curve
 
 #: windows per batch when predicting a test split
@@ -91,7 +104,10 @@ def slot_columns(pred: np.ndarray, slot: int) -> dict[str, np.ndarray]:
 
 
 class ContactCriterion(Criterion):
-    """See the module docstring. ``thickness`` (mm) charges a wrong face in the metric."""
+    """See the module docstring. ``thickness`` (mm) charges a wrong face in the metric;
+    ``state_means`` (n_states, P) the inflation shift's no-contact means; ``signals`` the finger
+    mix's (:func:`~ectskin.learn.tasks.contact_mix.finger_signals`), which a window with one
+    finger on the skin takes with probability ``finger_mix``."""
 
     def __init__(
         self,
@@ -99,8 +115,15 @@ class ContactCriterion(Criterion):
         thickness_mm: float,
         state_means: torch.Tensor | None = None,
         count_weight: torch.Tensor | None = None,
+        signals: FingerSignals | None = None,
+        finger_mix: float = 0.0,
     ) -> None:
         super().__init__()
+        if not (np.isfinite(finger_mix) and 0.0 <= finger_mix <= 1.0):
+            raise EctskinError(f"finger_mix must be a probability in [0, 1], got {finger_mix!r}")
+        mixes = signals is not None and len(signals) > 0 and finger_mix > 0
+        self.signals = signals if mixes else None
+        self.finger_mix = float(finger_mix) if mixes else 0.0
         self.thickness = float(thickness_mm)
         # the model whose force σ the validation pass calibrates (None: one without the σ)
         net = getattr(model, "module", model)
@@ -111,7 +134,7 @@ class ContactCriterion(Criterion):
 
     @property
     def augments(self) -> bool:
-        return self.state_means is not None
+        return self.state_means is not None or self.signals is not None
 
     @staticmethod
     def _finger_loss(out, s: int, face, uv_n, f_n) -> torch.Tensor:
@@ -156,6 +179,8 @@ class ContactCriterion(Criterion):
         return loss, out
 
     def loss(self, model, batch, rng):
+        if rng is not None and self.signals is not None:  # the finger mix, then the shift
+            batch = mix_fingers(batch, self.signals, self.finger_mix, rng)
         if rng is not None and self.state_means is not None:
             # the inflation shift: the same window seen at another inflation, as the difference
             # of the no-contact means of two training states drawn at random
@@ -318,7 +343,9 @@ class ContactTask(Task[ContactData]):
         self, model, settings: TrainSettings, train_data: ContactData, device
     ) -> ContactCriterion:
         """With ``settings.inflation_shift``, the no-contact means (last frame of each window) of
-        the training split's no-contact trials (at least two, else skipped with a note)."""
+        the training split's no-contact trials (at least two, else skipped with a note); with
+        ``settings.finger_mix`` > 0, the training split's finger signals
+        (:func:`~ectskin.learn.tasks.contact_mix.finger_signals`; none: skipped with a note)."""
         state_means, notes = None, []
         if settings.inflation_shift:
             frames = SimpleNamespace(
@@ -334,8 +361,23 @@ class ContactTask(Task[ContactData]):
                     f"inflation shift skipped: the training data holds {len(means)} no-contact "
                     "trial(s), at least 2 are needed"
                 )
+        finger_mix, signals = float(settings.finger_mix), None
+        if finger_mix > 0:
+            signals = finger_signals(train_data).to(device)
+            if not len(signals):
+                signals = None
+                notes.append(
+                    "finger mix skipped: the training data holds no trial that starts with its "
+                    f"finger at least {MIX_FAR_MM:g} mm away and then hovers within "
+                    f"{MIX_HOVER_MAX_MM:g} mm of the skin and touches it"
+                )
         criterion = ContactCriterion(
-            model, train_data.body_mm[1], state_means, count_weights(train_data.count).to(device)
+            model,
+            train_data.body_mm[1],
+            state_means,
+            count_weights(train_data.count).to(device),
+            signals=signals,
+            finger_mix=finger_mix,
         )
         criterion.notes.extend(notes)
         return criterion
@@ -429,6 +471,7 @@ def contact_report(
                 over_skin[m] = on_skin_distance(
                     faces[a], tuv[m], faces[b], puv[m], width, thickness
                 )
+    state_names = [_state_name(s) for s in test.states]
     loc = localisation_metrics(
         true_pts[single, 0],
         pred_pts[single, 0],
@@ -436,7 +479,7 @@ def contact_report(
         pred_face=p_face[single, 0],
         faces=faces,
         state=test.state[single],
-        state_names=[_state_name(s) for s in test.states],
+        state_names=state_names,
         true_uv=test.uv[single, 0] if with_maps else None,
         face_extent=test.face_extent if with_maps else None,
         distance=over_skin,
@@ -473,6 +516,13 @@ def contact_report(
         "count_accuracy": multi["count_accuracy"],
         "per_face": loc["per_face"],
         "per_state": loc.get("per_state", {}),
+        "by_other_finger": other_finger_split(
+            over_skin,
+            test.other_height[single],
+            HOVER_MAX_MM,
+            state=test.state[single],
+            state_names=state_names,
+        ),
         "force": force,
         "hover": hover,
         "multi": multi,
