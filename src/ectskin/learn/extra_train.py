@@ -10,7 +10,8 @@ Each extra recording is calibrated against its own rest readouts with the run's 
 per recording: a twin's or another session's absolute capacitances need not match the run's),
 and must have the run's channels and classes. ``split.json`` names each file with its trial
 digests (``extra_train``), so an evaluation fits the baselines on the same training trials
-(:func:`extra_training_data`) and a changed file is noticed.
+(:func:`with_extra`) and a changed or missing file is noticed (the baselines are then skipped,
+saying why).
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ import logging
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from ectskin._check import EctskinError
 from ectskin.io import read_recording
@@ -75,7 +78,9 @@ def join_training(train: Any, extras: Sequence[Any], paths: Sequence[str | Path]
         return train
     for ds, path in zip(extras, paths):
         for f in type(train).MATCH_FIELDS:
-            if getattr(ds, f) != getattr(train, f):
+            a, b = getattr(ds, f), getattr(train, f)
+            arrays = isinstance(a, np.ndarray) or isinstance(b, np.ndarray)
+            if not (np.array_equal(a, b) if arrays else a == b):
                 raise EctskinError(
                     f"extra training recording {path}: its {f} differ from the run's recording "
                     f"({getattr(ds, f)!r} vs {getattr(train, f)!r}); extra trials must come from "
