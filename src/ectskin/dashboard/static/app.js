@@ -2,7 +2,8 @@
 // Messages on /ws: one "meta", one "history", then "status" (the engine running, ended, failed:
 // again whenever it changes) and "frame"s (see ectskin/dashboard/app.py). A frame's "contact"
 // (the contact model's reading) and "ect" (the ECT image, quantised, and its peak) are drawn in
-// the Contact panel, shown when the meta says the engine has either head.
+// the Contact panel, shown when the meta says the engine has either head or the physical
+// inversion, whose "inversion" (the fitted fingers and their standard errors) inversion.js draws.
 (function () {
   "use strict";
 
@@ -253,6 +254,7 @@
     updateMarkers(f.markers);
     updateContact(f.contact);
     if (f.ect) updateEct(f.ect, f.seq);
+    window.ectskinInversion.update(f);
     updateBadge();
   }
 
@@ -626,14 +628,15 @@
 
   function contactFaces(meta) {
     const names = [];
-    for (const head of [meta.contact, meta.ect]) {
+    for (const head of [meta.contact, meta.ect, meta.inversion]) {
       if (head && Array.isArray(head.faces)) head.faces.forEach((f) => names.push(f));
     }
     const known = SURFACE_ORDER.filter((s) => names.includes(s));
     return known.concat([...new Set(names)].filter((f) => !known.includes(f)));
   }
 
-  // The face's drawing extent: its skins, the contact model's face extent, the ECT grid.
+  // The face's drawing extent: its skins, the contact model's and the inversion's face extents,
+  // the ECT grid.
   function faceBounds(meta, face) {
     const b = { u0: Infinity, u1: -Infinity, v0: Infinity, v1: -Infinity };
     const add = (u, v) => {
@@ -642,7 +645,9 @@
     };
     meta.skins.filter((s) => s.surface === face).forEach((s) => add(s.u_mm, s.v_mm));
     for (const ext of [meta.contact && meta.contact.face_extent[face],
-                       meta.ect && meta.ect.grid_extent[face]]) {
+                       meta.ect && meta.ect.grid_extent[face],
+                       meta.inversion && meta.inversion.face_extent &&
+                         meta.inversion.face_extent[face]]) {
       if (Array.isArray(ext)) add(ext[0], ext[1]);
     }
     if (!isFinite(b.u0)) Object.assign(b, { u0: -20, u1: 20, v0: 0, v1: 120 });
@@ -658,8 +663,9 @@
     state.contact = null;
     state.ect = null;
     $("contact-fingers").querySelectorAll(".cf-row").forEach((el) => el.remove());
-    panel.hidden = !(meta.contact || meta.ect);
-    if (panel.hidden) return;
+    panel.hidden = !(meta.contact || meta.ect || meta.inversion);
+    const svgs = {};
+    if (panel.hidden) { window.ectskinInversion.build(meta, svgs); return; }
     for (const face of contactFaces(meta)) {
       const b = faceBounds(meta, face), m = 4;
       const div = document.createElement("div");
@@ -704,7 +710,9 @@
       div.appendChild(title);
       host.appendChild(div);
       contactView.faces[face] = { svg, canvas, peak, sigma, dots };
+      svgs[face] = svg;
     }
+    window.ectskinInversion.build(meta, svgs);  // over the contact model's fingers
     const list = $("contact-fingers");
     for (let k = 0; k < FINGER_SLOTS; k++) {
       const row = document.createElement("div");
@@ -720,6 +728,8 @@
     if (!meta.contact) notes.push("no contact model (ectskin live --contact-model RUN)");
     if (!meta.ect) notes.push("no ECT image (ectskin live --ect)");
     else notes.push("ECT image every " + meta.ect.every + " frame(s)");
+    if (!meta.inversion) notes.push("no physical inversion (ectskin live --fields DIR)");
+    else notes.push("inversion every " + meta.inversion.every + " frame(s)");
     setText("contact-note", notes.join("; "));
     updateForceScale();
   }
