@@ -89,21 +89,32 @@ def simulate_or_load(runner: StepRunner, config: ReproduceConfig) -> tuple[Path,
         def make() -> None:
             write_recording(recording, path, overwrite=True)
 
+        runner.step("simulate", settings, [path], make)
     else:
         protocol = config.simulation_protocol()
         assert protocol is not None  # None only when a recording is given
-        settings = {"source": "ectskin.twin", "protocol": protocol.to_dict()}
-        if path.exists() and runner.state.settings("simulate") is None and not runner.force:
-            _check_adoptable(path, settings["protocol"])
-            log.info("simulate: %s holds the same protocol; reusing it", path)
-            runner.adopt("simulate", settings)
-
-        def make() -> None:
-            rec = simulate_experiment(protocol, workers=config.workers, progress=config.progress)
-            write_recording(rec, path, overwrite=True)
-
-    runner.step("simulate", settings, [path], make)
+        settings = _twin_step(runner, config, "simulate", protocol, path)
     return path, settings
+
+
+def _twin_step(
+    runner: StepRunner, config: ReproduceConfig, name: str, protocol: Any, path: Path
+) -> dict[str, Any]:
+    """Step ``name``: ``path`` holding the twin's simulation of ``protocol``. A file found there
+    without a record in the state file is adopted when it holds the same protocol (e.g. made
+    with ``ectskin simulate``), refused otherwise (unless ``force``). Returns the settings."""
+    settings = {"source": "ectskin.twin", "protocol": protocol.to_dict()}
+    if path.exists() and runner.state.settings(name) is None and not runner.force:
+        _check_adoptable(path, settings["protocol"])
+        log.info("%s: %s holds the same protocol; reusing it", name, path)
+        runner.adopt(name, settings)
+
+    def make() -> None:
+        rec = simulate_experiment(protocol, workers=config.workers, progress=config.progress)
+        write_recording(rec, path, overwrite=True)
+
+    runner.step(name, settings, [path], make)
+    return settings
 
 
 def coverage_settings(config: ReproduceConfig) -> dict[str, Any] | None:
@@ -119,21 +130,11 @@ def coverage_data(runner: StepRunner, config: ReproduceConfig) -> Path | None:
     simulated protocol (:meth:`ReproduceConfig.coverage_protocol`) that the robust run adds to
     its training split; None when there are none (no robust run, ``coverage`` off, or a given
     recording). A coverage.h5 found without a record is adopted as data.h5 is."""
-    settings = coverage_settings(config)
     protocol = config.coverage_protocol()
-    if settings is None or protocol is None:
+    if protocol is None:
         return None
     path = runner.out / COVERAGE_FILE
-    if path.exists() and runner.state.settings("simulate_coverage") is None and not runner.force:
-        _check_adoptable(path, settings["protocol"])  # e.g. `ectskin simulate --coverage`'s
-        log.info("simulate_coverage: %s holds the same protocol; reusing it", path)
-        runner.adopt("simulate_coverage", settings)
-
-    def make() -> None:
-        rec = simulate_experiment(protocol, workers=config.workers, progress=config.progress)
-        write_recording(rec, path, overwrite=True)
-
-    runner.step("simulate_coverage", settings, [path], make)
+    _twin_step(runner, config, "simulate_coverage", protocol, path)
     return path
 
 
