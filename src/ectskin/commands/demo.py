@@ -12,7 +12,10 @@ import argparse
 from ectskin.commands._options import add_out
 from ectskin.commands.reproduce import add_common_arguments, run_reproduce
 
-HELP = "run the whole reproduction with quick settings into ./demo-output (minutes on a laptop)"
+HELP = (
+    "run the whole reproduction with quick settings into ./demo-output (the paper's experiment "
+    "simulated in full on the CPU: its time on a 2-core machine is in BENCHMARKS.md)"
+)
 EXAMPLES = """\
   ectskin demo                         # ./demo-output/report.html
   ectskin demo -o my-demo --workers 2  # another folder, 2 simulation processes
