@@ -14,6 +14,12 @@ undented skin) is from the direct contact solve: why contact nodes are full solv
 
 Prints JSON (and writes it with ``--out``). Run: ``.venv/bin/python benchmarks/bench_field.py``
 (the grid that meets the accuracy bar, :data:`~ectskin.twin.field_spec.FINE_FIELD`, by default).
+
+``--one-state`` measures only the CPU seconds of one state's build (the first of the states):
+every chunk solved in this process on one thread, in the order a worker gets them, and the
+cold build of all the states projected for ``--workers`` idle cores. The reproduction's grid,
+:data:`~ectskin.twin.field_spec.QUICK_FIELD`: ``--spacing 2,4 --uniform --force-nodes 4
+--height-nodes 6``.
 """
 
 from __future__ import annotations
@@ -37,7 +43,7 @@ from ectskin.electrostatics.schur import FixedConductors
 from ectskin.layout import default_layout
 from ectskin.twin import Discretisation, Touch
 from ectskin.twin.field_build import build_fields
-from ectskin.twin.field_solve import hover_row
+from ectskin.twin.field_solve import chunks_of, hover_row, solve_chunk
 from ectskin.twin.field_spec import (
     COARSE_FIELD_MESH,
     FINE_FIELD,
@@ -180,6 +186,33 @@ def rigid_schur_error(spec: FieldSpec, points, forces) -> dict:
             "of_signal_max": max(r["of_signal"] for r in rows)}
 
 
+def one_state_cpu(spec: FieldSpec, n_states: int, workers: int) -> dict:
+    """CPU seconds of every chunk of ``spec``'s field solved here on one thread (by kind), the
+    nodes per CPU second, and ``n_states`` such states on ``workers`` idle cores."""
+    cpu: dict[str, float] = {}
+    nodes: dict[str, int] = {}
+    n_v = {f: spec.grid(f)[1].size for f in spec.face_names}
+    w0 = time.perf_counter()
+    with threadpool_limits(limits=1):
+        for chunk in chunks_of(spec):
+            c0 = time.process_time()
+            solve_chunk(spec, chunk)
+            cpu[chunk.kind] = cpu.get(chunk.kind, 0.0) + time.process_time() - c0
+            per = {"untouched": 1, "contact": spec.force_nodes, "hover": spec.height_nodes}
+            nodes[chunk.kind] = nodes.get(chunk.kind, 0) + per[chunk.kind] * (
+                1 if chunk.kind == "untouched" else n_v[chunk.face])
+    total = sum(cpu.values())
+    return {
+        "state": list(spec.inflation_ml),
+        "cpu_s": {k: round(v, 2) for k, v in cpu.items()} | {"total": round(total, 2)},
+        "ms_per_node": {k: round(1e3 * cpu[k] / nodes[k], 3) for k in cpu},
+        "wall_s": round(time.perf_counter() - w0, 1),
+        "load": [round(x, 2) for x in os.getloadavg()],
+        "projected_wall_s": {"states": n_states, "workers": workers,
+                             "s": round(total * n_states / workers, 1)},
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--levels", default="0,20", help="chamber levels (ml), all combinations")
@@ -197,6 +230,8 @@ def main() -> None:
     ap.add_argument("--checks", type=int, default=20, help="random points checked per state")
     ap.add_argument("--rigid-checks", type=int, default=3, help="points of the rigid check")
     ap.add_argument("--out", default=None, help="write results as JSON here")
+    ap.add_argument("--one-state", action="store_true",
+                    help="only the CPU seconds of the first state's build, here on one thread")
     args = ap.parse_args()
     levels = [float(x) for x in args.levels.split(",")]
     states = list(itertools.product(levels, repeat=3))
@@ -215,6 +250,12 @@ def main() -> None:
         fine_spacing_mm=None if args.uniform else FINE_FIELD.fine_spacing_mm,
     )
     specs = [contact_field_spec(layout, state, grid, window_mm=window) for state in states]
+    if args.one_state:
+        text = json.dumps(one_state_cpu(specs[0], len(specs), args.workers), indent=1)
+        print(text)
+        if args.out:
+            Path(args.out).write_text(text + "\n")
+        return
     nodes = sum(
         s.grid(f)[0].size * s.grid(f)[1].size * (s.force_nodes + s.height_nodes)
         for s in specs for f in s.face_names

@@ -32,6 +32,7 @@ Accuracy and speed
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from typing import Literal, overload
 
 import numpy as np
@@ -175,7 +176,11 @@ def _integral(rel0: np.ndarray, frames: np.ndarray) -> np.ndarray:
 
 # ====================================================================== potential matrix
 def potential_matrix(
-    panels: Panels, eps_r: float = 1.0, *, near_factor: float = NEAR_FACTOR
+    panels: Panels,
+    eps_r: float = 1.0,
+    *,
+    near_factor: float = NEAR_FACTOR,
+    blocks: Sequence[tuple[int, np.ndarray]] = (),
 ) -> np.ndarray:
     """(N, N) potential coefficients P (1/pF = V/pC), Eq. (1), symmetrised.
 
@@ -185,6 +190,13 @@ def potential_matrix(
     including each panel with itself, use the exact integral :func:`potential_integral`; all
     others use the point-charge approximation ``1 / (4π ε0 εr |r_i − r_j|)``. Finally
     ``P ← (P + Pᵀ) / 2``.
+
+    ``blocks``: (start, D) pairs, D an (m, m) matrix: the panels ``start .. start + m − 1`` are a
+    rigid motion of panels whose own potential matrix (the same ``eps_r`` and ``near_factor``)
+    is D, so their mutual entries are taken from D instead of computed (a fingertip pressed
+    anywhere on the sensor: its own block depends only on its shape). P depends only on the
+    panels' relative geometry, so this is the same matrix to round-off; every other entry is
+    computed as without ``blocks``, bit for bit.
     """
     if not isinstance(panels, Panels):
         raise EctskinError(f"panels must be Panels, got {type(panels).__name__}")
@@ -193,6 +205,7 @@ def potential_matrix(
     n = panels.n_panels
     if n == 0:
         raise EctskinError("potential_matrix: panels is empty (0 panels)")
+    known = _block_ids(n, blocks)
     c = panels.centres
     areas = panels.areas
     reach = near_factor * panels.sizes
@@ -200,6 +213,8 @@ def potential_matrix(
     # near pairs i <= j, as index lists: |r_i − r_j| < near_factor · max(size_i, size_j)
     ii, jj = np.nonzero(dist < np.maximum(reach[:, None], reach[None, :]))
     upper = ii <= jj
+    if known is not None:  # pairs inside a given block are not computed
+        upper &= (known[ii] < 0) | (known[ii] != known[jj])
     ii, jj = ii[upper], jj[upper]
     scale = 0.5 / (4.0 * np.pi * EPS0_PF_PER_MM * eps_r)
     # far field: P_ij ≈ 1 / |r_i − r_j|, symmetric: (P¹ + P¹ᵀ) / 2 is P¹ (×2 × ½ applied as one)
@@ -214,8 +229,43 @@ def potential_matrix(
     sym = (one_way[:m] + one_way[m:]) * scale
     P[ii, jj] = sym
     P[jj, ii] = sym
-    logger.debug("potential_matrix: %d panels, %d near pairs", n, 2 * m - np.sum(ii == jj))
+    for start, D in blocks:
+        P[start : start + D.shape[0], start : start + D.shape[0]] = D
+    if logger.isEnabledFor(logging.DEBUG):
+        logger.debug("potential_matrix: %d panels, %d near pairs", n, 2 * m - np.sum(ii == jj))
     return P
+
+
+def _block_ids(n: int, blocks: Sequence[tuple[int, np.ndarray]]) -> np.ndarray | None:
+    """(n,) the index of the given block (:func:`potential_matrix`'s ``blocks``) each panel
+    lies in, −1 for none; None without blocks. Blocks must be square, finite, inside the n
+    panels and must not overlap."""
+    if not blocks:
+        return None
+    ids = np.full(n, -1)
+    for k, item in enumerate(blocks):
+        try:
+            start, D = item
+        except (TypeError, ValueError):
+            raise EctskinError(
+                f"potential_matrix: blocks[{k}] must be a (start, D) pair, got {item!r:.60}"
+            ) from None
+        D = np.asarray(D)
+        if isinstance(start, bool) or not isinstance(start, int | np.integer):
+            raise EctskinError(f"potential_matrix: blocks[{k}] start must be an int, got {start!r}")
+        m = D.shape[0] if D.ndim == 2 else -1
+        if D.ndim != 2 or D.shape[1] != m or m < 1 or not 0 <= start <= n - m:
+            raise EctskinError(
+                f"potential_matrix: blocks[{k}] must be a square (m, m) matrix of panels "
+                f"start .. start + m − 1 within the {n} panels, got start {start} and shape "
+                f"{D.shape}"
+            )
+        if np.any(ids[start : start + m] >= 0):
+            raise EctskinError(f"potential_matrix: blocks[{k}] overlaps another block")
+        if not np.all(np.isfinite(D)):
+            raise EctskinError(f"potential_matrix: blocks[{k}] has non-finite entries")
+        ids[start : start + m] = k
+    return ids
 
 
 # ====================================================================== capacitance
@@ -226,6 +276,7 @@ def maxwell_capacitance(
     *,
     near_factor: float = ...,
     return_charges: Literal[False] = ...,
+    blocks: Sequence[tuple[int, np.ndarray]] = ...,
 ) -> np.ndarray: ...
 
 
@@ -236,6 +287,7 @@ def maxwell_capacitance(
     *,
     near_factor: float = ...,
     return_charges: Literal[True],
+    blocks: Sequence[tuple[int, np.ndarray]] = ...,
 ) -> tuple[np.ndarray, np.ndarray]: ...
 
 
@@ -245,6 +297,7 @@ def maxwell_capacitance(
     *,
     near_factor: float = NEAR_FACTOR,
     return_charges: bool = False,
+    blocks: Sequence[tuple[int, np.ndarray]] = (),
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """(n_conductors, n_conductors) Maxwell (short-circuit) capacitance matrix K, pF.
 
@@ -255,6 +308,7 @@ def maxwell_capacitance(
     ``K[a, b] < 0`` for a ≠ b and every row sums to ≥ 0 (the charge induced at infinity).
 
     With ``return_charges=True`` also returns the panel charges q, (N, n_conductors) pC.
+    ``blocks``: known diagonal blocks of P (:func:`potential_matrix`).
     """
     if not isinstance(panels, Panels):
         raise EctskinError(f"panels must be Panels, got {type(panels).__name__}")
@@ -265,7 +319,7 @@ def maxwell_capacitance(
             f"maxwell_capacitance: conductor(s) {empty} have no panels "
             f"(n_conductors={panels.n_conductors}); every conductor needs at least one panel"
         )
-    P = potential_matrix(panels, eps_r, near_factor=near_factor)
+    P = potential_matrix(panels, eps_r, near_factor=near_factor, blocks=blocks)
     if not np.all(np.isfinite(P)):
         i, j = np.argwhere(~np.isfinite(P))[0]
         raise EctskinError(

@@ -183,13 +183,15 @@ class Panels:
                 raise EctskinError(
                     f"Panels.concatenate: parts[{k}] must be Panels, got {type(p).__name__}"
                 )
-        return Panels(
-            centres=np.concatenate([p.centres for p in parts]),
-            u=np.concatenate([p.u for p in parts]),
-            v=np.concatenate([p.v for p in parts]),
-            conductor=np.concatenate([p.conductor for p in parts]),
-            n_conductors=max(p.n_conductors for p in parts),
-        )
+        # the parts were checked when they were made, and every derived quantity is row-wise:
+        # joined, not computed again (the same numbers)
+        out = object.__new__(Panels)
+        for name in ("centres", "u", "v", "conductor", "_areas", "_normals"):
+            arr = np.concatenate([getattr(p, name) for p in parts])
+            arr.setflags(write=False)
+            object.__setattr__(out, name, arr)
+        object.__setattr__(out, "n_conductors", max(p.n_conductors for p in parts))
+        return out
 
     def with_conductor(
         self, conductor: int | np.ndarray, n_conductors: int | None = None

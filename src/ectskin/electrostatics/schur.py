@@ -91,7 +91,13 @@ def _block(
     # near pairs: P¹_ij (col panel j's exact potential at row centre i) + P¹_ji (row panel i's
     # at col centre j)
     if ii.size:
-        near_ij = _integral(cb[jj] - ca[ii], _panel_frames(cols.u[jj], cols.v[jj])) / cols.areas[jj]
+        # the columns' frames once per column where they have more near pairs than columns
+        # (a row-wise computation: the same numbers either way)
+        if ii.size > cols.n_panels:
+            col_frames = _panel_frames(cols.u, cols.v)[jj]
+        else:
+            col_frames = _panel_frames(cols.u[jj], cols.v[jj])
+        near_ij = _integral(cb[jj] - ca[ii], col_frames) / cols.areas[jj]
         fr = _panel_frames(rows.u[ii], rows.v[ii]) if row_frames is None else row_frames[ii]
         P[ii, jj] = near_ij + _integral(ca[ii] - cb[jj], fr) / rows.areas[ii]
     P *= 0.5 / (4.0 * np.pi * EPS0_PF_PER_MM * eps_r)
@@ -181,7 +187,8 @@ class FixedConductors:
         return self.panels.n_conductors
 
     def capacitance(
-        self, added: Sequence[Panels], *, sensitivity_columns: int | None = None
+        self, added: Sequence[Panels], *, sensitivity_columns: int | None = None,
+        blocks: Sequence[np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray | None]:
         """Maxwell matrices (k, n_c, n_c) pF of the fixed panels with each of ``added`` (k sets).
 
@@ -189,9 +196,21 @@ class FixedConductors:
         (``n_conductors`` must agree), and every conductor needs a panel in the fixed or the
         added set. With ``sensitivity_columns`` = n (and ``cells`` given) also returns the
         sensitivities (k, n, n) of :func:`~.mom.dielectric_sensitivity` over the cells for the
-        first n conductors' excitations (else None).
+        first n conductors' excitations (else None). ``blocks``: each added set's own potential
+        matrix, where the caller has it (:func:`~.mom.potential_matrix` of a set it is a rigid
+        motion of: a fingertip's shape), else computed here.
         """
         added = list(added)
+        if blocks is not None:
+            blocks = list(blocks)
+            if len(blocks) != len(added) or any(
+                np.shape(b) != (p.n_panels, p.n_panels) for b, p in zip(blocks, added)
+            ):
+                raise EctskinError(
+                    f"FixedConductors.capacitance: blocks must be one (N_F, N_F) matrix per "
+                    f"added set ({len(added)}), got {len(blocks)} of shapes "
+                    f"{[np.shape(b) for b in blocks][:3]}"
+                )
         nc = self.n_conductors
         has_fixed = np.bincount(self.panels.conductor, minlength=nc) > 0
         for k, p in enumerate(added):
@@ -222,11 +241,17 @@ class FixedConductors:
             while stop < len(added) and (stop == start or cols + added[stop].n_panels <= BATCH_COLUMNS):
                 cols += added[stop].n_panels
                 stop += 1
-            self._solve_batch(added[start:stop], K[start:stop], None if S is None else S[start:stop])
+            self._solve_batch(
+                added[start:stop], K[start:stop], None if S is None else S[start:stop],
+                None if blocks is None else blocks[start:stop],
+            )
             start = stop
         return K, S
 
-    def _solve_batch(self, added: list[Panels], K_out: np.ndarray, S_out: np.ndarray | None) -> None:
+    def _solve_batch(
+        self, added: list[Panels], K_out: np.ndarray, S_out: np.ndarray | None,
+        blocks: list[np.ndarray] | None = None,
+    ) -> None:
         """The block solve of the module docstring for a batch of added sets (in place)."""
         # the fixed panels' rows of every added set's columns, in one block
         C = _block(
@@ -241,7 +266,8 @@ class FixedConductors:
         for k, p in enumerate(added):
             W = W_all[:, offset : offset + p.n_panels]
             offset += p.n_panels
-            schur = self._self_block(p) - W.T @ W
+            own = self._self_block(p) if blocks is None else blocks[k]
+            schur = own - W.T @ W
             try:
                 M = scipy.linalg.cholesky(schur, lower=True, overwrite_a=True, check_finite=False)
             except np.linalg.LinAlgError:

@@ -9,20 +9,24 @@
   ``docs/field.md``.)
 * **Hover** (force 0, height h): a finger that does not press leaves the body as it is, so the
   electrode panels (and the chamber cavities) are the untouched state's. They are factored once
-  per row (:class:`~ectskin.electrostatics.schur.FixedConductors`) and every finger position and
-  height adds only its own panels: the same readout as the direct solve, to round-off. That the
-  finger at force 0 moves no electrode panel is checked on every row. For the same reason the
+  per state and process (:class:`~ectskin.electrostatics.schur.FixedConductors`,
+  :func:`untouched_conductors`) and every finger position and height adds only its own panels
+  (with the fingertip's own potential block, computed once per shape): the same readout as the
+  direct solve, to round-off. That the finger at force 0 moves no electrode panel is checked on
+  every row. For the same reason the
   row's fingertips rest on one untouched skin and are placed together
   (:func:`~ectskin.twin.finger.hovering`), then turned into panels by the twin's own calls.
 * **Untouched**: the state without a finger.
 
-Every function here is deterministic: its result depends only on its arguments (the per-row
-factor is not shared between rows), so a field is the same whichever worker solves which row.
+Every function here is deterministic: its result depends only on its arguments (what is kept
+between rows, the state's factor and the fingertip's shapes and blocks, is a pure function of
+the sensor, the state and the shape), so a field is the same whichever worker solves which row.
 """
 
 from __future__ import annotations
 
 import logging
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -117,27 +121,53 @@ def hover_row(
     by the Schur path over the untouched electrodes (module docstring)."""
     heights = np.asarray(heights_mm, dtype=np.float64)
     zeros = np.zeros(heights.size)
-    base = sensor.electrode_panels(inflation_ml, None, [0.0])[0]
-    _check_unmoved(sensor, inflation_ml, Touch(face, (float(u_mm), float(v_mm[0]))), base)
+    solver = untouched_conductors(sensor, inflation_ml)
+    _check_unmoved(sensor, inflation_ml, Touch(face, (float(u_mm), float(v_mm[0]))), solver.panels)
     cavities = sensor.chamber_eps_r is not None and sensor.chamber_eps_r != sensor.eps_r
-    cells = None
-    if cavities:
-        pts, vols = sensor.cavity_cells(inflation_ml, None, [0.0])
-        cells = (pts[0], vols[0])
-    solver = FixedConductors(base, sensor.eps_r, cells=cells)
     touches = [Touch(face, (float(u_mm), float(v))) for v in v_mm]
     # the fingertips of the whole row placed at once (the finger at force 0 leaves the body as
     # it is); the panels and any direct solve below are the twin's own calls
     with hovering(sensor.manipulator, sensor.finger, inflation_ml, touches, heights):
         fingers = [
-            sensor.finger_panels(inflation_ml, t, zeros, heights_mm=heights) for t in touches
-        ]  # n_v lists of n_heights
+            [(p, blocks[0][1]) for p, blocks in
+             sensor.finger_sets(inflation_ml, t, zeros, heights_mm=heights)]
+            for t in touches
+        ]  # n_v lists of n_heights (panels, their own block)
         try:  # the whole row in one batch
             flat = _readouts(sensor, solver, [p for per_v in fingers for p in per_v], cavities)
             return flat.reshape(len(v_mm), heights.size, -1)
         except EctskinError:
             pass
         return _one_by_one(sensor, inflation_ml, solver, touches, fingers, heights, cavities)
+
+
+#: per sensor, the last few states' untouched electrodes factored (:func:`untouched_conductors`)
+_UNTOUCHED: weakref.WeakKeyDictionary[SensorModel, dict[bytes, FixedConductors]] = (
+    weakref.WeakKeyDictionary()
+)
+_UNTOUCHED_KEPT = 4
+
+
+def untouched_conductors(sensor: SensorModel, inflation_ml) -> FixedConductors:
+    """The untouched state's electrode panels (and cavity cells) factored for the Schur path,
+    once per sensor and state: every hover row of a state adds its fingers to the same factor.
+    A pure function of the sensor and the state (the fingers' own blocks are passed in, so the
+    factor carries nothing from one row to the next), so the rows' values do not depend on
+    which rows a process solved before."""
+    p = sensor.manipulator.check_inflation(inflation_ml)
+    per_sensor = _UNTOUCHED.setdefault(sensor, {})
+    solver = per_sensor.get(p.tobytes())
+    if solver is None:
+        base = sensor.electrode_panels(p, None, [0.0])[0]
+        cells = None
+        if sensor.chamber_eps_r is not None and sensor.chamber_eps_r != sensor.eps_r:
+            pts, vols = sensor.cavity_cells(p, None, [0.0])
+            cells = (pts[0], vols[0])
+        solver = FixedConductors(base, sensor.eps_r, cells=cells)
+        if len(per_sensor) >= _UNTOUCHED_KEPT:
+            per_sensor.pop(next(iter(per_sensor)))
+        per_sensor[p.tobytes()] = solver
+    return solver
 
 
 def _one_by_one(sensor, inflation_ml, solver, touches, fingers, heights, cavities) -> np.ndarray:
@@ -156,12 +186,17 @@ def _one_by_one(sensor, inflation_ml, solver, touches, fingers, heights, cavitie
 
 
 def _readouts(
-    sensor: SensorModel, solver: FixedConductors, fingers: list[Panels], cavities: bool
+    sensor: SensorModel, solver: FixedConductors, fingers: list[tuple[Panels, np.ndarray]],
+    cavities: bool,
 ) -> np.ndarray:
-    """(len(fingers), n_pairs) C_ij = −K_ij, with the cavities' first-order term as the twin
-    adds it (:class:`SensorModel`, ``chamber_eps_r``)."""
+    """(len(fingers), n_pairs) C_ij = −K_ij of the fingers (panels, their own potential block),
+    with the cavities' first-order term as the twin adds it (:class:`SensorModel`,
+    ``chamber_eps_r``)."""
     n = sensor.n_electrodes
-    K, S = solver.capacitance(fingers, sensitivity_columns=n if cavities else None)
+    K, S = solver.capacitance(
+        [p for p, _ in fingers], sensitivity_columns=n if cavities else None,
+        blocks=[b for _, b in fingers],
+    )
     Kn = K[:, :n, :n]
     if S is not None:
         assert sensor.chamber_eps_r is not None  # (cavities says so)

@@ -60,8 +60,10 @@ from ectskin.twin.mechanics_tables import (
     POSE_FRAMES_KEPT,
     POSES_KEPT,
     bredt_torsion,
-    interp_rows,
+    invert_pull_in,
+    kept_arrays,
     pose_key,
+    pull_in_table,
     rect_torsion,
     remember,
 )
@@ -216,6 +218,7 @@ class Manipulator:
         # chamber) and the pull-in's arc-length table (a placement maps a state a dozen times)
         self._heights: dict[bytes, np.ndarray] = {}
         self._arcs: dict[bytes, np.ndarray] = {}
+        self._rests: dict[tuple, tuple[np.ndarray, ...]] = {}  # deform(keep_rest=True)
 
     # ------------------------------------------------------------------ inflation
     def check_inflation(self, inflation_ml) -> np.ndarray:
@@ -313,25 +316,12 @@ class Manipulator:
         key = np.asarray(heights, dtype=np.float64).tobytes()
         mixed = self._arcs.get(key)
         if mixed is None:
-            g = np.gradient(np.tensordot(heights, self._chamber_window_z(zg), axes=1), zg)  # (n_z,)
-            phis = np.linspace(0.0, 1.0, _PULL_IN_PHIS)
-            integrand = np.sqrt(1.0 + (phis[:, None] * g[None, :]) ** 2)
-            steps = 0.5 * (integrand[:, 1:] + integrand[:, :-1]) * np.diff(zg)
-            arc = np.concatenate([np.zeros((phis.size, 1)), np.cumsum(steps, axis=1)], axis=1)
-            mixed = kappa * arc + (1.0 - kappa) * zg[None, :]  # increasing in ζ for every φ
-            mixed.setflags(write=False)
+            slope = np.gradient(np.tensordot(heights, self._chamber_window_z(zg), axes=1), zg)
+            mixed = pull_in_table(slope, zg, kappa, _PULL_IN_PHIS)
             remember(self._arcs, key, mixed)
-        n_phi = mixed.shape[0]
         zz = np.ravel(z).astype(np.float64)
         phi = np.ravel(self._window_x(x) if phi is None else phi)
-        fi = np.clip(phi * (n_phi - 1), 0, n_phi - 1 - 1e-9)
-        i0 = fi.astype(int)
-        wi = fi - i0
-        # invert the two bracketing rows, blend linearly in φ
-        lo = interp_rows(zz, mixed, zg, i0)
-        hi = interp_rows(zz, mixed, zg, i0 + 1)
-        zeta = (1 - wi) * lo + wi * hi
-        return (zz - zeta).reshape(np.shape(x))
+        return (zz - invert_pull_in(zz, phi, mixed, zg)).reshape(np.shape(x))
 
     def bulge_mm(self, x, z, heights) -> np.ndarray:
         """Outward bulge b(x, z) = Σ_k h_k φ(x) ψ_k(z) of a front/back face point (mm)."""
@@ -467,6 +457,8 @@ class Manipulator:
         touch: Touch | tuple[Touch, ...] | None = None,
         force_n=0.0,
         handling: Handling | None = None,
+        *,
+        keep_rest: bool = False,
     ) -> np.ndarray:
         """Map rest surface coordinates to deformed 3D points, one set per force value.
 
@@ -479,6 +471,8 @@ class Manipulator:
         touch : the finger's contact, a tuple of fingers' contacts, or None.
         force_n : scalar or (F,) touch force per frame; (F, T) for a tuple of T touches.
         handling : the finger's shear and the hand's push per frame (F rows), or None.
+        keep_rest : keep the state's part (bulge, pull-in, stretch) of these (n, 2) points, for
+            points deformed touch after touch (a sensor's panels); the same numbers as without.
 
         Returns
         -------
@@ -498,13 +492,12 @@ class Manipulator:
         if not per_frame:
             uv = uv.reshape(-1, 2)
         n_pts = uv.shape[-2]
+        if keep_rest and not per_frame:
+            key = (surface, uv.shape, uv.tobytes(), p.tobytes())
+            x, z, offset, zq = kept_arrays(self._rests, key, lambda: self._rest_part(surface, uv, p))
+        else:
+            x, z, offset, zq = self._rest_part(surface, uv, p)
         if surface in SIDE:
-            heights = self.bulge_height_mm(p)
-            x = uv[..., 0]
-            phi = self._window_x(x)
-            z = uv[..., 1] - self._face_pull_in(x, uv[..., 1], heights, phi)
-            # the bulge (bulge_mm), (n,) or (F, n)
-            offset = c.thickness_mm / 2 + phi * np.tensordot(heights, self._chamber_window_z(z), axes=1)
             offset = np.broadcast_to(offset, (n_f, n_pts)).copy()
             for k, t in enumerate(touches):  # each finger's dimple on this face
                 if t.surface != surface:
@@ -515,17 +508,11 @@ class Manipulator:
                 offset -= depth[:, None] * (bump if per_frame else bump[None, :])
             yprime = SIDE[surface] * offset
             xs = np.broadcast_to(x, yprime.shape)
-        elif surface in ("right", "left"):
+        else:
             x0 = c.width_mm / 2 * (1.0 if surface == "right" else -1.0)
             yprime = np.broadcast_to(uv[..., 0], (n_f, n_pts))
-            z = uv[..., 1]
             xs = np.full(yprime.shape, x0)
-        else:
-            raise EctskinError(
-                f"unknown surface {surface!r}: expected front, back, right or left"
-            )
         zs, r, rot = self.pose(force_n, touch, p, handling)
-        zq = self.axial_position(z, p)
         # the axis and the section frame at each point's stretched axial position (per frame):
         # one table per frame and grid point of the axis and the frame's first two columns (the
         # third meets a zero), (F n_z, 9), interpolated linearly
@@ -535,6 +522,24 @@ class Manipulator:
         at = np.broadcast_to(j + (np.arange(n_f) * zs.size)[:, None], xs.shape)  # (F, n)
         a = (1 - w) * table[at] + w * table[at + 1]  # (F, n, 9)
         return a[..., :3] + (a[..., 3:6] * xs[..., None] + a[..., 6:9] * yprime[..., None])
+
+    def _rest_part(self, surface: str, uv: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(x, z, offset, zq): the state's part of :meth:`deform` for rest points ``uv``: section
+        offset, pulled-in z, bulge offset (x and offset empty on the sides), stretched z."""
+        c = self.config
+        if surface in SIDE:
+            heights = self.bulge_height_mm(p)
+            x = uv[..., 0]
+            phi = self._window_x(x)
+            z = uv[..., 1] - self._face_pull_in(x, uv[..., 1], heights, phi)
+            # the bulge (bulge_mm), (n,) or (F, n)
+            offset = c.thickness_mm / 2 + phi * np.tensordot(heights, self._chamber_window_z(z), axes=1)
+        elif surface in ("right", "left"):
+            x = offset = np.empty(0)
+            z = uv[..., 1]
+        else:
+            raise EctskinError(f"unknown surface {surface!r}: expected front, back, right or left")
+        return x, z, np.asarray(offset), self.axial_position(z, p)
 
     def face_frame(
         self,

@@ -14,6 +14,9 @@ STATES_KEPT = 8
 #: beyond the last 8 only while they hold at most this many frames in all (a frame's pose is
 #: 61 × 12 numbers)
 POSES_KEPT = 64
+#: point sets whose state part :meth:`~ectskin.twin.mechanics.Manipulator.deform` keeps
+#: (``keep_rest``): a sensor's electrode corners and cavity cells per surface, a few states
+RESTS_KEPT = 24
 POSE_FRAMES_KEPT = 4096
 
 
@@ -59,9 +62,47 @@ def interp_rows(x: np.ndarray, xp: np.ndarray, fp: np.ndarray, rows: np.ndarray)
     return np.where(count >= n, fp[n - 1], out)
 
 
-def remember(cache: dict, key, value) -> None:
-    """``cache[key] = value``, dropping the oldest entry beyond :data:`STATES_KEPT`."""
-    if len(cache) >= STATES_KEPT:
+def pull_in_table(slope: np.ndarray, zg: np.ndarray, kappa: float, n_phis: int) -> np.ndarray:
+    """(n_phis, n_z) κ S(ζ) + (1 − κ) ζ on the axial grid ``zg`` for φ = 0 … 1, S the face's arc
+    length along z where its slope is φ · ``slope`` (trapezoids): the rows that
+    :func:`invert_pull_in` inverts (:meth:`~ectskin.twin.mechanics.Manipulator._face_pull_in`);
+    read-only."""
+    phis = np.linspace(0.0, 1.0, n_phis)
+    integrand = np.sqrt(1.0 + (phis[:, None] * slope[None, :]) ** 2)
+    steps = 0.5 * (integrand[:, 1:] + integrand[:, :-1]) * np.diff(zg)
+    arc = np.concatenate([np.zeros((phis.size, 1)), np.cumsum(steps, axis=1)], axis=1)
+    mixed = kappa * arc + (1.0 - kappa) * zg[None, :]  # increasing in ζ for every φ
+    mixed.setflags(write=False)
+    return mixed
+
+
+def invert_pull_in(z: np.ndarray, phi: np.ndarray, mixed: np.ndarray, zg: np.ndarray) -> np.ndarray:
+    """(k,) ζ with κ S(ζ) + (1 − κ) ζ = z at φ: the two rows of :func:`pull_in_table` that
+    bracket each φ inverted, blended linearly in φ."""
+    n_phi = mixed.shape[0]
+    fi = np.clip(phi * (n_phi - 1), 0, n_phi - 1 - 1e-9)
+    i0 = fi.astype(int)
+    wi = fi - i0
+    lo = interp_rows(z, mixed, zg, i0)
+    hi = interp_rows(z, mixed, zg, i0 + 1)
+    return (1 - wi) * lo + wi * hi
+
+
+def kept_arrays(cache: dict, key, make) -> tuple[np.ndarray, ...]:
+    """``cache[key]``, or ``make()``'s arrays copied, read-only, kept under ``key`` (at most
+    :data:`RESTS_KEPT` entries)."""
+    value = cache.get(key)
+    if value is None:
+        value = tuple(np.array(a) for a in make())  # own copies: the caller's may change
+        for a in value:
+            a.setflags(write=False)
+        remember(cache, key, value, kept=RESTS_KEPT)
+    return value
+
+
+def remember(cache: dict, key, value, kept: int = STATES_KEPT) -> None:
+    """``cache[key] = value``, dropping the oldest entry beyond ``kept``."""
+    if len(cache) >= kept:
         cache.pop(next(iter(cache)))
     cache[key] = value
 

@@ -98,12 +98,14 @@ def integrate(s: np.ndarray, kappa: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         ],
         axis=-1,
     )  # (F, N-1, 3)
-    r = np.zeros((n_f, n, 3))
-    rot = np.zeros((n_f, n, 3, 3))
+    rot = np.empty((n_f, n, 3, 3))
     rot[:, 0] = np.eye(3)
-    for i in range(n - 1):
-        r[:, i + 1] = r[:, i] + np.einsum("fij,fj->fi", rot[:, i], mid[:, i]) * ds[i]
-        rot[:, i + 1] = rot[:, i] @ steps[:, i]
+    for i in range(n - 1):  # the frames, step by step
+        np.matmul(rot[:, i], steps[:, i], out=rot[:, i + 1])
+    # then the axis: r_{i+1} = r_i + R_i mid_i ds_i, summed in order (the same sums as a loop)
+    r = np.zeros((n_f, n, 3))
+    np.cumsum(np.einsum("fnij,fnj->fni", rot[:, :-1], mid) * ds[None, :, None], axis=1,
+              out=r[:, 1:])
     return r, rot
 
 

@@ -24,6 +24,7 @@ a sensor with other fingers (people's differ) cheaply.
 from __future__ import annotations
 
 import copy
+import functools
 import logging
 from dataclasses import dataclass
 
@@ -36,6 +37,7 @@ from ectskin.electrostatics import (
     cylinder_panels,
     dielectric_sensitivity,
     maxwell_capacitance,
+    potential_matrix,
     sphere_panels,
 )
 from ectskin.electrostatics.meshing import orthonormal_frame, rectangle_quads, strip_quads
@@ -193,7 +195,8 @@ class SensorModel:
         per_force: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(n_f)]
         for surface, (quads, cond) in self._rest.items():
             xyz = self.manipulator.deform(
-                surface, quads.reshape(-1, 2), inflation_ml, touch, forces, handling
+                surface, quads.reshape(-1, 2), inflation_ml, touch, forces, handling,
+                keep_rest=True,
             )
             xyz = xyz.reshape(n_f, len(quads), 4, 3)
             for f in range(n_f):
@@ -269,52 +272,58 @@ class SensorModel:
         every finger's, all on the one finger conductor (see the module docstring), each placed
         on the skin as deformed by all of them.
         """
+        sets = self.finger_sets(
+            inflation_ml, touch, forces, handling, heights_mm=heights_mm, sphere_n=sphere_n
+        )
+        return [panels for panels, _ in sets]
+
+    def finger_sets(
+        self, inflation_ml, touch, forces, handling=None, *, heights_mm=None,
+        sphere_n: int | None = None,
+    ) -> list[tuple[Panels, list[tuple[int, np.ndarray]]]]:
+        """:meth:`finger_panels` per frame with each fingertip's own potential block: (panels,
+        [(first panel of a fingertip, its block), ...]), the blocks of
+        :func:`~ectskin.electrostatics.potential_matrix`'s ``blocks`` (:func:`finger_block`:
+        computed once per finger shape, not per touch)."""
         tips = self.fingertips(inflation_ml, touch, forces, handling, heights_mm=heights_mm)
         fingers = [self._tip_panels(tip, sphere_n) for tip in tips]
         if len(fingers) == 1:
-            return fingers[0]
-        return [Panels.concatenate(parts) for parts in zip(*fingers)]
+            return [(panels, [(0, block)]) for panels, block in fingers[0]]
+        out = []
+        for parts in zip(*fingers):
+            starts = np.cumsum([0] + [p.n_panels for p, _ in parts[:-1]])
+            out.append(
+                (Panels.concatenate([p for p, _ in parts]),
+                 [(int(s), block) for s, (_, block) in zip(starts, parts)])
+            )
+        return out
 
-    def _tip_panels(self, tip: Fingertip, sphere_n: int | None) -> list[Panels]:
-        """Panels of one fingertip and its shaft, per frame."""
+    def _tip_panels(self, tip: Fingertip, sphere_n: int | None) -> list[tuple[Panels, np.ndarray]]:
+        """Panels of one fingertip and its shaft, per frame, and their own potential block: the
+        finger's shape (:func:`finger_shape`) turned onto the axis and moved to the centre."""
         fg, d = tip.finger, self.discretisation
-        out: list[Panels] = []
-        cond = self.n_electrodes
-        # the fingertip: the half of a cubed sphere facing the skin, chosen once in the sphere's
-        # own frame (pole along +z) and then rotated onto the surface normal, so that the same
-        # panels make the tip at every force (choosing them by the sign of (c − centre)·n in
-        # world axes let panels on the equator flip in and out as the normal tilted, a step
-        # of ~0.1 % in the readout)
-        unit = sphere_panels(np.zeros(3), fg.radius_mm, sphere_n or d.finger_sphere_n, cond)
-        keep = unit.centres[:, 2] < -1e-6 * fg.radius_mm
+        out: list[tuple[Panels, np.ndarray]] = []
+        shape = (fg.radius_mm, fg.shaft_length_mm, sphere_n or d.finger_sphere_n,
+                 d.finger_shaft_around, d.finger_shaft_along, self.n_electrodes)
         for f, (n, centre, depth) in enumerate(zip(tip.axis, tip.centre_mm, tip.pad_depth_mm)):
             if f and np.array_equal(n, tip.axis[f - 1]) and depth == tip.pad_depth_mm[f - 1]:
                 # the previous frame's finger moved along its axis (a hovering finger at
                 # another height): the same panels, translated
-                last = out[-1]
+                last, block = out[-1]
                 shift = centre - tip.centre_mm[f - 1]
                 out.append(
-                    Panels(last.centres + shift, last.u, last.v, last.conductor, last.n_conductors)
+                    (Panels(last.centres + shift, last.u, last.v, last.conductor,
+                            last.n_conductors), block)
                 )
                 continue
+            local = finger_shape(*shape[:2], float(depth), *shape[2:])
             e1, e2 = orthonormal_frame(n)
             rot = np.stack([e1, e2, n], axis=1)  # local (x, y, z) -> world, z onto n
-            c_loc, u_loc, v_loc = flatten_cap(
-                unit.centres[keep], unit.u[keep], unit.v[keep], fg.radius_mm - depth
-            )
             panels = Panels(
-                centre + c_loc @ rot.T, u_loc @ rot.T, v_loc @ rot.T, unit.conductor[keep], cond + 1
+                centre + local.centres @ rot.T, local.u @ rot.T, local.v @ rot.T,
+                local.conductor, local.n_conductors,
             )
-            shaft = cylinder_panels(
-                centre,
-                centre + n * fg.shaft_length_mm,
-                fg.radius_mm,
-                d.finger_shaft_around,
-                d.finger_shaft_along,
-                cond,
-                caps=False,
-            )
-            out.append(Panels.concatenate([panels, shaft]))
+            out.append((panels, finger_block(*shape[:2], float(depth), *shape[2:], self.eps_r)))
         return out
 
     def cavity_cells(
@@ -333,8 +342,9 @@ class SensorModel:
         wall = self.manipulator.config.chamber_wall_mm
         n_t = self.discretisation.cavity_layers
         uv, area = self._cavity_uv
-        front = self.manipulator.deform("front", uv, inflation_ml, touch, forces, handling)
-        back = self.manipulator.deform("back", uv, inflation_ml, touch, forces, handling)
+        m = self.manipulator
+        front = m.deform("front", uv, inflation_ml, touch, forces, handling, keep_rest=True)
+        back = m.deform("back", uv, inflation_ml, touch, forces, handling, keep_rest=True)
         span = back - front
         gap = np.linalg.norm(span, axis=2)  # (F, n)
         inner = np.maximum(gap - 2.0 * wall, 0.0)
@@ -352,12 +362,18 @@ class SensorModel:
     def _with_cavities(self) -> bool:
         return self.chamber_eps_r is not None and self.chamber_eps_r != self.eps_r
 
-    def _readout(self, panels: Panels, cells: tuple[np.ndarray | None, np.ndarray | None]) -> np.ndarray:
-        """(n_pairs,) C_ij = −K_ij of one panel set, with the cavities' first-order term."""
+    def _readout(
+        self, panels: Panels, cells: tuple[np.ndarray | None, np.ndarray | None],
+        blocks: list[tuple[int, np.ndarray]] | None = None,
+    ) -> np.ndarray:
+        """(n_pairs,) C_ij = −K_ij of one panel set, with the cavities' first-order term;
+        ``blocks``: the fingertips' own potential blocks (:meth:`finger_sets`)."""
         if not self._with_cavities:
-            K = maxwell_capacitance(panels, self.eps_r)
+            K = maxwell_capacitance(panels, self.eps_r, blocks=blocks or ())
         else:
-            K, q = maxwell_capacitance(panels, self.eps_r, return_charges=True)
+            K, q = maxwell_capacitance(
+                panels, self.eps_r, return_charges=True, blocks=blocks or ()
+            )
             n = self.n_electrodes
             S = dielectric_sensitivity(panels, q[:, :n], cells[0], cells[1], self.eps_r)
             chamber_eps_r = self.chamber_eps_r
@@ -408,17 +424,20 @@ class SensorModel:
             for f, pe in enumerate(electrodes):
                 out[f] = self._readout(_without_finger(pe, self.n_electrodes), (pts[f], vols[f]))
             return np.repeat(out, n_rows, axis=0) if static else out
-        fingers = self.finger_panels(inflation_ml, touch, forces, handling, heights_mm=heights_mm)
-        for f, (pe, pf) in enumerate(zip(electrodes, fingers)):
+        fingers = self.finger_sets(inflation_ml, touch, forces, handling, heights_mm=heights_mm)
+        for f, (pe, (pf, blocks)) in enumerate(zip(electrodes, fingers)):
             try:
-                out[f] = self._readout(Panels.concatenate([pe, pf]), (pts[f], vols[f]))
+                out[f] = self._readout(
+                    Panels.concatenate([pe, pf]), (pts[f], vols[f]),
+                    [(pe.n_panels + s, block) for s, block in blocks],
+                )
             except EctskinError:
                 # a coarse fingertip panel very close to a fine wire-end panel can make the
                 # collocation matrix indefinite: refine the fingertip and solve again
                 log.debug("refining the fingertip at %s, %s N", touch, forces[f])
                 one = None if handling is None else _handling_rows(handling, f)
                 h = None if heights_mm is None else np.atleast_1d(heights_mm)[f : f + 1]
-                pf = self.finger_panels(
+                pf, blocks = self.finger_sets(
                     inflation_ml,
                     touch,
                     forces[f : f + 1],
@@ -426,7 +445,10 @@ class SensorModel:
                     heights_mm=h,
                     sphere_n=2 * self.discretisation.finger_sphere_n,
                 )[0]
-                out[f] = self._readout(Panels.concatenate([pe, pf]), (pts[f], vols[f]))
+                out[f] = self._readout(
+                    Panels.concatenate([pe, pf]), (pts[f], vols[f]),
+                    [(pe.n_panels + s, block) for s, block in blocks],
+                )
         return out
 
     def marker_positions(
@@ -444,6 +466,64 @@ class SensorModel:
             uv = np.asarray([self.layout.markers[k].uv_mm for k in idx])
             out[:, idx] = self.manipulator.deform(surface, uv, inflation_ml, touch, forces, handling)
         return out
+
+
+# ---------------------------------------------------------------------- the finger's shape
+#: fingertip shapes kept (and their own potential blocks): a field's force nodes and its hover
+#: shape, for a few fingers and meshes
+SHAPES_KEPT = 64
+
+
+@functools.lru_cache(maxsize=SHAPES_KEPT)
+def finger_shape(
+    radius_mm: float, shaft_length_mm: float, depth_mm: float, sphere_n: int,
+    shaft_around: int, shaft_along: int, conductor: int,
+) -> Panels:
+    """The panels of a fingertip and its shaft in the finger's own frame: the sphere's centre at
+    the origin, the shaft along +z, the pad (pressed ``depth_mm`` flat) towards −z; conductor
+    ``conductor`` of ``conductor + 1``. They depend on nothing else, so they are built once per
+    shape and turned onto each touch's axis (:meth:`SensorModel._tip_panels`).
+
+    The fingertip is the half of a cubed sphere facing the skin, chosen in the sphere's own
+    frame, so that the same panels make the tip at every force and axis (choosing them by the
+    sign of (c − centre)·n in world axes let panels on the equator flip in and out as the normal
+    tilted, a step of ~0.1 % in the readout), its pad flattened (:func:`flatten_cap`)."""
+    unit = sphere_panels(np.zeros(3), radius_mm, sphere_n, conductor)
+    keep = unit.centres[:, 2] < -1e-6 * radius_mm
+    c_loc, u_loc, v_loc = flatten_cap(
+        unit.centres[keep], unit.u[keep], unit.v[keep], radius_mm - depth_mm
+    )
+    tip = Panels(c_loc, u_loc, v_loc, unit.conductor[keep], conductor + 1)
+    shaft = cylinder_panels(
+        np.zeros(3), np.array([0.0, 0.0, shaft_length_mm]), radius_mm, shaft_around, shaft_along,
+        conductor, caps=False,
+    )
+
+    # cylinder_panels starts its side on orthonormal_frame(+z) = (−y, +x); a quarter turn about
+    # z (exact) starts it on (+x, +y), so that turned onto an axis n by orthonormal_frame(n) it
+    # is the shaft that cylinder_panels builds about n
+    def quarter(a: np.ndarray) -> np.ndarray:
+        return np.stack([-a[:, 1], a[:, 0], a[:, 2]], axis=1)
+
+    shaft = Panels(quarter(shaft.centres), quarter(shaft.u), quarter(shaft.v), shaft.conductor,
+                   shaft.n_conductors)
+    return Panels.concatenate([tip, shaft])
+
+
+@functools.lru_cache(maxsize=SHAPES_KEPT)
+def finger_block(
+    radius_mm: float, shaft_length_mm: float, depth_mm: float, sphere_n: int,
+    shaft_around: int, shaft_along: int, conductor: int, eps_r: float,
+) -> np.ndarray:
+    """(m, m) the potential matrix of :func:`finger_shape` (read-only): the fingertip's own
+    block of every solve it takes part in, whatever its point and axis (a rigid motion leaves it
+    as it is, to round-off)."""
+    shape = finger_shape(
+        radius_mm, shaft_length_mm, depth_mm, sphere_n, shaft_around, shaft_along, conductor
+    )
+    out = potential_matrix(shape, eps_r)
+    out.setflags(write=False)
+    return out
 
 
 def _cavity_grid(c, cell_mm: float) -> tuple[np.ndarray, np.ndarray]:
