@@ -34,8 +34,8 @@ from ectskin.twin.protocol import Protocol
 #: (:meth:`Protocol.rng`), apart from the paper's (0) and the contact experiment's.
 COVERAGE_STREAM = 0xC0
 #: Seconds of one coverage trial (90 frames at 30 fps): long enough for the force to move over a
-#: part of its range, short enough that the 18 × 27 × 2 touches cost about a fifth of the
-#: paper's sliding experiment in method-of-moments solves.
+#: part of its range. Each trial is one readout model (about 11 method-of-moments solves, however
+#: long it lasts), so the 18 × 27 × 2 touches cost about half the paper's sliding experiment.
 COVERAGE_DURATION_S = 3.0
 #: Touches of each region in each state: two points of the region, so that the trials show
 #: where its borders lie at every inflation (chosen on validation accuracy, seed 0 of the sliding
