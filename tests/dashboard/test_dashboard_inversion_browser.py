@@ -394,3 +394,24 @@ def test_no_inversion_head_no_inversion_drawn(chromium):
         assert page.locator("#contact-faces .inv-se").count() == 0
         assert page.locator("#contact-faces .finger-dot[visibility=visible]").count() == 1
     assert not errors, f"errors in the page: {errors}"
+
+
+def test_a_fit_whose_frame_was_skipped_still_stands_for_the_frames_after_it(chromium):
+    """The hub sends the newest frame only: a page that never got the frame carrying the fit
+    (here: it connects after it) draws the fit from ``inversion_fit`` of the frames after it."""
+    hub = Hub(LAYOUT, Engine(contact=False, every=3))
+    errors: list[str] = []
+    with DashboardServer(None, hub=hub, port=0) as server:
+        hub.set_engine_state("running")
+        hub.publish(message(10, [fitted("front", 6.0, 70.0, 1.5, 0.7, force=(0.6, 0.04))]))
+        hub.publish(message(11, None))
+        page = chromium.new_page(viewport={"width": 1400, "height": 1600})
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(server.url)  # the newest frame (11) is what it gets, not the fit's (10)
+        s = snapshot(page, 11, contact=False)
+        assert_finger(s["faces"]["front"], 0, 6.0, 70.0, 1.5, 0.7)
+        assert s["note"] == "the fit of frame 10 (one every 3 frames)"
+        hub.publish(message(13, None))  # beyond the frames the fit stands for: none
+        s = snapshot(page, 13, contact=False)
+        assert all(f["ell"] == {} and f["mark"] == {} for f in s["faces"].values())
+    assert not errors, f"errors in the page: {errors}"

@@ -5,7 +5,11 @@ The engine runs in its own thread and hands every :class:`~ectskin.live.output.O
 client is woken when a new one arrives and is sent the newest one at most ``max_rate_hz`` times a
 second (:class:`TokenBucket`; frames in between are skipped for that client, never queued), so a
 slow browser can never slow the engine down. JSON encoding happens on the server's loop, once per
-output sent, whatever the number of clients. The hub also holds the engine's state (running,
+output sent, whatever the number of clients. Since frames are skipped, the hub also keeps the
+newest output that carries a physical-inversion fit (``--inversion-every N`` fits every N-th
+frame, the others carry ``inversion: null``): a frame sent without a fit of its own carries that
+one as ``inversion_fit`` (``{"seq", "inversion"}``), so the page can show the fit its frame
+stands for even when the frame that carried it was skipped. The hub also holds the engine's state (running,
 ended, error: :meth:`Hub.set_engine_state`), which every client is told at once, so that a page
 never calls a stream "live" after it has stopped.
 """
@@ -155,6 +159,7 @@ class Hub:
         self._reference_markers = reference_markers
         self._lock = threading.Lock()
         self._latest: Any = None
+        self._fit: Any = None  # the newest output with an inversion fit
         self._version = 0
         self._encoded: tuple[int, str] | None = None  # cache, touched on the server loop only
         self._subscribers: set[_Subscriber] = set()
@@ -171,8 +176,13 @@ class Hub:
     def publish(self, output: Any) -> None:
         """Store ``output`` (an ``Output`` or a frame dict) as the newest and wake the clients."""
         now = time.monotonic()
+        fitted = (
+            output.get("inversion") if isinstance(output, dict) else getattr(output, "inversion", None)
+        ) is not None
         with self._lock:
             self._latest = output
+            if fitted:
+                self._fit = output
             self._version += 1
             if now - self._last_history_t >= 1.0 / self.max_rate_hz:
                 self._history.append((now, output))
@@ -288,13 +298,20 @@ class Hub:
 
     def encoded_latest(self) -> tuple[int, str | None]:
         """``(version, JSON text)`` of the newest output, encoded once however many clients."""
-        version, out = self.latest()
+        with self._lock:
+            version, out, fit = self._version, self._latest, self._fit
         if out is None:
             return 0, None
         cached = self._encoded
         if cached is not None and cached[0] == version:
             return cached
-        text = encode(frame_dict(out))
+        d = frame_dict(out)
+        if fit is not None and fit is not out and d.get("inversion") is None:
+            f = frame_dict(fit)
+            seq, fit_seq = d.get("seq"), f.get("seq")
+            if isinstance(seq, int) and isinstance(fit_seq, int) and fit_seq < seq:
+                d = {**d, "inversion_fit": {"seq": fit_seq, "inversion": f["inversion"]}}
+        text = encode(d)
         self._encoded = (version, text)
         return version, text
 

@@ -111,7 +111,14 @@
       draw(view.shown, "");
       return;
     }
-    const last = view.shown;
+    // the hub's newest fit (it rides on frames without one, since frames between are skipped)
+    const carried = f.inversion_fit;
+    let last = view.shown;
+    if (carried && typeof carried === "object" && isNum(carried.seq) && carried.inversion &&
+        typeof carried.inversion === "object" && (!last || !isNum(last.seq) || carried.seq > last.seq)) {
+      last = { seq: carried.seq, inv: carried.inversion };
+      view.shown = last;
+    }
     if (last && view.every > 1 && isNum(f.seq) && isNum(last.seq) && f.seq > last.seq &&
         f.seq - last.seq < view.every) {
       draw(last, "the fit of frame " + last.seq + " (one every " + view.every + " frames)");
