@@ -62,6 +62,11 @@ def test_extra_data_of_another_skin_or_no_file_is_refused(tmp_path, files, make_
                          extra_train=(str(tmp_path / "nope.h5"),))
     with pytest.raises(EctskinError, match="nope.h5"):
         train_from_recording("touch", main, tmp_path / "run", config)
+    # the run's own recording as extra data would put its validation and test trials in training
+    same = replace(config, extra_train=(str(main),))
+    with pytest.raises(EctskinError, match=r"data\.h5: 10 trial\(s\) .* of the run's own"):
+        train_from_recording("touch", main, tmp_path / "run2", same)
+    assert not (tmp_path / "run2" / "model.pt").exists()
 
 
 def test_the_baselines_are_fitted_on_the_run_s_extra_trials_too(tmp_path, files, monkeypatch):

@@ -160,6 +160,7 @@ class Hub:
         self._lock = threading.Lock()
         self._latest: Any = None
         self._fit: Any = None  # the newest output with an inversion fit
+        self._fit_dict: tuple[Any, dict[str, Any]] | None = None  # (that output, its dict)
         self._version = 0
         self._encoded: tuple[int, str] | None = None  # cache, touched on the server loop only
         self._subscribers: set[_Subscriber] = set()
@@ -307,7 +308,9 @@ class Hub:
             return cached
         d = frame_dict(out)
         if fit is not None and fit is not out and d.get("inversion") is None:
-            f = frame_dict(fit)
+            if self._fit_dict is None or self._fit_dict[0] is not fit:  # converted once per fit
+                self._fit_dict = (fit, frame_dict(fit))
+            f = self._fit_dict[1]
             seq, fit_seq = d.get("seq"), f.get("seq")
             if isinstance(seq, int) and isinstance(fit_seq, int) and fit_seq < seq:
                 d = {**d, "inversion_fit": {"seq": fit_seq, "inversion": f["inversion"]}}

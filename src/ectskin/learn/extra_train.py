@@ -47,20 +47,32 @@ def _reference_of(reference: Any) -> Any:
 
 
 def extra_training_data(
-    task: Any, paths: Sequence[str | Path], *, reference: Any, options: Mapping[str, Any]
+    task: Any, paths: Sequence[str | Path], *, reference: Any, options: Mapping[str, Any],
+    run_digests: Mapping[str, str] | None = None,
 ) -> tuple[list[Any], list[dict[str, Any]]]:
     """The task's data sets of the recordings ``paths`` (each calibrated with ``reference`` against
     its own rest readouts; ``options``: the task's data set options, window and prior) and their
-    identities for split.json (:func:`extra_identity`)."""
+    identities for split.json (:func:`extra_identity`). An extra recording holding a trial of the
+    run's own recording (``run_digests``, its trial digests) is refused: that trial could be a
+    validation or test trial, and would then be trained on."""
+    theirs = set((run_digests or {}).values())
     data, ident = [], []
     for p in paths:
         path = Path(p)
         if not path.is_file():
             raise EctskinError(f"extra training recording {path}: no such file")
         rec = read_recording(path)
+        mine = extra_identity(path, rec)
+        shared = sorted(n for n, d in mine["trial_digests"].items() if d in theirs)
+        if shared:
+            raise EctskinError(
+                f"extra training recording {path}: {len(shared)} trial(s) ({shared[0]}, ...) hold "
+                "the readouts of a trial of the run's own recording; extra trials must be other "
+                "trials (the run's own are split into training, validation and test)"
+            )
         ds = task.dataset(rec, reference=_reference_of(reference), **options)
         data.append(ds)
-        ident.append(extra_identity(path, rec))
+        ident.append(mine)
         log.info("extra training trials: %d trials, %d samples of %s", ds.n_groups,
                  ds.n_samples, path)
     return data, ident

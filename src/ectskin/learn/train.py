@@ -143,7 +143,8 @@ def train_from_recording(
     if config.extra_train:  # trials for the training split alone (ectskin.learn.extra_train)
         options = {"window": config.window, "prior": config.prior}
         extras, split["extra_train"] = extra_training_data(
-            t, config.extra_train, reference=config.reference_for(task), options=options
+            t, config.extra_train, reference=config.reference_for(task), options=options,
+            run_digests=split["trial_digests"],
         )
         parts["train"] = join_training(parts["train"], extras, config.extra_train)
     if getattr(data, "reference", None):  # touch: the Eq. 2 reference, re-applied by evaluate

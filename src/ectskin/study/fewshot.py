@@ -281,27 +281,46 @@ def few_shot_curve(
         lambda d, n, method, v: log.info("few-shot draw %d, N = %d, %s: %.2f mm", d, n, method,
                                          v["loc_mm_mean"] or math.nan),
     )
+    study = dict(task=task, run=run, rec=rec, data_desc=data_desc, config=config, counts=counts,
+                 ds=ds, ids=ids, pool=pool, test=test, draws=draws, base=base)
+    split = {"test_single_contact_frames": base["n_single_contact_frames"]}
+    return curve_document(study, METRICS, values, seconds, t0, out, split=split)
+
+
+def curve_document(
+    study: dict[str, Any], metrics: dict[str, str], values: dict, seconds: dict, t0: float,
+    out: str | Path | None, *, split: dict[str, Any], extra: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The study's document (``few_shot.json``), written to ``out`` when given: the source run,
+    the new skin's data, the config, the split (plus ``split``), the draws, the source run's own
+    scores, the curve (``values`` per N and method, summarised by :func:`draw_stats`), the
+    fitting and total seconds (since ``t0``); ``extra`` top-level keys after ``new_layout``.
+    ``study``: task, run, rec, data_desc, config, counts, ds, ids, pool, test, draws, base.
+    Shared by the contact and touch studies."""
+    s = study
+    ds, pool = s["ds"], s["pool"]
     doc = {
         "format": FORMAT,
         "version": VERSION,
-        "task": task.name,
-        "source_run": str(Path(run.path).resolve()),
-        "source_data": run.split.get("data"),
-        "new_data": data_desc,
-        "new_layout": rec.layout.name,
-        "config": {**asdict(config), "counts": list(counts)},
+        "task": s["task"].name,
+        "source_run": str(Path(s["run"].path).resolve()),
+        "source_data": s["run"].split.get("data"),
+        "new_data": s["data_desc"],
+        "new_layout": s["rec"].layout.name,
+        **(extra or {}),
+        "config": {**asdict(s["config"]), "counts": list(s["counts"])},
         "split": {
-            "train": [ds.group_names[i] for i in ids["train"]],
-            "test": [ds.group_names[i] for i in ids["test"]],
+            "train": [ds.group_names[i] for i in s["ids"]["train"]],
+            "test": [ds.group_names[i] for i in s["ids"]["test"]],
             "pool_frames": pool.n_samples,
-            "test_frames": test.n_samples,
-            "test_single_contact_frames": base["n_single_contact_frames"],
+            "test_frames": s["test"].n_samples,
+            **split,
         },
-        "draws": draw_records(pool, draws, config.seed),
-        "metrics": dict(METRICS),
-        "source_on_new_skin": base,
+        "draws": draw_records(pool, s["draws"], s["config"].seed),
+        "metrics": dict(metrics),
+        "source_on_new_skin": s["base"],
         "curve": {
-            n: {m: draw_stats(v, METRICS) for m, v in per.items() if v} for n, per in values.items()
+            n: {m: draw_stats(v, metrics) for m, v in per.items() if v} for n, per in values.items()
         },
         "fit_seconds": seconds,
     }

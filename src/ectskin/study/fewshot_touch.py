@@ -45,7 +45,7 @@ import logging
 import math
 import tempfile
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -53,18 +53,14 @@ import numpy as np
 
 from ectskin._check import EctskinError
 from ectskin.study.fewshot import (
-    FORMAT,
-    VERSION,
     FewShotConfig,
     common_arguments,
+    curve_document,
     curve_values,
     draw_frames,
-    draw_records,
-    draw_stats,
     net_config,
     net_split,
     run_study,
-    write_outputs,
 )
 
 log = logging.getLogger(__name__)
@@ -154,35 +150,11 @@ def few_shot_touch_curve(
         lambda d, n, method, v: log.info("few-shot-touch draw %d, N = %d, %s: accuracy %.4f",
                                          d, n, method, v["accuracy"]),
     )
-    doc = {
-        "format": FORMAT,
-        "version": VERSION,
-        "task": task.name,
-        "source_run": str(Path(run.path).resolve()),
-        "source_data": run.split.get("data"),
-        "new_data": data_desc,
-        "new_layout": rec.layout.name,
-        "reference": ds.reference,
-        "config": {**asdict(config), "counts": list(counts)},
-        "split": {
-            "train": [ds.group_names[i] for i in ids["train"]],
-            "test": [ds.group_names[i] for i in ids["test"]],
-            "pool_frames": pool.n_samples,
-            "test_frames": test.n_samples,
-            "test_touch_frames": base["n_touch_frames"],
-        },
-        "draws": draw_records(pool, draws, config.seed),
-        "metrics": dict(METRICS),
-        "source_on_new_skin": base,
-        "curve": {
-            n: {m: draw_stats(v, METRICS) for m, v in per.items() if v} for n, per in values.items()
-        },
-        "fit_seconds": seconds,
-    }
-    doc["seconds"] = time.perf_counter() - t0
-    if out is not None:
-        write_outputs(out, doc)
-    return doc
+    study = dict(task=task, run=run, rec=rec, data_desc=data_desc, config=config, counts=counts,
+                 ds=ds, ids=ids, pool=pool, test=test, draws=draws, base=base)
+    split = {"test_touch_frames": base["n_touch_frames"]}
+    return curve_document(study, METRICS, values, seconds, t0, out, split=split,
+                          extra={"reference": ds.reference})
 
 
 def source_reference(run: Any) -> str:
