@@ -50,3 +50,36 @@ def test_a_large_array_comes_from_the_heap_not_a_fresh_mmap():
     assert _mapped_bytes("keep") < size  # from the heap, reused when freed
     assert _mapped_bytes("default", {**os.environ, **MALLOC_ENV}) < size
     assert keep_freed_memory() is True
+
+
+def _worker_mapped_bytes() -> int:
+    import ctypes
+
+    import numpy as np
+
+    class Mallinfo2(ctypes.Structure):
+        _fields_ = [(name, ctypes.c_size_t) for name in (
+            "arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks",
+            "fordblks", "keepcost")]
+
+    mallinfo2 = ctypes.CDLL("libc.so.6").mallinfo2
+    mallinfo2.restype = Mallinfo2
+    a = np.ones(5_000_000)  # 40 MB, alive while glibc is asked
+    held = int(mallinfo2().hblkhd)
+    del a
+    return held
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
+def test_the_dask_workers_start_with_the_thresholds():
+    """A Dask nanny applies its ``env`` inside the worker after the start, too late for glibc, and
+    its own pre-spawn ``MALLOC_TRIM_THRESHOLD_`` turns the adaptive threshold off: the worker of
+    :func:`ectskin._dask.dask_client` must hold a 40 MB array in the heap, not in a mapping.
+    Catches MALLOC_ENV passed as the cluster's ``env`` only (what the code did)."""
+    from ectskin._dask import dask_client
+
+    fn = _worker_mapped_bytes
+    fn.__module__ = "__main__"  # shipped by value: the worker need not import the tests
+    with dask_client(1) as client:
+        held = client.submit(fn, pure=False).result()
+    assert held < 5_000_000 * 8

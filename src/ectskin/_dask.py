@@ -4,6 +4,15 @@
 limited to one thread each: the workers are the parallelism), or connects to a running scheduler
 (``tcp://HOST:PORT``, a real cluster), and closes what it opened. Deferred imports: the package
 starts without Dask.
+
+The workers keep freed heap memory (:mod:`ectskin._malloc`). glibc reads its thresholds when a
+process starts, and a Dask nanny applies its ``env`` only inside the worker, after the start, while
+its own ``pre-spawn-environ`` (``MALLOC_TRIM_THRESHOLD_=65536``) reaches the start and turns off
+glibc's adaptive mmap threshold: every array above 128 KiB was then mapped and zero-filled anew
+(a cold build of the reproduction's response fields spent 330 of 808 CPU-s in the kernel,
+BENCHMARKS.md). So :data:`~ectskin._malloc.MALLOC_ENV` goes into the local cluster's
+pre-spawn environment, and the workers of a given scheduler set the same thresholds at run time
+(:func:`~ectskin._malloc.keep_freed_memory`).
 """
 
 from __future__ import annotations
@@ -14,7 +23,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from ectskin._check import EctskinError
-from ectskin._malloc import MALLOC_ENV
+from ectskin._malloc import MALLOC_ENV, keep_freed_memory
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +46,7 @@ def dask_client(
     ``LocalCluster`` of ``n_workers`` single-threaded processes. ``option`` names the setting in
     errors; ``wait_for_workers``: a scheduler must have a worker within the timeout;
     ``what`` names the work in the log."""
+    import dask
     from distributed import Client, LocalCluster
 
     timeout = CONNECT_TIMEOUT_S if timeout_s is None else timeout_s
@@ -53,6 +63,7 @@ def dask_client(
                 f"with `dask worker {scheduler}`, or leave {option} out for a local cluster"
             ) from None
         try:
+            client.run(keep_freed_memory)  # the workers already there (module docstring)
             if wait_for_workers:
                 try:
                     client.wait_for_workers(1, timeout=timeout)
@@ -65,15 +76,17 @@ def dask_client(
         finally:
             client.close()
         return
-    cluster = LocalCluster(
-        n_workers=n_workers,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=":0",  # any free port: never clashes with another cluster
-        silence_logs=logging.WARNING,
-        env={"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
-             **MALLOC_ENV},
-    )
+    threads = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    pre_spawn = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **threads, **MALLOC_ENV}
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": pre_spawn}):
+        cluster = LocalCluster(
+            n_workers=n_workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=":0",  # any free port: never clashes with another cluster
+            silence_logs=logging.WARNING,
+            env=threads,
+        )
     client = Client(cluster)
     log.info("%s: LocalCluster with %d worker(s) at %s", what, n_workers, cluster.scheduler_address)
     try:
