@@ -91,3 +91,37 @@ def test_the_baselines_are_fitted_on_the_run_s_extra_trials_too(tmp_path, files,
     write_recording(read_recording(main), extra, overwrite=True)
     m = evaluate_run(tmp_path / "run", main, figures=False, write=False)["touch"]
     assert not m["baselines"] and "extra.h5 changed since training" in m["baselines_skipped"]
+
+
+def test_a_moved_folder_keeps_its_baselines_on_the_extra_trials(tmp_path, files, monkeypatch):
+    """A reproduction's folder moved whole (coverage.h5 beside runs/): the extra recording is
+    found by name near the run and checked by its trial digests. Catches the stored absolute
+    path alone (baselines skipped after any move) and a same-named file taken unchecked."""
+    import shutil
+
+    from ectskin.learn.evaluate import evaluate_run
+    from ectskin.learn.tasks.touch import TouchTask
+
+    main, extra = files
+    old = tmp_path / "old"
+    (old / "runs").mkdir(parents=True)
+    shutil.copy(extra, old / "coverage.h5")
+    config = TrainConfig(profile="robust", epochs=1, counts=(6, 2, 2), progress=False,
+                         extra_train=(str(old / "coverage.h5"),))
+    train_from_recording("touch", main, old / "runs" / "touch", config)
+    new = tmp_path / "new"
+    old.rename(new)
+    fitted = []
+    real = TouchTask.baseline_metrics
+
+    def spy(self, train, test, **kw):
+        fitted.append(train.n_samples)
+        return real(self, train, test, **kw)
+
+    monkeypatch.setattr(TouchTask, "baseline_metrics", spy)
+    m = evaluate_run(new / "runs" / "touch", main, figures=False, write=False)["touch"]
+    assert fitted == [6 * 40 + 10 * 20] and m["baselines"]
+    # another recording of that name near the run is not taken for it
+    write_recording(read_recording(main), new / "coverage.h5", overwrite=True)
+    m = evaluate_run(new / "runs" / "touch", main, figures=False, write=False)["touch"]
+    assert not m["baselines"] and "changed since training" in m["baselines_skipped"]

@@ -502,7 +502,7 @@ def _test_case(
     case = EvalCase(data=ds, test=test, pred=pred, recording=rec, config=run.config)
     train = _training_trials(run, rec, ds, chosen)  # with the run's extra training trials:
     data, note = with_extra(train.data, train.note, run.split, task, reference=calib.value,
-                            options=task.dataset_options(run.config))
+                            options=task.dataset_options(run.config), run_dir=run.path)
     return case, chosen, _Train(data, note)
 
 

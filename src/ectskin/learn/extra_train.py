@@ -101,16 +101,31 @@ def join_training(train: Any, extras: Sequence[Any], paths: Sequence[str | Path]
     return type(train).concat([train, *extras])
 
 
+def _moved(path: Path, run_dir: str | Path | None) -> Path:
+    """``path`` where it was at training, else a file of its name in the run's folder or one of
+    the three above it (a reproduction's coverage.h5 beside ``runs/``, the folder moved or
+    copied whole); its trial digests are checked after."""
+    if path.is_file() or run_dir is None:
+        return path
+    folder = Path(run_dir).resolve()
+    for d in (folder, *folder.parents[:3]):
+        if (d / path.name).is_file():
+            return d / path.name
+    return path
+
+
 def stored_extra(
-    split: Mapping[str, Any], task: Any, *, reference: Any, options: Mapping[str, Any]
+    split: Mapping[str, Any], task: Any, *, reference: Any, options: Mapping[str, Any],
+    run_dir: str | Path | None = None,
 ) -> tuple[list[Any], str]:
     """The data sets of the extra training recordings that a run's split.json names, for its
     baselines: ([], "") without any; ([], why) when one is missing or changed since training
-    (its trial digests differ)."""
+    (its trial digests differ). A file gone from its path is looked for by name near
+    ``run_dir`` (:func:`_moved`)."""
     items = list(split.get("extra_train") or [])
     if not items:
         return [], ""
-    paths = [Path(item["file"]) for item in items]
+    paths = [_moved(Path(item["file"]), run_dir) for item in items]
     missing = [p for p in paths if not p.is_file()]
     if missing:
         return [], f"the run's extra training recording {missing[0]} is not there to fit them on"
@@ -123,14 +138,14 @@ def stored_extra(
 
 def with_extra(
     train: Any, note: str, split: Mapping[str, Any], task: Any, *, reference: Any,
-    options: Mapping[str, Any],
+    options: Mapping[str, Any], run_dir: str | Path | None = None,
 ) -> tuple[Any, str]:
     """A run's training data for its baselines (``train``, or None with ``note`` saying why)
     joined by the extra training trials its split.json names, so that the baselines are fitted
     on the trials the run trained on; (None, why) when an extra recording is gone or changed."""
     if train is None or not split.get("extra_train"):
         return train, note
-    extras, why = stored_extra(split, task, reference=reference, options=options)
+    extras, why = stored_extra(split, task, reference=reference, options=options, run_dir=run_dir)
     if why:
         return None, why
     return join_training(train, extras, [e["file"] for e in split["extra_train"]]), ""
