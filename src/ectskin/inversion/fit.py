@@ -38,6 +38,14 @@ nuisances estimated): the Fisher information of the fitted model.
 superposition of two fingers, the twin's per-channel drift. Zero by default (the readout noise
 alone; then the standard errors are the bound).
 
+**The untouched readout** (``untouched``): c_u may be the skin's own measured untouched
+readout of each state instead of the field's (the fingers' signals stay the field's).
+
+**Pressing or hovering** (``press_check``): after the count is chosen, each hovering finger of
+the chosen fit is refitted pressing and kept so when that fits within ``contact_bias`` times
+the frame's χ² per degree of freedom of the hovering fit, or when it hovers at the field's
+lowest height (docs/inversion.md).
+
 **The finger's size** (``finger_scale_sd``): a bigger or softer fingertip than the field's
 couples more at every channel alike (∂C/∂R ≈ κ ΔC, :mod:`ectskin.twin.bound_field`), so each
 finger's signal is (1 + a) Δ, a with a Gaussian prior (a penalised fit, a BIC parameter). The
@@ -50,7 +58,6 @@ import functools
 import math
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -60,8 +67,11 @@ from scipy.stats import chi2
 from ectskin._check import EctskinError
 from ectskin.inversion.coupling import RHO_MAX
 from ectskin.inversion.model import MODES, FieldLike, StateModel
-from ectskin.twin.bound import crb
+from ectskin.inversion.result import FingerEstimate, Fit, InversionResult, build_result
 from ectskin.twin.readout import ReadoutConfig
+
+# FingerEstimate and InversionResult live in :mod:`ectskin.inversion.result`; named here too
+__all__ = ["FingerEstimate", "Inversion", "InversionResult"]
 
 #: the kinds of readout :meth:`Inversion.fit` takes
 KINDS = ("absolute", "relative", "difference")
@@ -84,67 +94,14 @@ LM_OPTIONS: dict[str, Any] = {"ftol": 1e-6, "xtol": 1e-6, "gtol": 1e-8}
 FINGER_SCALE_SD = 0.12
 #: the scale's range: this many prior sd either side of 1 (a truncated Gaussian prior)
 SCALE_BOUND_SD = 3.0
+#: ``contact_bias``' default: a pressing finger is preferred to a hovering one that fits better
+#: by up to this many times the frame's χ² per degree of freedom (chosen on the validation
+#: trials of the twin's contact experiment among 0, 3, 5 and 10)
+CONTACT_BIAS = 5.0
+#: a hovering finger this close (in ln h) to the field's lowest height is at the range's end
+PINNED_LN_H = 1e-3
 #: lmder's exit codes that mean it stopped on a tolerance (5: the evaluation budget ran out)
 LM_CONVERGED = (1, 2, 3, 4)
-
-
-@dataclass(frozen=True)
-class FingerEstimate:
-    """One fitted finger: its face, whether it presses (``contact``) or hovers, its point
-    (u, v) mm, force N (0 hovering), height mm (0 pressing), and their standard errors (the
-    bound at the solution; 0 for the value the mode fixes, inf where unresolved); ``scale``
-    1 + a, its signal's fitted relative size, and its standard error (1 and 0 without
-    ``finger_scale_sd``)."""
-
-    face: str
-    contact: bool
-    u_mm: float
-    v_mm: float
-    force_n: float
-    height_mm: float
-    u_se_mm: float
-    v_se_mm: float
-    force_se_n: float
-    height_se_mm: float
-    scale: float = 1.0
-    scale_se: float = 0.0
-
-
-@dataclass(frozen=True)
-class InversionResult:
-    """The inversion of one frame.
-
-    ``n_fingers`` (0, 1 or 2) is the count chosen by BIC; ``fingers`` its estimates;
-    ``log_likelihood`` and ``bic`` those of the chosen fit; ``bic_by_count`` the BIC of every
-    count (index = count; inf where the count was not tried, see ``gate_p``); ``converged``
-    whether the chosen fit's optimiser stopped on a tolerance (always True for no finger);
-    ``nuisance`` the fitted nuisance coefficients by name; ``coupling`` the two fingers' fitted
-    coupling ρ (:mod:`ectskin.inversion.coupling`; NaN unless two coupled fingers).
-    """
-
-    n_fingers: int
-    fingers: tuple[FingerEstimate, ...]
-    log_likelihood: float
-    bic: float
-    converged: bool
-    bic_by_count: tuple[float, ...]
-    nuisance: dict[str, float] = field(default_factory=dict)
-    coupling: float = math.nan
-
-
-@dataclass
-class _Fit:
-    fingers: list[tuple[int, int, np.ndarray]]  # (face index, mode index, x = (u, v, s))
-    beta: np.ndarray
-    chi2: float
-    converged: bool
-    rho: float = math.nan  # the two fingers' coupling (coupled two-finger fits)
-    scales: np.ndarray = field(default_factory=lambda: np.zeros(0))  # each finger's a
-
-    @property
-    def n_params(self) -> int:
-        return (3 * len(self.fingers) + (0 if math.isnan(self.rho) else 1) + self.beta.size
-                + self.scales.size)
 
 
 class Inversion:
@@ -168,6 +125,16 @@ class Inversion:
         χ² (a penalised fit); None: the push is unknown, without a prior.
     finger_scale_sd : the prior sd of each finger's relative signal scale a (module docstring;
         :data:`FINGER_SCALE_SD` from the physics), or None: the field's finger, no scale.
+    untouched : {state: (n_pairs,) pF} the skin's untouched readout of each state as measured
+        (a recording without a finger), c_u in place of the field's (the fingers' signals stay
+        the field's); a state missing from it, or None, has the field's.
+    press_check : refit each hovering finger of a fit pressing instead (from its point, at
+        the field's least force) and keep that when its χ² is at most the hovering fit's plus
+        ``contact_bias`` × the frame's χ² per degree of freedom (at least 1): a finger just
+        above the skin and one pressing lightly have nearly the same signal, and the search
+        starts each finger in one mode.
+    contact_bias : the χ² (in units of the fit's χ² per degree of freedom) by which a pressing
+        finger may fit worse than a hovering one and still be preferred (``press_check``).
     two_fingers : "coupled" (two fingers as coupled conductors, one more parameter ρ:
         :mod:`ectskin.inversion.coupling`) or "superposition" (the sum of their signals).
     gate_p : a count of k + 1 fingers, or a further start, is tried only while the fits so
@@ -190,6 +157,9 @@ class Inversion:
         push_prior_sd: float | None = None,
         two_fingers: str = "superposition",
         finger_scale_sd: float | None = None,
+        untouched: Mapping[tuple[float, ...], np.ndarray] | None = None,
+        press_check: bool = False,
+        contact_bias: float = CONTACT_BIAS,
     ) -> None:
         if not isinstance(fields, Mapping) or not fields:
             raise EctskinError(
@@ -224,6 +194,10 @@ class Inversion:
         self.gate_p = float(gate_p)
         self.push_prior_sd = push_prior_sd
         self.finger_scale_sd = finger_scale_sd
+        if not (isinstance(contact_bias, int | float) and 0 <= contact_bias < math.inf):
+            raise EctskinError(f"Inversion: contact_bias must be a number >= 0, got {contact_bias!r}")
+        self.press_check = bool(press_check)
+        self.contact_bias = float(contact_bias)
         self.noise = noise or ReadoutConfig()
         self.max_fingers = int(max_fingers)
         self.model_error = (a, r)
@@ -249,7 +223,18 @@ class Inversion:
                         f"got shape {extra.shape}"
                     )
             self.states.append(state)
-            sm = StateModel(fld, extra, drift, self.noise)
+            base = None
+            if untouched is not None:
+                base = next((np.asarray(v, float) for k, v in untouched.items()
+                             if _same(_state("untouched key", k), state)), None)
+                found = (None if base is None else f"shape {base.shape}"
+                         if base.shape != (n_pairs,) else "a value that is not finite"
+                         if not np.all(np.isfinite(base)) else "a value <= 0"
+                         if not np.all(base > 0) else None)
+                if found:
+                    raise EctskinError(f"Inversion: untouched[{list(state)}] must be ({n_pairs},) "
+                                       f"finite readouts > 0 pF, got {found}")
+            sm = StateModel(fld, extra, drift, self.noise, base)
             n_push = 0 if extra is None else extra.shape[1]
             # 1/sd of each nuisance coefficient's Gaussian prior (0: none)
             sm.prior_w = np.zeros(sm.N.shape[1])
@@ -337,7 +322,7 @@ class Inversion:
         sigma = self._sigma(m, y, w)
         delta = y - m.untouched
         n, nb = m.n_pairs, m.N.shape[1]
-        fits: list[_Fit | None] = [self._fit_none(m, delta, sigma)]
+        fits: list[Fit | None] = [self._fit_none(m, delta, sigma)]
         passed = [self._passes(fits[0], 0, nb, n)]
         starts: list[list[list[tuple[int, int, np.ndarray]]]] = [[]]
         # counts in turn, each from its first start while no count passes the gate; a count's
@@ -378,7 +363,12 @@ class Inversion:
         chosen = fits[best_k]
         if chosen is None:  # never: the no-finger fit always exists and has a finite BIC
             raise RuntimeError("inversion: no fit to choose")
-        return self._result(m, chosen, y, w, lls[best_k], bics)
+        if self.press_check and chosen.fingers and "contact" in m.modes:
+            # the count is chosen; now whether its hovering fingers press (the mode)
+            chosen = self._pressing(m, delta, sigma, chosen)
+            lls[best_k] = const - 0.5 * chosen.chi2
+            bics[best_k] = chosen.n_params * math.log(n) - 2 * lls[best_k]
+        return build_result(m, chosen, w, lls[best_k], bics, self._sigma)
 
     @staticmethod
     def _warm_start(m: StateModel, warm: InversionResult | None
@@ -401,7 +391,7 @@ class Inversion:
             start.append((m.faces.index(f.face), MODES.index(mode), np.array([f.u_mm, f.v_mm, s])))
         return start or None
 
-    def _passes(self, fit: _Fit | None, k: int, nb: int, n: int) -> bool:
+    def _passes(self, fit: Fit | None, k: int, nb: int, n: int) -> bool:
         """Whether the k-finger fit explains the frame of n channels within the noise (the
         gate)."""
         if fit is None or not self.gate_p:
@@ -416,7 +406,7 @@ class Inversion:
         return s
 
     def _starts(self, m: StateModel, delta: np.ndarray, k: int,
-                one: _Fit | None) -> list[list[tuple[int, int, np.ndarray]]]:
+                one: Fit | None) -> list[list[tuple[int, int, np.ndarray]]]:
         """Starting points of a k-finger fit, best first: for one finger the nearest node of
         each face and mode; for two the best pairs of nodes (:meth:`NodeTable.pairs`), then the
         one-finger solution with the node nearest what it leaves."""
@@ -434,18 +424,35 @@ class Inversion:
             out.insert(1, [(fi, mi, x.copy()), node(t.starts(rest, 1, m.scale_w)[0])])
         return out[: self.starts + 1]
 
+    def _pressing(self, m: StateModel, delta: np.ndarray, sigma: np.ndarray, fit: Fit) -> Fit:
+        """``fit`` with each hovering finger refitted pressing, in turn, where that fits about
+        as well (``press_check``)."""
+        lo_f = float(m.field.spec.force_range_n[0])
+        for j, (fi, mi, x) in enumerate(fit.fingers):
+            if MODES[mi] != "hover":
+                continue
+            start = [(a, b, y.copy()) for a, b, y in fit.fingers]
+            start[j] = (fi, MODES.index("contact"), np.array([x[0], x[1], lo_f]))
+            alt = self._fit_fingers(m, delta, sigma, start, self.coupled)
+            dof = max(1, m.n_pairs - fit.n_params)
+            # at the field's lowest height the fit would go lower still: the finger touches
+            pinned = x[2] <= m.bounds[(m.faces[fi], "hover")][0][2] + PINNED_LN_H
+            if pinned or alt.chi2 <= fit.chi2 + self.contact_bias * max(1.0, fit.chi2 / dof):
+                fit = alt
+        return fit
+
     @staticmethod
-    def _fit_none(m: StateModel, delta: np.ndarray, sigma: np.ndarray) -> _Fit:
+    def _fit_none(m: StateModel, delta: np.ndarray, sigma: np.ndarray) -> Fit:
         nb = m.N.shape[1]
         Nw = np.vstack([m.N / sigma[:, None], np.diag(m.prior_w)])
         z = np.concatenate([delta / sigma, np.zeros(nb)])
         beta = np.linalg.lstsq(Nw, z, rcond=None)[0] if nb else np.zeros(0)
         r = z - Nw @ beta
-        return _Fit([], beta, float(r @ r), True)
+        return Fit([], beta, float(r @ r), True)
 
     @staticmethod
     def _fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
-                     start: list[tuple[int, int, np.ndarray]], coupled: bool = False) -> _Fit:
+                     start: list[tuple[int, int, np.ndarray]], coupled: bool = False) -> Fit:
         """Levenberg–Marquardt over (x_1, …, x_k, [ρ], [a_1, …, a_k], β) from ``start`` (ρ: two
         coupled fingers; a: the fingers' scales, with ``m.scale_w``).
 
@@ -528,56 +535,8 @@ class Inversion:
         res = evaluate(p)[0]
         r = np.concatenate([res[:n], res[n + na:]])  # the channels and the priors
         fingers = [(fi, mi, p[3 * j: 3 * j + 3].copy()) for j, (fi, mi, _) in enumerate(start)]
-        return _Fit(fingers, p[na:].copy(), float(r @ r), status in LM_CONVERGED,
+        return Fit(fingers, p[na:].copy(), float(r @ r), status in LM_CONVERGED,
                     rho=float(p[6]) if with_rho else math.nan, scales=p[nx:na].copy())
-
-    def _result(self, m: StateModel, fit: _Fit, y: np.ndarray, w: int, ll: float,
-                bics: list[float]) -> InversionResult:
-        k = len(fit.fingers)
-        ests: list[FingerEstimate] = []
-        if k:
-            mu = m.untouched + m.N @ fit.beta
-            cols, scale_cols = [], []
-            g = 1.0 + fit.scales if fit.scales.size else np.ones(k)
-            for j, (fi, mi, x) in enumerate(fit.fingers):
-                d, dj = m.signal(m.faces[fi], MODES[mi], x)
-                mu = mu + g[j] * d
-                cols.append(g[j] * dj)
-                scale_cols.append(d[:, None])
-            ns = fit.scales.size
-            if not math.isnan(fit.rho):  # the coupling: its share, slopes and its own column
-                keys = [(m.faces[fi], MODES[mi]) for fi, mi, _ in fit.fingers]
-                c, da, db, drho = m.coupling(keys, [x for _, _, x in fit.fingers], fit.rho)
-                mu = mu + c
-                cols = [cols[0] + da, cols[1] + db, drho[:, None]]
-            # the scales are bounded beside the fingers (the same marginal bound as nuisances)
-            J = np.concatenate(cols, axis=1)
-            n0 = J.shape[1]
-            J = np.concatenate([J] + scale_cols[:ns] + [m.N], axis=1)
-            prior = {n0 + ns + i: float(1.0 / pw**2) for i, pw in enumerate(m.prior_w) if pw > 0}
-            prior.update({n0 + i: float(1.0 / m.scale_w**2) for i in range(ns)})
-            interest = set(range(3 * k)) | set(range(n0, n0 + ns))
-            b = crb(J, self._sigma(m, mu, w), prior_var=prior,
-                    nuisance_cols=[c for c in range(J.shape[1]) if c not in interest])
-            for j, (fi, mi, x) in enumerate(fit.fingers):
-                se = b.std[3 * j: 3 * j + 3]
-                contact = MODES[mi] == "contact"
-                h = 0.0 if contact else float(np.exp(x[2]))
-                ests.append(FingerEstimate(
-                    face=m.faces[fi], contact=contact, u_mm=float(x[0]), v_mm=float(x[1]),
-                    force_n=float(x[2]) if contact else 0.0, height_mm=h,
-                    u_se_mm=float(se[0]), v_se_mm=float(se[1]),
-                    force_se_n=float(se[2]) if contact else 0.0,
-                    height_se_mm=0.0 if contact else h * float(se[2]),
-                    scale=float(g[j]), scale_se=float(b.std[3 * k + j]) if ns else 0.0,
-                ))
-        return InversionResult(
-            n_fingers=k, fingers=tuple(ests), log_likelihood=ll, bic=bics[k],
-            converged=fit.converged, bic_by_count=tuple(bics),
-            nuisance={n: float(v) for n, v in zip(m.nuisance_names, fit.beta)},
-            coupling=fit.rho,
-        )
-
 
 @functools.lru_cache(maxsize=64)
 def _chi2_gate(dof: int, p: float) -> float:

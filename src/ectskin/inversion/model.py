@@ -4,7 +4,9 @@ For one sensor state (an inflation vector) a frame's n_pairs readouts y (pF) are
 
     y = c_u + Σ_k Δ(face_k, mode_k; u_k, v_k, s_k) + N β + e,   e ~ N(0, diag σ²)
 
-* c_u (n_pairs,): the untouched readout of the state (``field.untouched``);
+* c_u (n_pairs,): the untouched readout of the state (``field.untouched``, or the skin's own
+  measured untouched readout of the state where one is given: the twin's or a real skin's body
+  differs from the field's mesh by far more than the noise, and Δ stays the field's);
 * Δ: one finger's signal, the response field's readout less c_u. ``mode`` is "contact" (the
   finger presses, s = its force F in N) or "hover" (force 0, s = ln h of its height h in mm: the
   field interpolates in ln h, so the fit does too). Two fingers add their signals
@@ -376,6 +378,8 @@ class StateModel:
     nuisance : (n_pairs, m) extra nuisance columns (the push basis) or None.
     drift : drift terms among :data:`DRIFT_TERMS`.
     noise : the readout's noise model.
+    untouched : (n_pairs,) pF, the state's untouched readout as measured (c_u, and the gain's
+        column), or None: the field's. The fingers' signals Δ are the field's either way.
     """
 
     def __init__(
@@ -384,6 +388,7 @@ class StateModel:
         nuisance: np.ndarray | None,
         drift: Sequence[str],
         noise: ReadoutConfig,
+        untouched: np.ndarray | None = None,
     ) -> None:
         self.field = field
         self.faces: tuple[str, ...] = tuple(field.faces)
@@ -391,7 +396,11 @@ class StateModel:
         #: the field's channels this model covers (all; fewer in a :meth:`masked` copy)
         self.channels = np.arange(self.n_pairs)
         self._masked: dict[bytes, StateModel] = {}
-        self.untouched = np.asarray(field.untouched, dtype=np.float64)
+        #: the field's own untouched readout: the base of its signals Δ
+        self.field_untouched = np.asarray(field.untouched, dtype=np.float64)
+        #: c_u: the untouched readout the frames are compared with
+        self.untouched = (self.field_untouched.copy() if untouched is None
+                          else np.asarray(untouched, dtype=np.float64).copy())
         self.noise = noise
         self.N, self.nuisance_names = nuisance_columns(self.untouched, drift, nuisance)
         #: 1/sd of a Gaussian prior on each nuisance coefficient, 0 for none (set by Inversion)
@@ -465,6 +474,7 @@ class StateModel:
             sub.channels = self.channels[ok]
             sub.n_pairs = int(sub.channels.size)
             sub.untouched = self.untouched[ok]
+            sub.field_untouched = self.field_untouched[ok]
             sub.N = self.N[ok]
             sub._masked = {}
             sub._signals = {k: _restricted(sig, ok) for k, sig in self._signals.items()}
@@ -490,7 +500,7 @@ class StateModel:
                 U, V, S = np.meshgrid(u, v, s, indexing="ij")  # s fastest: a point's nodes in a row
                 n_ss.append(s.size)
                 shapes.append((u.size, v.size))
-                d = (vals - self.untouched).reshape(-1, self.n_pairs) / sigma
+                d = (vals - self.field_untouched).reshape(-1, self.n_pairs) / sigma
                 D.append(d - (d @ Q) @ Q.T)
                 xs.append(np.c_[U.ravel(), V.ravel(), S.ravel()])
                 face_i.append(np.full(U.size, fi))

@@ -28,6 +28,17 @@ people's fingertips differ from the field's, so each finger's signal may be fitt
 unknown relative scale under that prior (``Inversion(finger_scale_sd=...)``); None (the
 default) fits the field's finger as it is.
 
+The untouched readout (``untouched``): "field" (the default) compares each frame with the
+field's untouched readout of its state; "auto" with the skin's own, the mean readout of the
+recording's no-contact trials of that state (:func:`ectskin.io.calibration.is_no_contact`)
+outside the test trials (:func:`untouched_readouts`; a state without one keeps the field's).
+No label is read: it is the skin's baseline, as a real skin's is recorded before use. The
+twin's body (its mesh) differs from the field's by tens of noise σ per channel, a pattern that
+a common gain and offset cannot absorb (docs/inversion.md).
+
+``press_check``: each hovering finger of the chosen fit is refitted pressing, and kept so where
+that fits about as well (``Inversion(press_check=True)``).
+
 :func:`ectskin.pipeline.metrics.inversion_block` turns the step's metrics into metrics.json's
 ``inversion``.
 """
@@ -46,6 +57,7 @@ from ectskin._check import EctskinError, check_option
 from ectskin._files import read_json, to_jsonable, write_json_atomic
 from ectskin.inversion import Inversion, fit_frames, push_basis, results_to_arrays
 from ectskin.io import Recording, read_recording
+from ectskin.io.calibration import is_no_contact
 from ectskin.learn.data.contact import HOVER_MAX_MM, MAX_FINGERS, ContactData, contact_dataset
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
 from ectskin.learn.tasks.contact import contact_report
@@ -62,6 +74,8 @@ INVERSION_DIR = "inversion"
 METRICS_FILE = "metrics.json"
 #: how the hand's push enters the inversion (module docstring)
 PUSH_CHOICES = ("auto", "on", "off")
+#: where each state's untouched readout comes from (module docstring)
+UNTOUCHED_CHOICES = ("field", "auto")
 #: validation frames with one finger on the skin (at most, evenly spread) that choose the push
 PUSH_CHOICE_FRAMES = 240
 #: test frames inverted (at most, evenly spread over the test trials' frames in order): the
@@ -93,9 +107,10 @@ def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
 
     ``count``: the fitted fingers that press; ``p_contact``: 1 when one does; ``p_hover``: 1
     when none presses and one hovers at most ``HOVER_MAX_MM`` high. The pressing fingers take
-    the slots in the fitted order; a frame where none presses gives slot 0 the point of the
-    hovering finger, or, with no finger at all, the middle of the first face (an answer is
-    needed wherever a finger is on the skin, and that one is charged its full error).
+    the slots in the fitted order, then the hovering ones, the lowest first; a frame where none
+    presses gives slot 0 the point of the lowest hovering finger (the nearest to touching),
+    or, with no finger at all, the middle of the first face (an answer is needed wherever a
+    finger is on the skin, and that one is charged its full error).
     ``sigma_mm``: the point's standard error, √(σ_u² + σ_v²); ``force_sigma_n``: the force's
     (0 where there is none: no force fitted); ``face``: the index in ``faces``.
     """
@@ -108,7 +123,8 @@ def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
     for i in range(n):
         fitted = [k for k in range(S) if arrays["face"][i, k]]
         pressing = [k for k in fitted if arrays["contact"][i, k]]
-        hovering = [k for k in fitted if not arrays["contact"][i, k]]
+        hovering = sorted((k for k in fitted if not arrays["contact"][i, k]),
+                          key=lambda k: arrays["height_mm"][i, k])  # the lowest first
         pred[i, 0] = len(pressing)
         pred[i, 1] = float(bool(pressing))
         pred[i, 2] = float(not pressing and any(
@@ -132,6 +148,31 @@ def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
                 pred[i, a + col["v_mm"]] = (v0 + v1) / 2
                 pred[i, a + col["sigma_mm"]] = np.nan
     return pred
+
+
+def untouched_readouts(rec: Recording, fields: Mapping[tuple[float, ...], Any],
+                       exclude: Sequence[str] = ()) -> dict[tuple[float, ...], dict[str, Any]]:
+    """{state: {"pF": (n_pairs,) mean readout, "trials": names}} of every state of ``fields``
+    that has a no-contact trial in ``rec`` (:func:`~ectskin.io.calibration.is_no_contact`) not
+    in ``exclude``: the mean of their frames, per channel over the finite readouts. A state
+    without one, or with a channel never read, is left out (it keeps its field's)."""
+    found: dict[tuple[float, ...], list[Any]] = {}
+    skip = set(exclude)
+    for t in rec.trials:
+        if t.name in skip or not is_no_contact(t):
+            continue
+        for state in fields:
+            if _field_of({state: True}, t.inflation) is not None:
+                found.setdefault(state, []).append(t)
+    out = {}
+    for state, trials in found.items():
+        frames = np.concatenate([t.capacitance for t in trials], axis=0)
+        ok = np.isfinite(frames)
+        if not ok.any(axis=0).all():
+            continue
+        mean = np.where(ok, frames, 0.0).sum(axis=0) / ok.sum(axis=0)
+        out[state] = {"pF": mean, "trials": [t.name for t in trials]}
+    return out
 
 
 def _frames(data: ContactData, single_only: bool, limit: int | None) -> np.ndarray:
@@ -213,7 +254,7 @@ def _dataset(rec: Recording, trials: Sequence[str]) -> ContactData | None:
 
 def _choose_push(rec: Recording, fields: Mapping[tuple[float, ...], ResponseField],
                  noise: ReadoutConfig, val: Sequence[str], push: Mapping[Any, np.ndarray],
-                 finger_scale_sd: float | None = None) -> dict[str, Any]:
+                 finger_scale_sd: float | None = None, **options: Any) -> dict[str, Any]:
     """The validation frames' mean point error with and without the push columns, and which is
     lower (ties and no validation frame: without, the smaller model)."""
     data = _dataset(rec, val)
@@ -225,8 +266,8 @@ def _choose_push(rec: Recording, fields: Mapping[tuple[float, ...], ResponseFiel
     sub = data.take(rows)
     errors = {}
     for name, cols in (("off", None), ("on", push)):
-        arrays, _ = invert_rows(Inversion(fields, noise, push=cols,
-                                          finger_scale_sd=finger_scale_sd), rec, data, rows)
+        arrays, _ = invert_rows(Inversion(fields, noise, push=cols, finger_scale_sd=finger_scale_sd,
+                                          **options), rec, data, rows)
         errors[name] = contact_report(sub, prediction_columns(arrays, sub.faces, sub.face_extent),
                                       with_maps=False)["loc_mm_mean"]
     return {"use": bool(errors["on"] < errors["off"]), "val_loc_mm_mean": errors,
@@ -243,6 +284,8 @@ def inversion_step(
     push: str = "auto",
     max_frames: int | None = MAX_FRAMES,
     finger_scale_sd: float | None = None,
+    untouched: str = "field",
+    press_check: bool = False,
 ) -> dict[str, Any]:
     """Step "inversion": OUT_DIR/inversion/metrics.json (module docstring); returns it.
 
@@ -252,8 +295,9 @@ def inversion_step(
     holds ContactNet's and its baselines' point error on the states inverted
     (:func:`ectskin.pipeline.metrics.beside`, not stored: the run may change).
     ``max_frames``: the test frames inverted at most, evenly spread over them (None: every
-    one). ``push``: "auto", "on" or "off"; ``finger_scale_sd``: the finger scale's prior (module
-    docstring).
+    one). ``push``: "auto", "on" or "off"; ``finger_scale_sd``: the finger scale's prior;
+    ``untouched``: "field" or "auto" (the no-contact trials outside the test trials);
+    ``press_check``: refit hovering fingers pressing (module docstring).
     """
     if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
         raise EctskinError(f"inversion_step: max_frames must be an integer >= 1 or None, got "
@@ -261,6 +305,9 @@ def inversion_step(
     if not fields:
         raise EctskinError("inversion_step: no response fields given")
     check_option("push", push, PUSH_CHOICES)
+    check_option("untouched", untouched, UNTOUCHED_CHOICES)
+    if not isinstance(press_check, bool):
+        raise EctskinError(f"inversion_step: press_check must be True or False, got {press_check!r}")
     fields = {tuple(float(x) for x in s): f for s, f in fields.items()}
     data_path, data_settings = found
     split_file = runner.out / "runs" / CONTACT_RUN / "split.json"
@@ -278,7 +325,7 @@ def inversion_step(
         "data": digest(dict(data_settings)), "test_trials": test, "val_trials": val,
         "push": push, "push_choice_frames": PUSH_CHOICE_FRAMES, "noise": noise,
         "window": 1, "force_observable_n": FORCE_OBSERVABLE_N, "max_frames": max_frames,
-        "finger_scale_sd": finger_scale_sd,
+        "finger_scale_sd": finger_scale_sd, "untouched": untouched, "press_check": press_check,
     }
 
     def make() -> None:
@@ -293,6 +340,9 @@ def inversion_step(
             if not has[name]:
                 t = rec.trial(name)
                 without[state_key(t.inflation)] = without.get(state_key(t.inflation), 0) + t.n_frames
+        base = untouched_readouts(rec, fields, test) if untouched == "auto" else {}
+        options: dict[str, Any] = {"press_check": press_check,
+                                   "untouched": {s: b["pF"] for s, b in base.items()} or None}
         cols: dict[Any, np.ndarray] | None = None
         choice: dict[str, Any] = {"use": push == "on", "why": f"push={push!r}"}
         t_push = 0.0
@@ -302,9 +352,9 @@ def inversion_step(
             t_push = time.perf_counter() - t1
             if push == "auto":
                 choice = _choose_push(rec, fields, noise, [n for n in val if has[n]], cols,
-                                      finger_scale_sd)
+                                      finger_scale_sd, **options)
         inv = Inversion(fields, noise, push=cols if choice["use"] else None,
-                        finger_scale_sd=finger_scale_sd)
+                        finger_scale_sd=finger_scale_sd, **options)
         data = _dataset(rec, [n for n in test if has[n]])
         n_without = sum(without.values())
         if data is None:
@@ -323,7 +373,10 @@ def inversion_step(
             n_test_trials=len(test), push=choice,
             settings={"window": 1, "kind": "absolute", "noise": to_jsonable(noise),
                       "push": push, "max_fingers": inv.max_fingers,
-                      "finger_scale_sd": finger_scale_sd,
+                      "finger_scale_sd": finger_scale_sd, "press_check": press_check,
+                      "untouched": {"source": untouched,
+                                    "trials": {state_key(st): b["trials"]
+                                               for st, b in base.items()}},
                       "fields": settings["fields"]},
         )
         result["timing"] = {**result.get("timing", {}), "total_s": time.perf_counter() - t0}

@@ -40,6 +40,7 @@ from typing import Any
 
 from ectskin._check import EctskinError, check_type
 from ectskin._files import read_json, write_json_atomic
+from ectskin.inversion.fit import FINGER_SCALE_SD
 from ectskin.io.hdf5 import read_recording
 from ectskin.learn.threads import torch_threads
 from ectskin.pipeline.bound import bound_step
@@ -100,7 +101,10 @@ def _physics_steps(
     if not fields:
         return None, None
     bound = bound_step(runner, config, fields, found)
-    inversion = inversion_step(runner, config, fields, found, contact)
+    # the skin's own untouched readout, people's finger sizes and the press check: chosen on the
+    # validation trials of the contact experiment (docs/inversion.md)
+    inversion = inversion_step(runner, config, fields, found, contact, untouched="auto",
+                               finger_scale_sd=FINGER_SCALE_SD, press_check=True)
     return bound, inversion
 
 

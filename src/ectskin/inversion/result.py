@@ -1,0 +1,127 @@
+"""The result of one frame's inversion and its standard errors (:mod:`ectskin.inversion.fit`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ectskin.inversion.model import MODES, StateModel
+from ectskin.twin.bound import crb
+
+
+@dataclass(frozen=True)
+class FingerEstimate:
+    """One fitted finger: its face, whether it presses (``contact``) or hovers, its point
+    (u, v) mm, force N (0 hovering), height mm (0 pressing), and their standard errors (the
+    bound at the solution; 0 for the value the mode fixes, inf where unresolved); ``scale``
+    1 + a, its signal's fitted relative size, and its standard error (1 and 0 without
+    ``finger_scale_sd``)."""
+
+    face: str
+    contact: bool
+    u_mm: float
+    v_mm: float
+    force_n: float
+    height_mm: float
+    u_se_mm: float
+    v_se_mm: float
+    force_se_n: float
+    height_se_mm: float
+    scale: float = 1.0
+    scale_se: float = 0.0
+
+
+@dataclass(frozen=True)
+class InversionResult:
+    """The inversion of one frame.
+
+    ``n_fingers`` (0, 1 or 2) is the count chosen by BIC; ``fingers`` its estimates;
+    ``log_likelihood`` and ``bic`` those of the chosen fit; ``bic_by_count`` the BIC of every
+    count (index = count; inf where the count was not tried, see ``gate_p``); ``converged``
+    whether the chosen fit's optimiser stopped on a tolerance (always True for no finger);
+    ``nuisance`` the fitted nuisance coefficients by name; ``coupling`` the two fingers' fitted
+    coupling ρ (:mod:`ectskin.inversion.coupling`; NaN unless two coupled fingers).
+    """
+
+    n_fingers: int
+    fingers: tuple[FingerEstimate, ...]
+    log_likelihood: float
+    bic: float
+    converged: bool
+    bic_by_count: tuple[float, ...]
+    nuisance: dict[str, float] = field(default_factory=dict)
+    coupling: float = math.nan
+
+
+@dataclass
+class Fit:
+    """One fit of k fingers: their (face index, mode index, (u, v, s)), the nuisance
+    coefficients β, its χ² (with the priors' terms), whether the optimiser converged, the
+    coupling ρ and the fingers' relative scales a."""
+
+    fingers: list[tuple[int, int, np.ndarray]]  # (face index, mode index, x = (u, v, s))
+    beta: np.ndarray
+    chi2: float
+    converged: bool
+    rho: float = math.nan  # the two fingers' coupling (coupled two-finger fits)
+    scales: np.ndarray = field(default_factory=lambda: np.zeros(0))  # each finger's a
+
+    @property
+    def n_params(self) -> int:
+        return (3 * len(self.fingers) + (0 if math.isnan(self.rho) else 1) + self.beta.size
+                + self.scales.size)
+
+
+def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
+             sigma: Callable[[StateModel, np.ndarray, int], np.ndarray]) -> InversionResult:
+    """The :class:`InversionResult` of the chosen fit: its fingers with their standard errors,
+    the Cramér–Rao bound at the solution (:func:`ectskin.twin.bound.crb` of the model's Jacobian
+    there, the nuisances estimated, the priors' information added); ``sigma(m, mu, w)`` is the
+    noise at the fitted readout mu."""
+    k = len(fit.fingers)
+    ests: list[FingerEstimate] = []
+    if k:
+        mu = m.untouched + m.N @ fit.beta
+        cols, scale_cols = [], []
+        g = 1.0 + fit.scales if fit.scales.size else np.ones(k)
+        for j, (fi, mi, x) in enumerate(fit.fingers):
+            d, dj = m.signal(m.faces[fi], MODES[mi], x)
+            mu = mu + g[j] * d
+            cols.append(g[j] * dj)
+            scale_cols.append(d[:, None])
+        ns = fit.scales.size
+        if not math.isnan(fit.rho):  # the coupling: its share, slopes and its own column
+            keys = [(m.faces[fi], MODES[mi]) for fi, mi, _ in fit.fingers]
+            c, da, db, drho = m.coupling(keys, [x for _, _, x in fit.fingers], fit.rho)
+            mu = mu + c
+            cols = [cols[0] + da, cols[1] + db, drho[:, None]]
+        # the scales are bounded beside the fingers (the same marginal bound as nuisances)
+        J = np.concatenate(cols, axis=1)
+        n0 = J.shape[1]
+        J = np.concatenate([J] + scale_cols[:ns] + [m.N], axis=1)
+        prior = {n0 + ns + i: float(1.0 / pw**2) for i, pw in enumerate(m.prior_w) if pw > 0}
+        prior.update({n0 + i: float(1.0 / m.scale_w**2) for i in range(ns)})
+        interest = set(range(3 * k)) | set(range(n0, n0 + ns))
+        b = crb(J, sigma(m, mu, w), prior_var=prior,
+                nuisance_cols=[c for c in range(J.shape[1]) if c not in interest])
+        for j, (fi, mi, x) in enumerate(fit.fingers):
+            se = b.std[3 * j: 3 * j + 3]
+            contact = MODES[mi] == "contact"
+            h = 0.0 if contact else float(np.exp(x[2]))
+            ests.append(FingerEstimate(
+                face=m.faces[fi], contact=contact, u_mm=float(x[0]), v_mm=float(x[1]),
+                force_n=float(x[2]) if contact else 0.0, height_mm=h,
+                u_se_mm=float(se[0]), v_se_mm=float(se[1]),
+                force_se_n=float(se[2]) if contact else 0.0,
+                height_se_mm=0.0 if contact else h * float(se[2]),
+                scale=float(g[j]), scale_se=float(b.std[3 * k + j]) if ns else 0.0,
+            ))
+    return InversionResult(
+        n_fingers=k, fingers=tuple(ests), log_likelihood=ll, bic=bics[k],
+        converged=fit.converged, bic_by_count=tuple(bics),
+        nuisance={n: float(v) for n, v in zip(m.nuisance_names, fit.beta)},
+        coupling=fit.rho,
+    )
