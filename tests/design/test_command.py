@@ -49,3 +49,27 @@ def test_bad_search_options_are_one_error(tmp_path, capsys, argv, text):
 def test_no_subcommand_is_an_error(capsys):
     code, err = _run(capsys)
     assert code == 2 and "score or search" in err
+
+
+def test_the_score_reads_fields_by_default_and_solves_when_asked():
+    """``design score``'s reading picks its protocol's size unless given (the field reading: 12
+    trials of 15 s per state; the solve reading: 6 of 3 s), and a given size wins."""
+    import argparse
+
+    from ectskin.commands.design import _common, _config
+
+    p = argparse.ArgumentParser()
+    _common(p)
+    field = _config(p.parse_args([]))
+    assert field.response == "field" and field.protocol.response == "field"
+    assert (field.protocol.touch_trials, field.protocol.duration_s) == (12, 15.0)
+    solve = _config(p.parse_args(["--response", "solve"]))
+    assert solve.response == "solve" and solve.protocol.response != "field"
+    assert (solve.protocol.touch_trials, solve.protocol.duration_s) == (6, 3.0)
+    given = _config(p.parse_args(["--response", "solve", "--touch-trials", "4", "--duration", "5"]))
+    assert (given.protocol.touch_trials, given.protocol.duration_s) == (4, 5.0)
+
+
+def test_a_bad_reading_is_one_error(tmp_path, capsys):
+    code, err = _run(capsys, "score", "--out", str(tmp_path / "o"), "--response", "luck")
+    assert code == 2 and "--response" in err and "luck" in err and err.count("\n") == 1

@@ -27,7 +27,7 @@ def test_a_sweep_killed_in_the_middle_resumes_without_redoing_finished_layouts(
 ):
     a, b = _layouts()
     boom = build_layout(LayoutDesign(FaceDesign(2)), "boom")
-    cfg = ScoreConfig()
+    cfg = ScoreConfig(response="solve")  # (the field reading would build fields)
     fake_score.calls.clear()
     with pytest.raises(RuntimeError, match="killed"):
         score_layouts(
@@ -61,7 +61,7 @@ def test_a_sweep_killed_in_the_middle_resumes_without_redoing_finished_layouts(
     ]
     # other settings: everything is scored again
     fake_score.calls.clear()
-    other = ScoreConfig(seed=1)
+    other = ScoreConfig(seed=1, response="solve")
     score_layouts([("a", a)], tmp_path, other, n_workers=0, score_fn=fake_score, report=False)
     assert fake_score.calls == ["paper-2x4-wires", "three"]
 
@@ -69,11 +69,14 @@ def test_a_sweep_killed_in_the_middle_resumes_without_redoing_finished_layouts(
 def test_a_changed_layout_under_the_same_name_is_scored_again(tmp_path, fake_score):
     a, b = _layouts()
     fake_score.calls.clear()
+    cfg = ScoreConfig(response="solve")
     score_layouts(
-        [("x", a)], tmp_path, n_workers=0, score_fn=fake_score, report=False, include_paper=False
+        [("x", a)], tmp_path, cfg, n_workers=0, score_fn=fake_score, report=False,
+        include_paper=False,
     )
     score_layouts(
-        [("x", b)], tmp_path, n_workers=0, score_fn=fake_score, report=False, include_paper=False
+        [("x", b)], tmp_path, cfg, n_workers=0, score_fn=fake_score, report=False,
+        include_paper=False,
     )
     assert fake_score.calls == ["three", "five"]
 
@@ -153,7 +156,8 @@ def test_the_mesh_option_reaches_the_simulation_and_the_settings(tmp_path, monke
     from ectskin.design.score import score_layout
     from ectskin.twin.bound import COARSE
 
-    coarse, default = ScoreConfig(), ScoreConfig(mesh="default")  # coarse is the default
+    # coarse is the default
+    coarse, default = ScoreConfig(response="solve"), ScoreConfig(mesh="default", response="solve")
     assert coarse.mesh == "coarse" and coarse.protocol.touch_trials == 6
     assert "mesh" not in default.settings()  # scores on the twin's mesh made before it resume
     assert coarse.settings()["mesh"] == "coarse"

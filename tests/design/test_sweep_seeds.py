@@ -53,7 +53,7 @@ def _layouts():
 def test_seeds_give_means_intervals_and_the_paired_verdict(tmp_path):
     fake = SeededFake()
     info = partial(information_layout, providers=point_charges)
-    run = partial(score_layouts, _layouts(), tmp_path, ScoreConfig(), n_workers=0, score_fn=fake,
+    run = partial(score_layouts, _layouts(), tmp_path, ScoreConfig(response="solve"), n_workers=0, score_fn=fake,
                   seeds=[0, 1, 2], information=CONFIG, information_fn=info)
     design = run()
     assert sorted(fake.calls) == sorted(
@@ -100,7 +100,7 @@ def test_repeated_seeds_are_refused(tmp_path):
 
 def test_one_seed_with_the_information_score_beside_it(tmp_path, fake_score):
     info = partial(information_layout, providers=point_charges)
-    run = partial(score_layouts, _layouts()[:1], tmp_path, ScoreConfig(), n_workers=0,
+    run = partial(score_layouts, _layouts()[:1], tmp_path, ScoreConfig(response="solve"), n_workers=0,
                   score_fn=fake_score, information=CONFIG, information_fn=info)
     fake_score.calls.clear()
     design = run()

@@ -10,13 +10,14 @@ import logging
 from dataclasses import replace
 from pathlib import Path
 
-from ectskin._check import EctskinError, parse_floats
+from ectskin._check import EctskinError, check_option, parse_floats
 from ectskin.commands._options import add_seed, integer, number
 
 HELP = "score electrode layouts in the twin, or search the layout family (Optuna on Dask)"
 EXAMPLES = """\
   ectskin design score my_layout.json other.json --out scores   # + the paper's layout
   ectskin design score my_layout.json --out scores --workers 4
+  ectskin design score my_layout.json --out scores --response solve   # solves per dwell
   ectskin design score my_layout.json --out scores --scheduler tcp://10.0.0.5:8786
   ectskin design search study                    # bound objective: 6 trials on 2 local workers
   ectskin design search study --trials 200 --scheduler tcp://10.0.0.5:8786
@@ -51,11 +52,32 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--touch-trials",
         type=integer(0),
-        default=6,
-        help="touch trials per inflation state (default 6)",
+        default=None,
+        help="touch trials per inflation state (default 12; 6 with --response solve)",
     )
     p.add_argument(
-        "--duration", type=number(0, above=True), default=3.0, help="seconds per trial (default 3)"
+        "--duration",
+        type=number(0, above=True),
+        default=None,
+        help="seconds per trial (default 15; 3 with --response solve)",
+    )
+    p.add_argument(
+        "--response",
+        default=None,
+        help="trained score: how touch trials are read, field (default: from the states' "
+        "response fields, built once per layout and cached, a new touch point every 0.5 s) or "
+        "solve (method-of-moments solves per dwell)",
+    )
+    p.add_argument(
+        "--field-grid",
+        default="quick",
+        help="with --response field: the fields' grid, quick (default) or fine",
+    )
+    p.add_argument(
+        "--field-cache",
+        default=None,
+        help="with --response field: the field cache (default $ECTSKIN_CACHE/fields, else "
+        "~/.cache/ectskin/fields)",
     )
     p.add_argument(
         "--epochs",
@@ -147,23 +169,32 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _config(args):
-    from ectskin.design.score import ScoreConfig, design_protocol
+    from ectskin.design.score import DEFAULT_RESPONSE, ScoreConfig, design_protocol
 
     epochs = [int(x) for x in parse_floats("--epochs", args.epochs, 3)]
     tasks = ("touch", "contact") if args.no_track else ("touch", "contact", "track")
+    response = args.response or DEFAULT_RESPONSE
+    check_option("--response", response, ("field", "solve"))
+    given = {"touch_trials": args.touch_trials, "duration_s": args.duration}
     protocol = design_protocol(
         args.seed,
+        response=response,
         levels_ml=tuple(parse_floats("--levels", args.levels)),
-        touch_trials=args.touch_trials,
-        duration_s=args.duration,
+        **{k: v for k, v in given.items() if v is not None},
     )
-    return ScoreConfig(
-        protocol=protocol,
-        epochs=dict(zip(("touch", "contact", "track"), epochs)),
-        seed=args.seed,
-        tasks=tasks,
-        mesh=args.mesh,
-    )
+    try:
+        return ScoreConfig(
+            protocol=protocol,
+            epochs=dict(zip(("touch", "contact", "track"), epochs)),
+            seed=args.seed,
+            tasks=tasks,
+            mesh=args.mesh,
+            response=response,
+            field_grid=args.field_grid,
+            field_cache=args.field_cache,
+        )
+    except EctskinError as exc:
+        raise EctskinError(f"--mesh / --field-grid / --field-cache: {exc}") from None
 
 
 def _states(text: str) -> tuple[tuple[float, ...], ...]:

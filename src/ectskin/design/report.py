@@ -218,7 +218,14 @@ def _about(design: Mapping[str, Any]) -> str:
             f"Trained score: protocol of {len(proto['levels_ml'])} levels {proto['levels_ml']} ml "
             f"per chamber, {proto['touch_trials']} touch trials per state of "
             f"{proto['duration_s']:g} s, {proto['touch_dwells']} dwells, placement "
-            f"{proto['touch_placement']!r}, seed {proto['seed']}; quick training, epochs "
+            f"{proto['touch_placement']!r}, "
+            + (
+                "read from the states' response fields (spacing "
+                f"{s['field_grid']['spacing_mm']} mm), "
+                if s.get("response") == "field"
+                else "solved per dwell, "
+            )
+            + f"seed {proto['seed']}; quick training, epochs "
             f"{s['epochs']}. Errors are comparable between layouts of this report (the same "
             f"touches), not with the paper's protocol."
         )

@@ -5,11 +5,16 @@ the sensor's per-pair SNR, touch sensitivity and the conditioning of its sensiti
 ``<dir>/score.json`` last and atomically; :func:`finished_score` reads it back when its settings
 match, so a sweep resumes without redoing finished layouts.
 
-The default protocol (:func:`design_protocol`) is far smaller than the paper's (so that one
-layout costs minutes on one core): the contact experiment's placement (touches anywhere in
-their region, 2 dwells per trial, lifts) at the chambers' lowest and highest level (8 states),
-2 touch trials and one no-contact trial per state of 3 s, 3 force nodes, no hover, approach or
-second finger.
+The design protocol (:func:`design_protocol`) is far smaller than the paper's: the contact
+experiment's placement (touches anywhere in their region, lifts) at the chambers' lowest and
+highest level (8 states), one no-contact trial per state, no hover, approach or second finger.
+How its touch trials are read (``ScoreConfig.response``): by default (``field``) from the
+response fields of the protocol's states, built once per layout and cached, on a protocol with
+many more touch points (12 touch trials of 15 s per state, a new point every 0.5 s:
+:mod:`ectskin.design.score_field`); or (``solve``) by method-of-moments solves per dwell, 6
+touch trials of 3 s per state with 2 dwells and 3 force nodes (a few minutes a layout and seed
+on one core, but too few distinct touches to train on: its seed-to-seed spread hides the
+differences between layouts).
 
 Every layout is scored on the same *scoring regions* (:func:`scoring_regions`: each face cut
 into ``ScoreConfig.region_rows`` × ``region_cols`` rectangles, default 2 × 1: base and tip
@@ -35,6 +40,16 @@ from threadpoolctl import threadpool_limits
 from ectskin._check import EctskinError, check_option
 from ectskin._files import read_json, to_jsonable, write_json_atomic, write_text_atomic
 from ectskin.design.information import MESHES
+from ectskin.design.score_field import (
+    DEFAULT_GRID,
+    FIELD_DURATION_S,
+    FIELD_TOUCH_TRIALS,
+    dense_protocol,
+    grid_from_dict,
+    grid_to_dict,
+    resolve_grid,
+    score_fields,
+)
 from ectskin.electrostatics.reconstruct import normalise_sensitivity
 from ectskin.io import write_recording
 from ectskin.layout import Region, SensorLayout
@@ -42,6 +57,8 @@ from ectskin.learn.evaluate import evaluate_run
 from ectskin.learn.train import TrainConfig, train_from_recording
 from ectskin.twin import Protocol, SensorModel, simulate_experiment
 from ectskin.twin.ect import ect_grid, sensitivity
+from ectskin.twin.field_spec import FieldGrid
+from ectskin.twin.protocol import RESPONSES
 from ectskin.twin.readout import ReadoutConfig, noise_pf, snr_db
 
 log = logging.getLogger(__name__)
@@ -51,11 +68,20 @@ SCORE_FORMAT = 1
 TASKS = ("touch", "contact", "track")
 #: relative singular value above which a direction of the sensitivity matrix counts as resolved
 RANK_THRESHOLD = 1e-2
+#: how the touch trials are read by default (``ScoreConfig.response``): from the response
+#: fields, measured (paper's layout, 3 seeds): point error 3.10 / 3.39 / 2.59 mm against
+#: 9.88 / 8.33 / 16.32 mm solved per dwell (BENCHMARKS.md)
+DEFAULT_RESPONSE = "field"
 
 
-def design_protocol(seed: int = 0, **overrides: Any) -> Protocol:
+def design_protocol(seed: int = 0, response: str = "solve", **overrides: Any) -> Protocol:
     """The default design protocol (see the module docstring); ``overrides`` set any
-    :class:`~ectskin.twin.Protocol` field."""
+    :class:`~ectskin.twin.Protocol` field. ``response="field"``: the field protocol
+    (:mod:`ectskin.design.score_field`): :data:`~ectskin.design.score_field.FIELD_TOUCH_TRIALS`
+    touch trials of :data:`~ectskin.design.score_field.FIELD_DURATION_S` per state by default,
+    read from the states' response fields, the finger at a new point every
+    :data:`~ectskin.design.score_field.DWELL_S` (unless ``overrides`` set the dwells)."""
+    check_option("response", response, RESPONSES, source="design protocol")
     base = Protocol(
         seed=seed,
         levels_ml=(0.0, 20.0),
@@ -67,14 +93,20 @@ def design_protocol(seed: int = 0, **overrides: Any) -> Protocol:
         lifts=True,
         force_nodes=3,
     )
-    return replace(base, **overrides)
+    if response == "solve":
+        return replace(base, **overrides)
+    dense = {"touch_trials": FIELD_TOUCH_TRIALS, "duration_s": FIELD_DURATION_S}
+    dense.update({k: v for k, v in overrides.items() if k not in ("touch_dwells", "dwell_slide_s")})
+    protocol = dense_protocol(replace(base, **dense))
+    own = {k: v for k, v in overrides.items() if k in ("touch_dwells", "dwell_slide_s")}
+    return replace(protocol, **own)
 
 
 @dataclass(frozen=True)
 class ScoreConfig:
     """How a layout is scored.
 
-    protocol : the simulated experiment (default :func:`design_protocol`).
+    protocol : the simulated experiment (default :func:`design_protocol` for ``response``).
     epochs : training epochs per task on the ``quick`` profile (assumed small defaults: the
         point is to rank layouts, not to reach the paper's accuracy).
     seed : seeds the split, the models and the protocol's own draws through ``protocol.seed``.
@@ -83,18 +115,56 @@ class ScoreConfig:
         ``coarse`` (default: the information score's mesh, about 5x faster a touch trial than
         the twin's own; the paper's layout, seed 0: 42.71 against 41.87 mm) or ``default`` (the
         twin's own). A mesh other than the twin's own joins :meth:`settings`.
+    response : how the touch trials' readouts are computed: ``solve`` (method-of-moments
+        solves per dwell, the design protocol) or ``field`` (read from the states' response
+        fields, the dense field protocol: :mod:`ectskin.design.score_field`). None: the
+        protocol's when one is given, else :data:`DEFAULT_RESPONSE`; a protocol of the other
+        reading is an error. ``field`` joins :meth:`settings` with the field grid.
+    field_grid : the fields' grid, a name of :data:`~ectskin.twin.field_spec.FIELD_GRIDS`
+        (default ``quick``, the reproduction's) or a :class:`~ectskin.twin.field_spec.FieldGrid`;
+        held as the grid.
+    field_cache : where the fields are cached (default
+        :func:`~ectskin.pipeline.field.field_cache_dir`); not a setting (a field's folder is
+        named by its key).
     """
 
-    protocol: Protocol = field(default_factory=design_protocol)
+    protocol: Protocol | None = None
     epochs: dict[str, int] = field(default_factory=lambda: {"touch": 15, "contact": 6, "track": 3})
     seed: int = 0
     tasks: tuple[str, ...] = TASKS
     region_rows: int = 2
     region_cols: int = 1
     mesh: str = "coarse"
+    response: str | None = None
+    field_grid: str | FieldGrid = DEFAULT_GRID
+    field_cache: str | Path | None = None
 
     def __post_init__(self) -> None:
         check_option("mesh", self.mesh, tuple(MESHES))
+        if self.response is not None:
+            check_option("response", self.response, RESPONSES, source="score config")
+        if self.protocol is not None and not isinstance(self.protocol, Protocol):
+            raise EctskinError(
+                f"score config: protocol must be a Protocol, got {type(self.protocol).__name__}"
+            )
+        response = self.response or (
+            self.protocol.response if self.protocol is not None else DEFAULT_RESPONSE
+        )
+        protocol = self.protocol or design_protocol(response=response)
+        if protocol.response != response:
+            raise EctskinError(
+                f"score config: response {response!r} needs a protocol with response="
+                f"{response!r} (design_protocol(response={response!r})), got one with "
+                f"{protocol.response!r}"
+            )
+        object.__setattr__(self, "response", response)
+        object.__setattr__(self, "protocol", protocol)
+        object.__setattr__(self, "field_grid", resolve_grid(self.field_grid))
+        if self.field_cache is not None and not isinstance(self.field_cache, str | Path):
+            raise EctskinError(
+                f"score config: field_cache must be a folder (str or Path) or None, got "
+                f"{type(self.field_cache).__name__}"
+            )
         if not all(isinstance(v, int) and v >= 1 for v in (self.region_rows, self.region_cols)):
             raise EctskinError(
                 f"score config: region_rows and region_cols must be integers >= 1, got "
@@ -113,11 +183,18 @@ class ScoreConfig:
                     f"score config: epochs[{task!r}] must be an integer >= 1, got {n!r}"
                 )
 
+    @property
+    def grid(self) -> FieldGrid:
+        """The fields' grid (a :class:`~ectskin.twin.field_spec.FieldGrid` after construction)."""
+        assert isinstance(self.field_grid, FieldGrid)
+        return self.field_grid
+
     def settings(self) -> dict[str, Any]:
-        """Everything a finished score depends on (compared on resume)."""
+        """Everything a finished score depends on (compared on resume): the solve reading's
+        are those of scores made before the field reading existed."""
         out = {
             "format": SCORE_FORMAT,
-            "protocol": self.protocol.to_dict(),
+            "protocol": self.protocol.to_dict(),  # (set by __post_init__)
             "epochs": {t: self.epochs[t] for t in self.tasks},
             "seed": self.seed,
             "tasks": list(self.tasks),
@@ -125,6 +202,9 @@ class ScoreConfig:
         }
         if self.mesh != "default":
             out["mesh"] = self.mesh
+        if self.response == "field":
+            out["response"] = "field"
+            out["field_grid"] = grid_to_dict(self.grid)
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -132,6 +212,7 @@ class ScoreConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ScoreConfig:
+        grid = d.get("field_grid")
         return cls(
             protocol=Protocol.from_dict(d["protocol"]),
             epochs={k: int(v) for k, v in d["epochs"].items()},
@@ -140,6 +221,8 @@ class ScoreConfig:
             region_rows=int(d["regions"][0]),
             region_cols=int(d["regions"][1]),
             mesh=str(d.get("mesh", "default")),
+            response=str(d.get("response", "solve")),
+            field_grid=DEFAULT_GRID if grid is None else grid_from_dict(grid),
         )
 
 
@@ -163,6 +246,12 @@ def scoring_regions(layout: SensorLayout, rows: int, cols: int) -> tuple[Region,
                     )
                 )
     return tuple(regions)
+
+
+def scored_layout(layout: SensorLayout, config: ScoreConfig) -> SensorLayout:
+    """``layout`` with the scoring regions of ``config`` in place of its own: what is simulated
+    (and what the score's response fields are built for)."""
+    return replace(layout, regions=scoring_regions(layout, config.region_rows, config.region_cols))
 
 
 def finished_score(dir_: str | Path, layout: SensorLayout, config: ScoreConfig) -> dict | None:
@@ -256,14 +345,18 @@ def score_layout(
     out.mkdir(parents=True)
     write_text_atomic(out / "layout.json", layout.to_json() + "\n")
     t0 = time.perf_counter()
-    regions = scoring_regions(layout, config.region_rows, config.region_cols)
-    scored = replace(layout, regions=regions)
+    scored = scored_layout(layout, config)
+    fields, t_fields = None, None
+    if config.response == "field":
+        fields, built = score_fields(config.protocol, scored, config.grid, config.field_cache)
+        t_fields = built["seconds"]
     rec = simulate_experiment(
         config.protocol,
         layout=scored,
         discretisation=MESHES[config.mesh],
         workers=1,
         progress=False,
+        fields=fields,
     )
     data = write_recording(rec, out / "recording.h5", overwrite=True)
     t_sim = time.perf_counter() - t0
@@ -302,7 +395,12 @@ def score_layout(
         "track_ad_mm": metrics["track"]["ad_mm_mean"] if "track" in metrics else None,
         "loc_map": _error_maps(contact["map"]),
         "sensor": sensor,
-        "seconds": {"simulate": t_sim, "learn": t_learn, "total": time.perf_counter() - t0},
+        "seconds": {
+            "simulate": t_sim,  # with the fields' build or read (the field reading)
+            "fields": t_fields,
+            "learn": t_learn,
+            "total": time.perf_counter() - t0,
+        },
         "settings": config.settings(),
         "layout": layout.to_dict(),
     }
@@ -341,6 +439,7 @@ __all__ = [
     "finished_score",
     "score_layout",
     "score_to_dict",
+    "scored_layout",
     "scoring_regions",
     "sensor_metrics",
 ]

@@ -16,6 +16,11 @@ and the models' seed) into ``OUT/layouts/<name>/seed-<k>/``, the paper's layout 
 seeds (so on the same test touches): the entry's trained metrics are their means over the seeds,
 ``trained`` holds each metric's values, seeds, mean and 95 % t-interval, and ``vs_paper`` the
 paired comparison with the paper's layout (:mod:`ectskin.design.stats`).
+
+With the field reading (``ScoreConfig.response="field"``) the response fields of every layout
+to score are built first, each once whatever the number of seeds, on the sweep's own cluster
+(:func:`build_fields_first`); the tasks then only read them, and ``design.json``'s ``fields``
+says what the build did.
 """
 
 from __future__ import annotations
@@ -40,7 +45,14 @@ from ectskin.design.information import (
     information_layout,
 )
 from ectskin.design.report import write_report
-from ectskin.design.score import ScoreConfig, finished_score, score_layout, score_to_dict
+from ectskin.design.score import (
+    ScoreConfig,
+    finished_score,
+    score_layout,
+    score_to_dict,
+    scored_layout,
+)
+from ectskin.design.score_field import build_score_fields, field_specs
 from ectskin.design.stats import METRICS, aggregate, compare_with, goal_layouts, rank_agreement
 from ectskin.layout import SensorLayout, default_layout
 
@@ -132,6 +144,9 @@ def score_layouts(
     names = {str(layout_dir(out, n)): n for n, _ in named}
     t0 = time.perf_counter()
     with open_runner(n_workers, scheduler) as runner:
+        built = build_fields_first([job[0] for job in todo], config, runner)
+        if built is not None:
+            extra = {**(extra or {}), "fields": built}
         for job, score in runner.stream(task, iter_jobs(todo)):
             scores[names[str(job[1])]] = score
             write_design(out, named, scores, config, runner, time.perf_counter() - t0, extra)
@@ -141,6 +156,39 @@ def score_layouts(
     if report:
         write_report(out, design, scores)
     return design
+
+
+def build_fields_first(
+    layouts: Sequence[SensorLayout], config: ScoreConfig, runner
+) -> dict[str, Any] | None:
+    """With the field reading: the response fields of every layout in ``layouts`` (each once,
+    however many of its seeds are to score) built before the scoring tasks, on the runner's
+    cluster (in this process for a serial runner), so that the tasks only read them; what the
+    build did (``seconds``, chunks ``solved`` / ``cached``, ``fields``). None with the solve
+    reading."""
+    if config.response != "field":
+        return None
+    specs, seen = [], set()
+    for layout in layouts:
+        for spec in field_specs(config.protocol, scored_layout(layout, config), config.grid):
+            if spec.key() not in seen:
+                seen.add(spec.key())
+                specs.append(spec)
+    serial = runner.address == "serial"
+    log.info("response fields of %d layout(s) to score: %d field(s)",
+             len({layout.to_json() for layout in layouts}), len(specs))
+    report = build_score_fields(
+        specs,
+        config.field_cache,
+        scheduler=None if serial else runner.address,
+        workers=0 if serial else None,
+    )
+    return {
+        "seconds": report.seconds,
+        "solved": report.solved,
+        "cached": report.cached,
+        "fields": len(specs),
+    }
 
 
 def seeded(config: ScoreConfig, seed: int) -> ScoreConfig:
@@ -182,7 +230,13 @@ def _score_seeds(
                 infos[name] = done
     log.info("%d task(s) to run over %d layout(s) and %d seed(s)", len(jobs), len(named), len(seeds))
     t0 = time.perf_counter()
+    extra: dict[str, Any] = {"seeds": seeds}
     with open_runner(n_workers, scheduler) as runner:
+        built = build_fields_first(
+            [job[1] for job in jobs if job[0] is score_fn], config, runner
+        )
+        if built is not None:
+            extra["fields"] = built
         for job, score in runner.stream(run_job, iter_jobs(jobs)):
             name, k = where[str(job[2])]
             if k is None:
@@ -194,7 +248,6 @@ def _score_seeds(
         for name, _ in named:
             entry = merge_seeds(per_seed[name], None if name == PAPER else ref)
             scores[name] = entry if name not in infos else with_information(entry, infos[name])
-        extra: dict[str, Any] = {"seeds": seeds}
         if information is not None:
             extra["information_settings"] = information.to_dict()
         design = write_design(
