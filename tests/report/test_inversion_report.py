@@ -94,3 +94,20 @@ def test_without_an_inversion_the_report_says_nothing_of_it():
     assert "observable" not in text and "ms" not in text and "validation" not in text
     rows = {r[0]: r for r in next(iter(_tables(items).values()))}
     assert rows["Contact point: mean error"][1:] == ("2.00 mm", "—", "—", "—")
+
+
+def test_the_report_says_what_the_fit_assumed_beyond_the_field():
+    m = _metrics()
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert "untouched readout" not in text and "refitted pressing" not in text
+    m["inversion"]["settings"] = {
+        "untouched": {"source": "auto", "trials": {"0/0/0 ml": ["a"], "0/20/0 ml": ["b"]}},
+        "finger_scale_sd": 0.12, "press_check": True,
+    }
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert "the skin's own untouched readout" in text and "2 state(s) have one" in text
+    assert "(prior sd 0.12)" in text and "refitted pressing" in text
+    m["inversion"]["settings"] = {"untouched": {"source": "field"}, "finger_scale_sd": None,
+                                  "press_check": False}
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert "untouched readout" not in text and "prior sd" not in text and "pressing" not in text

@@ -112,6 +112,26 @@ def force_line(inv: Mapping[str, Any], bound: Mapping[str, Any] | None) -> str |
     return text + "."
 
 
+def _options_text(settings: Mapping[str, Any]) -> str:
+    """What the fit assumed beyond the field: whose untouched readout, people's finger sizes,
+    the press check (the step's settings; "" for a step made before they existed)."""
+    out = []
+    untouched = settings.get("untouched")
+    if isinstance(untouched, Mapping) and untouched.get("source") == "auto":
+        n = len(untouched.get("trials") or {})
+        out.append(f" Each frame is compared with the skin's own untouched readout of its state "
+                   f"(the mean of its no-contact trials outside the test split; {n} state(s) "
+                   "have one, the others the field's).")
+    sd = settings.get("finger_scale_sd")
+    if isinstance(sd, int | float):
+        out.append(f" Each finger's signal has an unknown scale (prior sd {sd:g}): people's "
+                   "fingertips differ from the field's.")
+    if settings.get("press_check"):
+        out.append(" A finger fitted hovering is refitted pressing and kept so where that fits "
+                   "about as well.")
+    return "".join(out)
+
+
 def inversion_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
     """The report's items for metrics.json's ``inversion``; [] without it (or with no frame)."""
     inv = lookup(metrics, "inversion")
@@ -126,6 +146,7 @@ def inversion_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
            f"{_mm(val.get('off'))} without)" if val else "")
         + "."
     )
+    push_text += _options_text(inv.get("settings") or {})
     n, n_all = inv.get("n_frames"), inv.get("n_frames_in_field_states")
     sub = (f" {n} of its {n_all} test frames in states with a field, evenly spread, were "
            "inverted." if isinstance(n_all, int) and isinstance(n, int) and n < n_all else "")
