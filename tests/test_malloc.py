@@ -38,6 +38,8 @@ print(mallinfo2().hblkhd)
 
 
 def _mapped_bytes(mode: str, env: dict[str, str] | None = None) -> int:
+    if env is None:  # glibc's defaults, whatever this process was started with
+        env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
     out = subprocess.run([sys.executable, "-c", MAPPED, mode], capture_output=True, text=True,
                          check=True, env=env)
     return int(out.stdout.strip())
@@ -80,6 +82,9 @@ def test_the_dask_workers_start_with_the_thresholds():
 
     fn = _worker_mapped_bytes
     fn.__module__ = "__main__"  # shipped by value: the worker need not import the tests
+    before = {k: v for k, v in os.environ.items() if k.startswith("MALLOC_")}
     with dask_client(1) as client:
         held = client.submit(fn, pure=False).result()
     assert held < 5_000_000 * 8
+    # and this process's own environment is left as it was
+    assert {k: v for k, v in os.environ.items() if k.startswith("MALLOC_")} == before

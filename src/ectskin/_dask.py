@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 from collections.abc import Iterator
 from typing import Any
 
@@ -30,6 +31,19 @@ log = logging.getLogger(__name__)
 #: seconds a scheduler (and, where asked, its first worker) has to answer (assumed: long enough
 #: for a scheduler on a LAN)
 CONNECT_TIMEOUT_S = 10.0
+
+
+@contextlib.contextmanager
+def _restored(saved: dict[str, str | None]) -> Iterator[None]:
+    """Put the environment variables ``saved`` (name → value, None: unset) back on exit."""
+    try:
+        yield
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
 
 
 @contextlib.contextmanager
@@ -78,7 +92,10 @@ def dask_client(
         return
     threads = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     pre_spawn = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **threads, **MALLOC_ENV}
-    with dask.config.set({"distributed.nanny.pre-spawn-environ": pre_spawn}):
+    # the nanny writes its pre-spawn environment into this process's before each start; what
+    # this process had is put back after (its later children get their own settings)
+    saved = {k: os.environ.get(k) for k in pre_spawn}
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": pre_spawn}), _restored(saved):
         cluster = LocalCluster(
             n_workers=n_workers,
             threads_per_worker=1,
