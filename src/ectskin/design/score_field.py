@@ -31,11 +31,10 @@ from typing import Any
 
 from ectskin._check import EctskinError, check_option
 from ectskin.layout import SensorLayout
-from ectskin.pipeline.field import field_cache_dir
+from ectskin.pipeline.field import field_cache_dir, protocol_field_specs
 from ectskin.twin import Protocol
 from ectskin.twin.field_build import BuildReport, build_chunks, field_dir
-from ectskin.twin.field_spec import FIELD_GRIDS, FieldGrid, FieldSpec, contact_field_spec
-from ectskin.twin.finger import Finger
+from ectskin.twin.field_spec import FIELD_GRIDS, FieldGrid, FieldSpec
 from ectskin.twin.sensor import Discretisation
 
 #: the field protocol's touch trials per state and their length (s), and how long the finger
@@ -98,17 +97,9 @@ def grid_from_dict(d: dict[str, Any]) -> FieldGrid:
 
 def field_specs(protocol: Protocol, layout: SensorLayout, grid: FieldGrid) -> list[FieldSpec]:
     """One field spec per inflation state of ``protocol`` on ``layout`` (the scored layout,
-    with its scoring regions) and the default body, on ``grid``: the same specs as
-    :func:`ectskin.pipeline.field.protocol_field_specs` (which takes a grid by name only)."""
-    finger = Finger(radius_mm=protocol.finger_radius_mm)
-    return [
-        contact_field_spec(
-            layout, state, grid, finger=finger,
-            force_range_n=protocol.force_range_n,
-            height_range_mm=(0.5, max(protocol.hover_max_mm, 1.0)),
-        )
-        for state in protocol.states()
-    ]
+    with its scoring regions) and the default body, on ``grid``
+    (:func:`ectskin.pipeline.field.protocol_field_specs`)."""
+    return protocol_field_specs(protocol, layout, grid)
 
 
 def build_score_fields(

@@ -25,7 +25,7 @@ from ectskin._check import EctskinError, check_option
 from ectskin.layout import SensorLayout, default_layout
 from ectskin.twin.field import ResponseField
 from ectskin.twin.field_build import build_fields, field_dir
-from ectskin.twin.field_spec import FIELD_GRIDS, FieldSpec, contact_field_spec
+from ectskin.twin.field_spec import FIELD_GRIDS, FieldGrid, FieldSpec, contact_field_spec
 from ectskin.twin.finger import Finger
 from ectskin.twin.protocol import Protocol
 
@@ -46,19 +46,21 @@ def field_cache_dir(cache_dir: str | os.PathLike | None = None) -> Path:
 
 
 def protocol_field_specs(
-    protocol: Protocol, layout: SensorLayout | None = None, grid: str = "quick"
+    protocol: Protocol, layout: SensorLayout | None = None, grid: str | FieldGrid = "quick"
 ) -> list[FieldSpec]:
     """One field spec per inflation state of ``protocol`` on ``layout`` (default: the paper's)
-    and the default body, as the reproduction and ``ectskin simulate`` simulate them, on the
-    grid named ``grid`` (:data:`~ectskin.twin.field_spec.FIELD_GRIDS`)."""
+    and the default body, as the reproduction and ``ectskin simulate`` simulate them, on
+    ``grid``: a name of :data:`~ectskin.twin.field_spec.FIELD_GRIDS` or a grid."""
     if not isinstance(protocol, Protocol):
         raise EctskinError(f"protocol must be a Protocol, got {type(protocol).__name__}")
-    check_option("field grid", grid, tuple(FIELD_GRIDS))
+    if not isinstance(grid, FieldGrid):
+        check_option("field grid", grid, tuple(FIELD_GRIDS))
+        grid = FIELD_GRIDS[grid]
     layout = layout or default_layout()
     finger = Finger(radius_mm=protocol.finger_radius_mm)
     return [
         contact_field_spec(
-            layout, state, FIELD_GRIDS[grid], finger=finger,
+            layout, state, grid, finger=finger,
             force_range_n=protocol.force_range_n,
             height_range_mm=(0.5, max(protocol.hover_max_mm, 1.0)),
         )
