@@ -54,22 +54,20 @@ def test_a_large_array_comes_from_the_heap_not_a_fresh_mmap():
     assert keep_freed_memory() is True
 
 
-def _worker_mapped_bytes() -> int:
-    import ctypes
+def _worker_mapped_bytes(script: str) -> int:
+    """``script`` (:data:`MAPPED`) run in this process (a Dask worker): the bytes it prints."""
+    import contextlib
+    import io
+    import sys
 
-    import numpy as np
-
-    class Mallinfo2(ctypes.Structure):
-        _fields_ = [(name, ctypes.c_size_t) for name in (
-            "arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks",
-            "fordblks", "keepcost")]
-
-    mallinfo2 = ctypes.CDLL("libc.so.6").mallinfo2
-    mallinfo2.restype = Mallinfo2
-    a = np.ones(5_000_000)  # 40 MB, alive while glibc is asked
-    held = int(mallinfo2().hblkhd)
-    del a
-    return held
+    out, argv = io.StringIO(), sys.argv
+    sys.argv = ["", "default"]  # glibc as the worker started
+    try:
+        with contextlib.redirect_stdout(out):
+            exec(script, {"__name__": "mapped"})
+    finally:
+        sys.argv = argv
+    return int(out.getvalue().strip())
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
@@ -84,7 +82,7 @@ def test_the_dask_workers_start_with_the_thresholds():
     fn.__module__ = "__main__"  # shipped by value: the worker need not import the tests
     before = {k: v for k, v in os.environ.items() if k.startswith("MALLOC_")}
     with dask_client(1) as client:
-        held = client.submit(fn, pure=False).result()
+        held = client.submit(fn, MAPPED, pure=False).result()
     assert held < 5_000_000 * 8
     # and this process's own environment is left as it was
     assert {k: v for k, v in os.environ.items() if k.startswith("MALLOC_")} == before

@@ -69,22 +69,29 @@ def test_extra_data_of_another_skin_or_no_file_is_refused(tmp_path, files, make_
     assert not (tmp_path / "run2" / "model.pt").exists()
 
 
-def test_the_baselines_are_fitted_on_the_run_s_extra_trials_too(tmp_path, files, monkeypatch):
-    from ectskin.learn.evaluate import evaluate_run
+@pytest.fixture
+def fitted(monkeypatch):
+    """The training sample counts the touch baselines are fitted on, call by call."""
     from ectskin.learn.tasks.touch import TouchTask
+
+    counts: list[int] = []
+    real = TouchTask.baseline_metrics
+
+    def spy(self, train, test, **kw):
+        counts.append(train.n_samples)
+        return real(self, train, test, **kw)
+
+    monkeypatch.setattr(TouchTask, "baseline_metrics", spy)
+    return counts
+
+
+def test_the_baselines_are_fitted_on_the_run_s_extra_trials_too(tmp_path, files, fitted):
+    from ectskin.learn.evaluate import evaluate_run
 
     main, extra = files
     config = TrainConfig(profile="robust", epochs=1, counts=(6, 2, 2), progress=False,
                          extra_train=(str(extra),))
     train_from_recording("touch", main, tmp_path / "run", config)
-    fitted = []
-    real = TouchTask.baseline_metrics
-
-    def spy(self, train, test, **kw):
-        fitted.append(train.n_samples)
-        return real(self, train, test, **kw)
-
-    monkeypatch.setattr(TouchTask, "baseline_metrics", spy)
     m = evaluate_run(tmp_path / "run", main, figures=False, write=False)["touch"]
     assert fitted == [6 * 40 + 10 * 20] and m["baselines"]
     # the extra recording changed since training: no baselines, and the reason said
@@ -93,14 +100,13 @@ def test_the_baselines_are_fitted_on_the_run_s_extra_trials_too(tmp_path, files,
     assert not m["baselines"] and "extra.h5 changed since training" in m["baselines_skipped"]
 
 
-def test_a_moved_folder_keeps_its_baselines_on_the_extra_trials(tmp_path, files, monkeypatch):
+def test_a_moved_folder_keeps_its_baselines_on_the_extra_trials(tmp_path, files, fitted):
     """A reproduction's folder moved whole (coverage.h5 beside runs/): the extra recording is
     found by name near the run and checked by its trial digests. Catches the stored absolute
     path alone (baselines skipped after any move) and a same-named file taken unchecked."""
     import shutil
 
     from ectskin.learn.evaluate import evaluate_run
-    from ectskin.learn.tasks.touch import TouchTask
 
     main, extra = files
     old = tmp_path / "old"
@@ -111,14 +117,6 @@ def test_a_moved_folder_keeps_its_baselines_on_the_extra_trials(tmp_path, files,
     train_from_recording("touch", main, old / "runs" / "touch", config)
     new = tmp_path / "new"
     old.rename(new)
-    fitted = []
-    real = TouchTask.baseline_metrics
-
-    def spy(self, train, test, **kw):
-        fitted.append(train.n_samples)
-        return real(self, train, test, **kw)
-
-    monkeypatch.setattr(TouchTask, "baseline_metrics", spy)
     m = evaluate_run(new / "runs" / "touch", main, figures=False, write=False)["touch"]
     assert fitted == [6 * 40 + 10 * 20] and m["baselines"]
     # another recording of that name near the run is not taken for it
