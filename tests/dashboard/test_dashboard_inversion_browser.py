@@ -31,6 +31,7 @@ Needs Chromium and Playwright (the ``chromium`` fixture of ``conftest.py``).
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
@@ -215,13 +216,22 @@ def open_page(chromium, server, errors: list[str]):
     return page
 
 
-def test_inversion_fingers_drawn_with_their_standard_errors(chromium):
-    hub = Hub(LAYOUT, Engine())
+@contextlib.contextmanager
+def running_page(chromium, engine):
+    """(hub, page): the dashboard of ``engine`` running, its page open; no error in the page by
+    the end."""
+    hub = Hub(LAYOUT, engine)
     errors: list[str] = []
     with DashboardServer(None, hub=hub, port=0) as server:
         hub.set_engine_state("running")
         page = open_page(chromium, server, errors)
         assert page.locator("#contact-panel").is_visible()
+        yield hub, page
+    assert not errors, f"errors in the page: {errors}"
+
+
+def test_inversion_fingers_drawn_with_their_standard_errors(chromium):
+    with running_page(chromium, Engine()) as (hub, page):
         assert page.locator("#inversion").is_visible()
         legend = page.text_content("#contact-panel .legend")
         assert "inversion (filled: pressing, hollow: hovering)" in legend
@@ -338,17 +348,11 @@ def test_inversion_fingers_drawn_with_their_standard_errors(chromium):
         assert all(f["ell"] == {} and f["mark"] == {} for f in s["faces"].values())
         assert s["note"] == "this engine sends no inversion (a version from before it)"
         assert s["faces"]["front"]["dots"] == [[0.0, -60.0]]  # the contact model goes on
-    assert not errors, f"errors in the page: {errors}"
 
 
 def test_inversion_alone_and_held_between_fits(chromium):
     """An engine with the inversion only (no contact model) fitting every 3rd frame."""
-    hub = Hub(LAYOUT, Engine(contact=False, every=3))
-    errors: list[str] = []
-    with DashboardServer(None, hub=hub, port=0) as server:
-        hub.set_engine_state("running")
-        page = open_page(chromium, server, errors)
-        assert page.locator("#contact-panel").is_visible()
+    with running_page(chromium, Engine(contact=False, every=3)) as (hub, page):
         assert "inversion every 3 frame(s)" in page.text_content("#contact-note")
 
         hub.publish(message(10, [fitted("front", 6.0, 70.0, 1.5, 0.7, force=(0.6, 0.04))]))
@@ -366,7 +370,6 @@ def test_inversion_alone_and_held_between_fits(chromium):
         assert (
             s["note"] == "no inversion for this frame (no reference yet, or a frame between fits)"
         )
-    assert not errors, f"errors in the page: {errors}"
 
 
 def test_no_inversion_head_no_inversion_drawn(chromium):
@@ -376,12 +379,7 @@ def test_no_inversion_head_no_inversion_drawn(chromium):
         def meta(self) -> dict:
             return dict(super().meta(), inversion=None)
 
-    hub = Hub(LAYOUT, NoInversion())
-    errors: list[str] = []
-    with DashboardServer(None, hub=hub, port=0) as server:
-        hub.set_engine_state("running")
-        page = open_page(chromium, server, errors)
-        assert page.locator("#contact-panel").is_visible()
+    with running_page(chromium, NoInversion()) as (hub, page):
         assert not page.locator("#inversion").is_visible()
         assert not page.locator("#contact-panel .inv-legend").first.is_visible()
         assert "no physical inversion (ectskin live --fields DIR)" in page.text_content(
@@ -393,7 +391,6 @@ def test_no_inversion_head_no_inversion_drawn(chromium):
         )
         assert page.locator("#contact-faces .inv-se").count() == 0
         assert page.locator("#contact-faces .finger-dot[visibility=visible]").count() == 1
-    assert not errors, f"errors in the page: {errors}"
 
 
 def test_a_fit_whose_frame_was_skipped_still_stands_for_the_frames_after_it(chromium):
