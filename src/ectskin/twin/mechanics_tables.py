@@ -41,18 +41,20 @@ def interp_rows(x: np.ndarray, xp: np.ndarray, fp: np.ndarray, rows: np.ndarray)
     Below a row's first node fp[0], from its last on fp[-1]; between, on the node j with
     xp[j] ≤ x < xp[j + 1], fp[j] where x == xp[j], else slope · (x − xp[j]) + fp[j] with
     slope = (fp[j + 1] − fp[j]) / (xp[j + 1] − xp[j]) (numpy's own formula)."""
-    n = xp.shape[1]
-    width = 1 << int(n).bit_length()  # > n: each row padded with +inf
-    table = np.full((xp.shape[0], width), np.inf)
-    table[:, :n] = xp
-    flat = table.ravel()
-    base = np.asarray(rows, dtype=np.intp) * width
-    count = np.zeros(x.shape, dtype=np.intp)  # #{nodes <= x}, by bisection
-    step = width >> 1
-    while step:
-        cand = count + step
-        count = np.where(flat.take(base + cand - 1) <= x, cand, count)
-        step >>= 1
+    n_rows, n = xp.shape
+    rows = np.asarray(rows, dtype=np.intp)
+    # #{nodes <= x} of each point's row: one search of all the rows laid end to end (row r
+    # shifted by r · span, so the rows' ranges are apart by at least one), then made exact by
+    # the row's own nodes (the shift rounds; it can move a point at most past one node)
+    lo, span = xp[:, 0].min(), xp[:, -1].max() - xp[:, 0].min() + 1.0
+    shift = span * np.arange(n_rows)
+    ends = ((xp - lo) + shift[:, None]).ravel()
+    q = np.clip(x - lo, -0.5, span - 0.5) + shift.take(rows)
+    base = rows * n
+    count = np.searchsorted(ends, q, side="right") - base
+    flat = xp.ravel()
+    count = count - ((count > 0) & (flat.take(base + np.maximum(count - 1, 0)) > x))
+    count = count + ((count < n) & (flat.take(base + np.minimum(count, n - 1)) <= x))
     j = np.clip(count - 1, 0, n - 2)
     x0, x1 = flat.take(base + j), flat.take(base + j + 1)
     f0 = fp.take(j)
@@ -83,9 +85,9 @@ def invert_pull_in(z: np.ndarray, phi: np.ndarray, mixed: np.ndarray, zg: np.nda
     fi = np.clip(phi * (n_phi - 1), 0, n_phi - 1 - 1e-9)
     i0 = fi.astype(int)
     wi = fi - i0
-    lo = interp_rows(z, mixed, zg, i0)
-    hi = interp_rows(z, mixed, zg, i0 + 1)
-    return (1 - wi) * lo + wi * hi
+    k = z.shape[0]
+    both = interp_rows(np.concatenate([z, z]), mixed, zg, np.concatenate([i0, i0 + 1]))
+    return (1 - wi) * both[:k] + wi * both[k:]
 
 
 def kept_arrays(cache: dict, key, make) -> tuple[np.ndarray, ...]:
