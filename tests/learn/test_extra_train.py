@@ -3,6 +3,7 @@
 import json
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from ectskin._check import EctskinError
@@ -123,3 +124,33 @@ def test_a_moved_folder_keeps_its_baselines_on_the_extra_trials(tmp_path, files,
     write_recording(read_recording(main), new / "coverage.h5", overwrite=True)
     m = evaluate_run(new / "runs" / "touch", main, figures=False, write=False)["touch"]
     assert not m["baselines"] and "changed since training" in m["baselines_skipped"]
+
+
+def _with_states(rec, states):
+    """``rec`` with its touch trials put at ``states`` in turn (the rest trial stays at rest)."""
+    trials = [t if i == 0 else replace(t, inflation=states[i % len(states)])
+              for i, t in enumerate(rec.trials)]
+    return replace(rec, trials=trials)
+
+
+def test_a_contact_extra_of_some_of_the_run_s_states_joins_with_their_indices(contact_recording):
+    """An extra contact recording made at some of the run's inflation states (another order)
+    joins with each sample's state index pointing at its own state in the run's list; one with a
+    state the run lacks is refused, naming the file and the state."""
+    task = get_task("contact")
+    states = [(0.0, 0.0, 0.0), (20.0, 0.0, 0.0), (0.0, 20.0, 0.0), (0.0, 0.0, 20.0)]
+    run = _with_states(contact_recording(n_frames=12, n_trials=8, seed=0), states)
+    extra = _with_states(contact_recording(n_frames=12, n_trials=6, seed=1),
+                         [(0.0, 0.0, 0.0), (0.0, 0.0, 20.0), (20.0, 0.0, 0.0)])
+    train = task.dataset(run, window=1)
+    more = task.dataset(extra, window=1)
+    assert more.states != train.states  # a subset, in another order
+    joined = join_training(train, [more], ["extra.h5"])
+    assert joined.states == train.states
+    tail = joined.state[train.n_samples:]
+    truth = [extra.trial(n.split("/", 1)[1]).inflation
+             for n in np.asarray(joined.group_names)[joined.group[train.n_samples:]]]
+    assert [train.states[i] for i in tail] == truth
+    other = task.dataset(_with_states(extra, [(0.0, 0.0, 0.0), (10.0, 10.0, 10.0)]), window=1)
+    with pytest.raises(EctskinError, match=r"odd\.h5: inflation state\(s\) \[\[10\.0, 10\.0, 10\.0\]\]"):
+        join_training(train, [other], ["odd.h5"])

@@ -85,10 +85,17 @@ def extra_identity(path: str | Path, rec: Any) -> dict[str, Any]:
 
 def join_training(train: Any, extras: Sequence[Any], paths: Sequence[str | Path]) -> Any:
     """``train`` with the ``extras`` data sets' samples appended (their groups after the run's);
-    an extra of other channels or classes is refused, naming its file."""
+    an extra of other channels or classes is refused, naming its file. A contact extra may hold
+    some of the run's inflation states only (``ContactData.aligned_to``)."""
     if not extras:
         return train
-    for ds, path in zip(extras, paths):
+    extras = list(extras)
+    for i, (ds, path) in enumerate(zip(extras, paths)):
+        if hasattr(ds, "aligned_to"):  # contact: some of the run's states are enough
+            try:
+                extras[i] = ds = ds.aligned_to(train)
+            except EctskinError as exc:
+                raise EctskinError(f"extra training recording {path}: {exc}") from None
         for f in type(train).MATCH_FIELDS:
             a, b = getattr(ds, f), getattr(train, f)
             arrays = isinstance(a, np.ndarray) or isinstance(b, np.ndarray)

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
@@ -117,6 +117,21 @@ class ContactData(SampleData):
     @property
     def window(self) -> int:
         return int(self.x.shape[1])
+
+    def aligned_to(self, other: ContactData) -> ContactData:
+        """These samples with their ``state`` indices into ``other.states`` (a recording of some
+        of ``other``'s inflation states joins its training split, :mod:`ectskin.learn.
+        extra_train`); a state ``other`` lacks is refused, naming it."""
+        if self.states == other.states:
+            return self
+        missing = [s for s in self.states if s not in other.states]
+        if missing:
+            raise EctskinError(
+                f"inflation state(s) {[list(s) for s in missing]} ml are not among the run's "
+                f"states {[list(s) for s in other.states]}: the contact model knows only those"
+            )
+        index = np.array([other.states.index(s) for s in self.states], dtype=np.int64)
+        return replace(self, state=index[self.state], states=list(other.states))
 
     @property
     def n_pairs(self) -> int:
