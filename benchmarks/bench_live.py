@@ -293,7 +293,7 @@ def throughput(args, layout, heads, inversion=None) -> dict:
         if not models.get("inversion"):
             return {k: v for k, v in models.items() if k != "inversion"}
         return {**models, "inversion": InversionHead.from_fields(
-            inversion[0], layout, every=args.inversion_every)}
+            inversion[0], layout, every=args.inversion_every, **args.inversion_options)}
 
     for label, models in configs:
         src = ReplaySource(rec, speed=math.inf)
@@ -523,6 +523,8 @@ def main(argv=None) -> int:
         "bench_inversion.py's field of the contact experiment's size",
     )
     ap.add_argument("--inversion-every", type=int, default=1, help="--fields: fit every N-th frame")
+    ap.add_argument("--inversion-options", type=json.loads, default={}, metavar="JSON", help=(
+        '--fields: InversionHead.from_fields options, e.g. {"press_check": false}'))
     ap.add_argument("--no-pin", action="store_true", help="do not pin to one CPU core")
     ap.add_argument("--out", type=Path, help="write the results as JSON here")
     args = ap.parse_args(argv)
@@ -584,7 +586,7 @@ def main(argv=None) -> int:
         "track": str(args.track_run or "random C2DT (paper size)"),
         "contact": str(args.contact_run or "random ContactNet (train default size, window 10)"),
         "ect": ect_name,
-        "inversion": None if not args.fields else " ".join(args.fields),
+        "inversion": args.fields and " ".join([*args.fields, json.dumps(args.inversion_options)]),
     }
     text = json.dumps(result, indent=1)
     print(text)

@@ -21,7 +21,7 @@ from ectskin._check import EctskinError
 from ectskin.cli import main
 from ectskin.inversion import Inversion
 from ectskin.inversion import fit as fit_module
-from ectskin.io.hdf5 import write_recording
+from ectskin.io.hdf5 import read_recording, write_recording
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import default_layout
 from ectskin.live import inversion_head
@@ -300,3 +300,177 @@ def test_jsonl_writer_writes_the_inversion(fields, tmp_path):
         w(out)
     msg = json.loads((tmp_path / "o.jsonl").read_text())
     assert msg["inversion"]["fingers"] == [] and msg["inversion"]["bic_by_count"] == [1.0, None, None]
+
+
+# ---------------------------------------------------------------------------- live vs offline
+def _skin(fields, seed: int = 4):
+    """A skin whose body differs from the fields' mesh: every readout (untouched or touched, at
+    every state) is the field's plus a per-channel offset of up to ±20 σ (a pattern a common
+    gain and offset cannot take up, as the twin's body against its field); a rest trial (the
+    touch reference) and trials of one finger pressing, one hovering at the field's lowest
+    height (1 mm), and one pressing at the inflated state."""
+    rng = np.random.default_rng(seed)
+    stray = 20 * noise_pf(fields[REST].untouched, NOISE) * rng.uniform(-1, 1, P)
+    hover = [(1.0 + 0.4 * t, 50.0 - 0.3 * t, 0.0, 1.0) for t in range(4)]
+    trials = [("rest", REST, [None] * 6), ("press", REST, slide(5)), ("hover", REST, hover),
+              ("inflated", INFLATED, slide(5, start=(4.2, 57.3), step=(-0.4, -0.3)))]
+    out = []
+    for name, state, points in trials:
+        cap = np.stack([frame(fields[state], [] if p is None else [p], rng) for p in points])
+        out.append(Trial(name, cap + stray, np.arange(len(points)) / 30.0,
+                         np.zeros(len(points)) if name == "rest" else np.ones(len(points)),
+                         inflation=state, region=0 if name == "rest" else 1))
+    return Recording(LAYOUT, out, 30.0), stray
+
+
+def _offline(inv, rec):
+    """The reproduction's path: every non-rest trial's frames fitted cold at its state
+    (``fit_frames``), in the stream's order."""
+    from ectskin.inversion import fit_frames
+
+    return [r for t in rec.trials[1:] for r in fit_frames(inv, t.capacitance, t.inflation)[0]]
+
+
+def _answers(results):
+    """Count, then per finger (face, contact, u, v, force, height)."""
+    return [(r.n_fingers, [(f.face, f.contact, f.u_mm, f.v_mm, f.force_n, f.height_mm)
+                           for f in r.fingers]) for r in results]
+
+
+def _same_answers(got, want, atol=1e-9) -> bool:
+    if [(n, [g[:2] for g in fs]) for n, fs in got] != [(n, [g[:2] for g in fs]) for n, fs in want]:
+        return False
+    a = [x for _, fs in got for g in fs for x in g[2:]]
+    b = [x for _, fs in want for g in fs for x in g[2:]]
+    return bool(np.allclose(a, b, rtol=0, atol=atol))
+
+
+def test_the_live_head_answers_as_the_reproductions_inversion(fields):
+    """``from_fields``' defaults are the reproduction's step's options (``untouched="auto"``,
+    ``press_check=True``, ``finger_scale_sd=FINGER_SCALE_SD``): through the engine, each frame's
+    answer equals ``Inversion(fields, untouched=..., press_check=True, finger_scale_sd=...)``'s
+    cold fit of the same frame, with the untouched readout the skin's own: c_0 (the rest trial's
+    mean, computed here) at rest, and c_0 carried by the fields' change of untouched readout at
+    the inflated state. Dropping any one of the three options changes some answer (checked)."""
+    from ectskin.inversion.fit import FINGER_SCALE_SD
+
+    rec, stray = _skin(fields)
+    head = InversionHead.from_fields(fields, LAYOUT, warm=False)  # offline fits are cold
+    assert (head.readout, head.inversion.press_check, head.inversion.finger_scale_sd) == (
+        "reference", True, FINGER_SCALE_SD)
+    outs: list[Output] = []
+    engine = LiveEngine(ReplaySource(rec, speed=math.inf), LAYOUT, inversion=head,
+                        reference_frames=6, policy="block")
+    assert engine.run(on_output=outs.append)["errors"] == 0
+    live = _answers([o.inversion for o in outs[6:]])
+    c0 = rec.trial("rest").capacitance.mean(axis=0)
+    untouched = {REST: c0, INFLATED: c0 + fields[INFLATED].untouched - fields[REST].untouched}
+    # the carried offset is this skin's own at the inflated state (its body offset is one)
+    np.testing.assert_allclose(untouched[INFLATED], fields[INFLATED].untouched + stray,
+                               atol=5 * noise_pf(c0, NOISE).max())
+
+    def offline(**kw):
+        opts = {"untouched": untouched, "press_check": True, "finger_scale_sd": FINGER_SCALE_SD}
+        return _answers(_offline(Inversion(fields, NOISE, **{**opts, **kw}), rec))
+
+    assert _same_answers(live, offline())
+    for dropped in ({"untouched": None}, {"press_check": False}, {"finger_scale_sd": None}):
+        assert not _same_answers(live, offline(**dropped)), dropped
+    # the pressing frames' truth comes back (the hovering finger's, at the field's edge, is not
+    # a test of the head); the field's untouched readout cannot explain the skin's offsets
+    truth = {i: p for i, p in enumerate(slide(5))} | {
+        9 + i: p for i, p in enumerate(slide(5, start=(4.2, 57.3), step=(-0.4, -0.3)))}
+    for i, (u, v, *_) in truth.items():
+        n, fingers = live[i]
+        assert n == 1 and fingers[0][1] and math.hypot(fingers[0][2] - u, fingers[0][3] - v) < 0.5
+    plain = _answers(_offline(Inversion(fields, NOISE), rec))
+    assert sum(plain[i][0] != 1 or math.hypot(plain[i][1][0][2] - u, plain[i][1][0][3] - v) > 0.5
+               for i, (u, v, *_) in truth.items()) >= len(truth) // 2
+
+
+def test_the_reference_readout_masks_and_carries(fields):
+    """readout "reference" directly: a channel without a usable reference (NaN) is left out of
+    the fit (its untouched readout the field's); c_0 captured at a state without a field gives
+    the field's own untouched readout; the reference is rebuilt only when c_0 changes; it needs
+    a way to rebuild the inversion."""
+    from ectskin.inversion.fit import FINGER_SCALE_SD
+
+    field = fields[REST]
+    rng = np.random.default_rng(11)
+    stray = 20 * noise_pf(field.untouched, NOISE) * rng.uniform(-1, 1, P)
+    raw = frame(field, [(2.3, 48.6, 1.2, 0.0)], rng) + stray
+    c0 = field.untouched + stray
+    c0[3] = np.nan
+    head = InversionHead.from_fields(fields, LAYOUT, warm=False)
+    got = _answers([head(raw, c0, REST)])
+    cu = np.where(np.isnan(c0), field.untouched, c0)
+    masked = np.where(np.isnan(c0), np.nan, raw)
+    want = Inversion({REST: field}, NOISE, untouched={REST: cu}, press_check=True,
+                     finger_scale_sd=FINGER_SCALE_SD).fit(masked, REST)
+    assert _same_answers(got, _answers([want]))
+    built = head._built[REST][2]
+    head(raw, c0.copy(), REST)  # the same reference (another array): not rebuilt
+    assert head._built[REST][2] is built
+    head(raw, c0 + 1e-3, REST)
+    assert head._built[REST][2] is not built
+    # c_0 of a state without a field: the field's untouched readout (the base inversion)
+    cu, mask = head.untouched(c0, REST, UNKNOWN)
+    assert cu is None and not mask.any()
+    assert _same_answers(_answers([head(raw, c0, REST, reference_state=UNKNOWN)]),
+                         _answers([head.inversion.fit(raw, REST)]))
+    with pytest.raises(EctskinError, match="readout 'reference' rebuilds the inversion"):
+        InversionHead(Inversion(fields, NOISE), LAYOUT, readout="reference")
+    with pytest.raises(EctskinError, match="--inversion-finger-sd must be a number >= 0"):
+        InversionHead.from_fields(fields, LAYOUT, finger_scale_sd=-0.1)
+
+
+def test_cli_inversion_options_reach_the_head(fields, field_dirs, tmp_path, monkeypatch, capsys):
+    """``--no-inversion-press-check --inversion-finger-sd 0 --inversion-readout absolute`` reach
+    the head (its meta) and its answers (those of the inversion with those options); the defaults
+    are the reproduction's."""
+    from ectskin.commands import live as live_cmd
+    from ectskin.inversion.fit import FINGER_SCALE_SD
+
+    rec, _ = _skin(fields)
+    src = write_recording(rec, tmp_path / "in.h5")
+    heads = []
+    real = live_cmd._inversion
+    monkeypatch.setattr(live_cmd, "_inversion", lambda *a: heads.append(real(*a)) or heads[-1])
+
+    def run(name, *extra):
+        out = tmp_path / f"{name}.jsonl"
+        argv = ["live", "--source", f"replay:{src}", "--speed", "inf", "--policy", "block",
+                "--fields", str(field_dirs), "--reference-frames", "6", "--jsonl", str(out),
+                *extra]
+        assert main(argv) == 0
+        return [json.loads(x)["inversion"] for x in out.read_text().splitlines()][6:]
+
+    default = run("default")
+    off = run("off", "--no-inversion-press-check", "--inversion-finger-sd", "0",
+              "--inversion-readout", "absolute")
+    meta = [{k: h.meta()[k] for k in ("readout", "press_check", "finger_scale_sd")} for h in heads]
+    assert meta == [{"readout": "reference", "press_check": True, "finger_scale_sd": FINGER_SCALE_SD},
+                    {"readout": "absolute", "press_check": False, "finger_scale_sd": None}]
+    assert run("sd", "--inversion-finger-sd", "0.3", "--record", str(tmp_path / "sd.h5"))[0] is not None
+    assert heads[-1].inversion.finger_scale_sd == 0.3
+    # the recording says how its inversion was made
+    stored = read_recording(tmp_path / "sd.h5").meta["inversion"]
+    assert (stored["finger_scale_sd"], stored["press_check"], stored["readout"]) == (0.3, True, "reference")
+    # the answers of the flags-off run are the plain inversion's, each fit started from the
+    # previous frame's answer as the head does (from the reference's last frame on)
+    inv, prev, want = Inversion(fields, NOISE), None, []
+    frames = [(y, t.inflation) for t in rec.trials for y in t.capacitance][5:]
+    for i, (y, state) in enumerate(frames):
+        r = inv.fit(y, state, warm=prev if prev is not None and frames[i - 1][1] == state else None)
+        prev = r if r.n_fingers else None
+        want.append(r)
+
+    def answers(msgs):
+        return [(m["n_fingers"], [(f["face"], f["contact"], f["u_mm"], f["v_mm"], f["force_n"],
+                                   f["height_mm"]) for f in m["fingers"]]) for m in msgs]
+
+    assert _same_answers(answers(off), _answers(want[1:]))
+    assert not _same_answers(answers(off), answers(default), atol=1e-3)
+    assert main(["live", "--source", "sim", "--fields", str(field_dirs),
+                 "--inversion-finger-sd", "-1"]) == 2
+    assert "--inversion-finger-sd must be a number >= 0 (0: off), got -1.0" in capsys.readouterr().err

@@ -102,9 +102,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--inversion-readout",
         choices=READOUTS,
-        default="absolute",
-        help="--fields: fit the raw frame in pF (absolute, default: a source calibrated like "
-        "the twin) or its change against the touch reference (difference)",
+        default="reference",
+        help="--fields: fit the raw frame in pF with the touch reference as the skin's untouched "
+        "readout (reference, default: the reproduction's untouched='auto'), the raw frame "
+        "against the field's untouched readout (absolute: a source calibrated like the field's "
+        "mesh) or its change against the touch reference (difference)",
+    )
+    p.add_argument(
+        "--inversion-press-check",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="--fields: refit a hovering finger pressing and keep that when it fits about as "
+        "well (default: on, as the reproduction)",
+    )
+    p.add_argument(
+        "--inversion-finger-sd",
+        type=float,
+        default=None,
+        metavar="SD",
+        help="--fields: the prior sd of each finger's relative signal scale (people's "
+        "fingertips differ from the field's); 0 turns it off (default: the reproduction's, "
+        "ectskin.inversion.fit.FINGER_SCALE_SD)",
     )
     p.add_argument(
         "--inversion-fingers",
@@ -245,6 +263,9 @@ def run(args: argparse.Namespace) -> int:
         raise EctskinError(f"--ect-every must be >= 1 (frames), got {args.ect_every}")
     if args.inversion_every < 1:
         raise EctskinError(f"--inversion-every must be >= 1 (frames), got {args.inversion_every}")
+    sd = args.inversion_finger_sd
+    if sd is not None and not 0 <= sd < float("inf"):  # NaN too
+        raise EctskinError(f"--inversion-finger-sd must be a number >= 0 (0: off), got {sd}")
     if not args.fields and args.state is not None:
         raise EctskinError("--state is the inflation state of the inversion's frames: give --fields")
     _check_outputs(args)
@@ -329,9 +350,12 @@ def _inversion(args: argparse.Namespace, fields, layout: SensorLayout) -> Invers
     """``--fields``: the inversion head over the loaded fields, bound to the source's layout."""
     if fields is None:
         return None
+    sd = args.inversion_finger_sd
     return InversionHead.from_fields(
         fields, layout, max_fingers=args.inversion_fingers, state=args.state,
         every=args.inversion_every, readout=args.inversion_readout,
+        press_check=args.inversion_press_check,
+        finger_scale_sd="reproduction" if sd is None else sd,
     )
 
 
@@ -366,6 +390,7 @@ def _run(args: argparse.Namespace, models: dict, ref_markers, fields=None) -> in
                     "contact_model": args.contact_model,
                     "ect_every": args.ect_every if args.ect else None,
                     "fields": list(args.fields) if args.fields else None,
+                    "inversion": None if inversion is None else inversion.meta(),
                     "state": args.state,
                     "runtime": args.runtime,
                 },

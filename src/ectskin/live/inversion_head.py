@@ -12,11 +12,34 @@ force or height, and their standard errors; the count's BIC) into the output.
   of a state without a field is refused (:class:`EctskinError` naming the state and the states
   there are fields of; the engine counts it in ``stats["errors"]``), and so is, at the door
   (:meth:`InversionHead.bind`), a replay with a trial of such a state.
-* **The readout**: ``"absolute"`` fits the raw frame in pF (the fields' own unit: a source
-  calibrated like the twin); ``"difference"`` fits c − c_0 against the touch reference (the
-  untouched readout of the field's state is added back: a source whose changes match the twin's
-  and whose absolute values do not; valid while the reference was captured at the frame's
-  state).
+* **The readout**: ``"reference"`` (:meth:`InversionHead.from_fields`' and ``ectskin live``'s
+  default) fits the raw frame in pF with the skin's own untouched readout in place of the
+  field's: the touch reference c_0, which the engine captures with the skin untouched (the
+  fingers' signals stay the field's). It is the reproduction's ``untouched="auto"``
+  (:mod:`ectskin.pipeline.inversion`, the mean of the recording's no-contact frames of the
+  state), with the live stream's own untouched frames as the measurement, and it is what a real
+  skin needs: a skin's body differs from the field's mesh by far more than the noise, in a
+  pattern over the channels that the fit's common gain and offset cannot take up.
+  c_0 is the untouched readout of the state it was captured at: the rest state (all chambers at
+  0 ml) when the frames carry their inflation (the engine refuses a touch reference captured
+  inflated), else the head's ``state``. A frame of another state is fitted with
+  c_0 + (c_u,field(frame's state) − c_u,field(c_0's state)), the skin's offset from the field
+  carried over; where c_0's state has no field, with the field's own untouched readout. The
+  inversion of a state is rebuilt when the reference changes (once per reference and state,
+  tens of ms: the untouched readout is fixed when an :class:`~ectskin.inversion.Inversion` is
+  built). ``"absolute"`` fits the raw frame against the field's untouched readout (a source
+  calibrated like the field's mesh); ``"difference"`` fits c − c_0 + c_u,field (a source whose
+  changes match the twin's and whose absolute values do not). "difference" takes the same
+  offsets off as "reference" but is not the same fit: its gain nuisance column is the field's
+  c_u instead of c_0, and the noise σ (which grows with the readout) and the coarse search's
+  whitening are evaluated at the frame shifted onto the field's base instead of at the frame
+  itself, which changes χ², the weights and the BIC's Σ ln σ (by about the offsets' share of
+  the readout).
+* **The fit's options**: :meth:`InversionHead.from_fields` builds the inversion as the
+  reproduction's step does (:mod:`ectskin.pipeline.reproduce`): ``press_check=True`` (a
+  hovering finger refitted pressing, kept when that fits about as well) and
+  ``finger_scale_sd`` = :data:`ectskin.inversion.fit.FINGER_SCALE_SD` (people's fingertips
+  differ from the field's), so a frame gets the live and the offline answer alike.
 * **Warm start**: a live stream is continuous, so each fit starts from the previous fitted
   frame's answer (``Inversion.fit(warm=...)``) while the state stays the same: the coarse
   search of that count is skipped while the fit from there explains the frame within the noise.
@@ -30,7 +53,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -45,8 +68,12 @@ if TYPE_CHECKING:
     from ectskin.inversion import Inversion, InversionResult
     from ectskin.twin.field import ResponseField
 
-#: what the head fits: the raw frame, or its change against the touch reference
-READOUTS = ("absolute", "difference")
+#: what the head fits: the raw frame against the touch reference as the untouched readout, the
+#: raw frame against the field's, or its change against the touch reference (module docstring)
+READOUTS = ("reference", "absolute", "difference")
+#: ``finger_scale_sd``'s default in :meth:`InversionHead.from_fields`: the reproduction's,
+#: :data:`ectskin.inversion.fit.FINGER_SCALE_SD` (imported there: see below)
+REPRODUCTION = "reproduction"
 #: two states are one when every chamber differs by less than this (ml; the inversion's own)
 STATE_TOL_ML = 1e-6
 # The inversion and the field's files are imported where used: ``import ectskin.live`` (every
@@ -102,9 +129,15 @@ class InversionHead:
     layout : the sensor layout of the stream.
     state : the inflation (ml per chamber) of frames that do not carry theirs, or None.
     every : fit every ``every``-th frame that has a reference (1: all).
-    readout : "absolute" or "difference" (module docstring).
+    readout : "reference", "absolute" or "difference" (module docstring). "absolute" (the
+        default here) fits through ``inversion`` as it was built; "reference" rebuilds it per
+        touch reference with ``rebuild`` (:meth:`from_fields` gives it and makes "reference"
+        the default).
     warm : start each fit from the previous fitted frame's answer (module docstring).
     fields : state → the field (its faces' extents for the dashboard's ``meta``), optional.
+    rebuild : ``rebuild(state, untouched)``: the inversion of ``state`` with the untouched
+        readout ``untouched`` (n_pairs,) pF, built with ``inversion``'s options (readout
+        "reference"); None: none (then "reference" is refused).
     """
 
     key, what, reference, window = "inversion", "physical inversion", "touch", 1
@@ -119,6 +152,7 @@ class InversionHead:
         readout: str = "absolute",
         warm: bool = True,
         fields: Mapping[tuple[float, ...], Any] | None = None,
+        rebuild: Callable[[tuple[float, ...], np.ndarray], Inversion] | None = None,
     ) -> None:
         from ectskin.inversion import Inversion
 
@@ -136,11 +170,17 @@ class InversionHead:
             raise EctskinError(
                 f"Invalid value for 'readout': allowed values are {list(READOUTS)}; got {readout!r}"
             )
+        if readout == "reference" and rebuild is None:
+            raise EctskinError(
+                f"{what}: readout 'reference' rebuilds the inversion with the touch reference as "
+                "the untouched readout: give rebuild (InversionHead.from_fields does)"
+            )
         self.inversion = inversion
         self.layout = layout
         self.every = int(every)
         self.readout = readout
         self.warm = bool(warm)
+        self.rebuild = rebuild
         self.state: tuple[float, ...] | None = None
         if state is not None:
             self.state = self._known("--state", state)
@@ -153,14 +193,25 @@ class InversionHead:
         self._calls = 0
         self._last: InversionResult | None = None
         self._last_state: tuple[float, ...] | None = None
+        #: readout "reference": per state, (the c_0 it was built for, the reference's state,
+        #: its inversion or None for the base one, the channels masked)
+        self._built: dict[tuple[float, ...], tuple[np.ndarray, tuple[float, ...],
+                                                   Inversion | None, np.ndarray]] = {}
 
     @classmethod
     def from_fields(cls, fields: Mapping[tuple[float, ...], ResponseField] | str | os.PathLike
                     | Sequence[str | os.PathLike], layout: SensorLayout, *, max_fingers: int = 2,
-                    **kw: Any) -> InversionHead:
+                    press_check: bool = True, finger_scale_sd: float | str | None = REPRODUCTION,
+                    readout: str = "reference", **kw: Any) -> InversionHead:
         """The head over ``fields`` (state → field, or the paths of :func:`load_fields`),
-        refused unless they are fields of ``layout`` (the same pairs in the same order)."""
+        refused unless they are fields of ``layout`` (the same pairs in the same order).
+
+        The inversion is built as the reproduction's step builds it (module docstring):
+        ``press_check`` (default True), ``finger_scale_sd`` (default :data:`REPRODUCTION`:
+        :data:`ectskin.inversion.fit.FINGER_SCALE_SD`; None or 0: no scale) and the readout
+        "reference" (the touch reference as the untouched readout)."""
         from ectskin.inversion import Inversion
+        from ectskin.inversion.fit import FINGER_SCALE_SD
 
         if not isinstance(fields, Mapping):
             fields = load_fields(fields)
@@ -172,7 +223,30 @@ class InversionHead:
                     f"({fl.n_pairs} pairs), the stream's layout is {layout.name!r} "
                     f"({layout.n_pairs} pairs) with other pairs"
                 )
-        return cls(Inversion(fields, max_fingers=max_fingers), layout, fields=fields, **kw)
+        if not isinstance(press_check, bool):
+            raise EctskinError(f"--inversion-press-check must be True or False, got {press_check!r}")
+        if isinstance(finger_scale_sd, str):
+            if finger_scale_sd != REPRODUCTION:
+                raise EctskinError(
+                    f"--inversion-finger-sd must be a number >= 0 (0: off) or {REPRODUCTION!r}, "
+                    f"got {finger_scale_sd!r}"
+                )
+            finger_scale_sd = FINGER_SCALE_SD
+        if finger_scale_sd is not None:
+            sd = finger_scale_sd
+            if isinstance(sd, bool) or not isinstance(sd, int | float) or not 0 <= sd < math.inf:
+                raise EctskinError(f"--inversion-finger-sd must be a number >= 0 (0: off), got {sd!r}")
+            finger_scale_sd = float(sd) or None
+        options: dict[str, Any] = {"max_fingers": max_fingers, "press_check": press_check,
+                                   "finger_scale_sd": finger_scale_sd}
+        base = dict(fields)
+
+        def rebuild(state: tuple[float, ...], untouched: np.ndarray) -> Inversion:
+            fld = next(f for s, f in base.items() if _same(tuple(float(x) for x in s), state))
+            return Inversion({state: fld}, untouched={state: untouched}, **options)
+
+        return cls(Inversion(fields, **options), layout, fields=fields, readout=readout,
+                   rebuild=rebuild, **kw)
 
     # ------------------------------------------------------------------ states
     @property
@@ -237,19 +311,31 @@ class InversionHead:
         self._calls += 1
         return due
 
-    def __call__(self, raw: np.ndarray, c0: np.ndarray, state: tuple[float, ...]) -> InversionFrame:
+    def __call__(self, raw: np.ndarray, c0: np.ndarray, state: tuple[float, ...], *,
+                 reference_state: tuple[float, ...] | None = None) -> InversionFrame:
         """The inversion of one raw frame (n_pairs,) pF of ``state``; the touch reference
-        ``c0`` (n_pairs,) pF is used by ``readout="difference"``."""
+        ``c0`` (n_pairs,) pF (NaN: a channel without a usable reference) is used by the readouts
+        "reference" and "difference"; ``reference_state``: the state ``c0`` was captured at
+        (None: ``state``; readout "reference")."""
         raw = np.asarray(raw, dtype=np.float64)
+        inversion = self.inversion
         if self.readout == "difference":
             y, kind = raw - np.asarray(c0, dtype=np.float64), "difference"
         else:
             y, kind = raw, "absolute"
+        if self.readout == "reference":
+            at = state if reference_state is None else reference_state
+            inv, masked = self._with_reference(np.asarray(c0, dtype=np.float64), state,
+                                               tuple(float(x) for x in at))
+            if inv is not None:
+                inversion = inv
+            if masked.any():
+                y = np.where(masked, np.nan, y)
         y = np.where(np.isfinite(y), y, np.nan)  # a channel without a usable value is masked
         warm = self._last if self.warm and self._last_state == state else None
         t0 = time.perf_counter()
         try:
-            r = self.inversion.fit(y, state, kind=kind, warm=warm)
+            r = inversion.fit(y, state, kind=kind, warm=warm)
         finally:
             self._last = None  # a failed fit starts the next one cold
         ms = (time.perf_counter() - t0) * 1e3
@@ -261,18 +347,65 @@ class InversionHead:
             fit_ms=ms,
         )
 
+    def untouched(self, c0: np.ndarray, state: tuple[float, ...],
+                  reference_state: tuple[float, ...]) -> tuple[np.ndarray | None, np.ndarray]:
+        """The untouched readout (n_pairs,) pF the readout "reference" fits a frame of
+        ``state`` with, from the touch reference ``c0`` captured at ``reference_state`` (module
+        docstring), and the channels it masks (bool, (n_pairs,): no usable reference, or not a
+        readout > 0); (None, none masked) where it has none (``reference_state`` has no field:
+        the field's own)."""
+        c0 = np.asarray(c0, dtype=np.float64)
+        if c0.shape != (self.inversion.n_pairs,):
+            raise EctskinError(
+                f"{self.what}: the touch reference must be ({self.inversion.n_pairs},) pF, got "
+                f"shape {c0.shape}"
+            )
+        field_u = self.inversion.model(state).field_untouched
+        if _same(tuple(reference_state), tuple(state)):
+            cu = c0.copy()
+        elif any(_same(tuple(reference_state), k) for k in self.inversion.states):
+            cu = c0 + (field_u - self.inversion.model(reference_state).field_untouched)
+        else:
+            return None, np.zeros(c0.shape, bool)
+        masked = ~(np.isfinite(cu) & (cu > 0))
+        cu[masked] = field_u[masked]  # left out of the fit: any readout > 0 builds
+        return cu, masked
+
+    def _with_reference(self, c0: np.ndarray, state: tuple[float, ...],
+                        reference_state: tuple[float, ...]
+                        ) -> tuple[Inversion | None, np.ndarray]:
+        """The inversion of ``state`` with the untouched readout of :meth:`untouched` (built
+        once per reference and state) and the channels masked."""
+        got = self._built.get(state)
+        if (got is not None and got[1] == reference_state
+                and np.array_equal(got[0], c0, equal_nan=True)):
+            return got[2], got[3]
+        cu, masked = self.untouched(c0, state, reference_state)
+        assert self.rebuild is not None  # readout "reference" has it (checked at __init__)
+        inv = None if cu is None else self.rebuild(state, cu)
+        self._built[state] = (c0.copy(), reference_state, inv, masked)
+        return inv, masked
+
     def step(self, frames: np.ndarray, ref: ReferenceInUse, out: Output) -> None:
         if self.due():
-            out.inversion = self(frames[-1], ref.c0, self.state_of(out))
+            state = self.state_of(out)
+            # the engine refuses a touch reference captured inflated: with the frames' own
+            # inflation known, c_0 is the rest state's; else the skin stays at --state
+            carried = out.inflation is not None and len(out.inflation) > 0
+            rest = tuple(0.0 for _ in state) if carried else state
+            out.inversion = self(frames[-1], ref.c0, state, reference_state=rest)
 
     def meta(self) -> dict[str, Any]:
+        inv = self.inversion
         return {
             "states": [list(s) for s in self.states],
             "faces": self.faces,
             "face_extent": self.face_extent,
             "every": self.every,
             "readout": self.readout,
-            "max_fingers": self.inversion.max_fingers,
+            "max_fingers": inv.max_fingers,
+            "press_check": inv.press_check,
+            "finger_scale_sd": inv.finger_scale_sd,
             "warm": self.warm,
         }
 
