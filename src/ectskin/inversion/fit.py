@@ -13,9 +13,11 @@ For a frame y (n_pairs,) pF of a known state (the model of :mod:`ectskin.inversi
    ``least_squares(method="lm")``, the same iterates, without that wrapper's cost per call
    (about 0.2 ms per fit); its warning when a fit runs out of evaluations is silenced (the
    result's ``converged`` says so).
-3. **Two fingers**: a coarse search over pairs of nodes (:meth:`NodeTable.pairs`), and the
-   one-finger solution with the node nearest what it leaves (y − c_u − Δ₁); from each, one fit
-   of both fingers and β together (and their coupling ρ with ``two_fingers="coupled"``).
+3. **Two fingers**: a coarse search over pairs of nodes (:meth:`NodeTable.pairs`), the
+   one-finger solution with the node nearest what it leaves (y − c_u − Δ₁), and with
+   ``scaled_pairs`` the best pair with each node's signal scaled by its best factor (two
+   fingers screen each other); from each, one fit of both fingers and β together (and their
+   coupling ρ with ``two_fingers="coupled"``).
 
 Counts and starts are tried in turn while the fits so far do not explain the frame within the
 noise (the gate, ``gate_p``): a one-finger frame costs one fit, a two-finger frame two.
@@ -135,6 +137,10 @@ class Inversion:
         starts each finger in one mode.
     contact_bias : the χ² (in units of the fit's χ² per degree of freedom) by which a pressing
         finger may fit worse than a hovering one and still be preferred (``press_check``).
+    scaled_pairs : start a two-finger fit also from the best pair of nodes with each node's
+        signal scaled by its best factor (:meth:`NodeTable.pairs` ``scaled``; two fingers
+        screen each other), in place of the second best plain pair; off by default
+        (docs/inversion.md).
     two_fingers : "coupled" (two fingers as coupled conductors, one more parameter ρ:
         :mod:`ectskin.inversion.coupling`) or "superposition" (the sum of their signals).
     gate_p : a count of k + 1 fingers, or a further start, is tried only while the fits so
@@ -160,6 +166,7 @@ class Inversion:
         untouched: Mapping[tuple[float, ...], np.ndarray] | None = None,
         press_check: bool = False,
         contact_bias: float = CONTACT_BIAS,
+        scaled_pairs: bool = False,
     ) -> None:
         if not isinstance(fields, Mapping) or not fields:
             raise EctskinError(
@@ -198,6 +205,9 @@ class Inversion:
             raise EctskinError(f"Inversion: contact_bias must be a number >= 0, got {contact_bias!r}")
         self.press_check = bool(press_check)
         self.contact_bias = float(contact_bias)
+        if not isinstance(scaled_pairs, bool):
+            raise EctskinError(f"Inversion: scaled_pairs must be True or False, got {scaled_pairs!r}")
+        self.scaled_pairs = scaled_pairs
         self.noise = noise or ReadoutConfig()
         self.max_fingers = int(max_fingers)
         self.model_error = (a, r)
@@ -408,8 +418,9 @@ class Inversion:
     def _starts(self, m: StateModel, delta: np.ndarray, k: int,
                 one: Fit | None) -> list[list[tuple[int, int, np.ndarray]]]:
         """Starting points of a k-finger fit, best first: for one finger the nearest node of
-        each face and mode; for two the best pairs of nodes (:meth:`NodeTable.pairs`), then the
-        one-finger solution with the node nearest what it leaves."""
+        each face and mode; for two the best pair of nodes (:meth:`NodeTable.pairs`), the
+        one-finger solution with the node nearest what it leaves, (``scaled_pairs``) the best
+        pair with each node's signal scaled by its best factor, then the next pairs."""
         t = m.table
 
         def node(i: int) -> tuple[int, int, np.ndarray]:
@@ -417,7 +428,13 @@ class Inversion:
 
         if k == 1:
             return [[node(i)] for i in t.starts(delta, self.starts, m.scale_w)]
-        out = [[node(i), node(j)] for i, j in t.pairs(delta, self.starts)]
+        # the best pair as the nodes are, then (scaled_pairs) the best with each node's size
+        # left free (two fingers screen each other), then the next as they are
+        plain = t.pairs(delta, self.starts)
+        pairs = plain[:1]
+        if self.scaled_pairs:
+            pairs += [p for p in t.pairs(delta, 1, scaled=True) if p not in pairs]
+        out = [[node(i), node(j)] for i, j in pairs + [p for p in plain[1:] if p not in pairs]]
         if one is not None:
             fi, mi, x = one.fingers[0]
             rest = delta - m.signal(m.faces[fi], MODES[mi], x)[0]

@@ -56,6 +56,11 @@ MODES = ("contact", "hover")
 #: about how many nodes the two-finger coarse search pairs (every pair of them: a Gram matrix of
 #: this size squared, precomputed per state)
 PAIR_NODES = 300
+#: the two-finger coarse search scales each node's signal by its best factor (:meth:`NodeTable.
+#: pairs`): the least factor of a finger, and the ridge (whitened units², one noise variance)
+#: that keeps the factor of a signal too small to tell near 1
+PAIR_SCALE_MIN = 0.3
+PAIR_SCALE_RIDGE = 1.0
 #: the drift columns there are
 DRIFT_TERMS = ("gain", "offset")
 
@@ -315,7 +320,8 @@ class NodeTable:
     ``groups``: the (start, stop) rows of each (face, mode);
     ``pair_rows`` (n_sub,): the nodes of the two-finger search (the middle s of every
     ``stride``-th grid point, at most about :data:`PAIR_NODES`); ``gram`` (n_sub, n_sub):
-    2 d_i·d_j of those for i < j, +inf elsewhere.
+    2 d_i·d_j of those for i < j, +inf elsewhere; ``pair_solve``: the scaled search's 2 × 2
+    inverses (:meth:`pairs`), built at its first use.
     """
 
     D: np.ndarray
@@ -328,6 +334,7 @@ class NodeTable:
     groups: list[tuple[int, int]]
     pair_rows: np.ndarray
     gram: np.ndarray
+    pair_solve: tuple[np.ndarray, ...] | None = None
 
     def project(self, z: np.ndarray) -> np.ndarray:
         return z - self.Q @ (self.Q.T @ z)
@@ -347,18 +354,54 @@ class NodeTable:
         g = (dz + w2) / (self.norm2 + w2)
         return g * g * self.norm2 - 2.0 * g * dz + w2 * (g - 1.0) ** 2
 
-    def pairs(self, target: np.ndarray, n: int) -> list[tuple[int, int]]:
+    def pairs(self, target: np.ndarray, n: int, scaled: bool = False) -> list[tuple[int, int]]:
         """The ``n`` best pairs of nodes (i, j) for a frame of two fingers, best first, searched
         over every pair of the pair subset (``pair_rows``):
         ||z − d_i − d_j||² = ||z||² + a_i + a_j + 2 d_i·d_j with a_i = ||d_i||² − 2 d_i·z, the
-        products d_i·d_j precomputed (``gram``)."""
+        products d_i·d_j precomputed (``gram``).
+
+        ``scaled``: each node's signal scaled by its best factor instead, min over (a, b) of
+        ||z − a d_i − b d_j||² + w² ((a − 1)² + (b − 1)²), w² = :data:`PAIR_SCALE_RIDGE`: a
+        2 × 2 linear solve per pair from the same products. The subset holds one force (height)
+        per point, the middle one, and two fingers screen each other (each one's signal is less
+        than alone), so the size of each node's signal is left to the fit; a pair whose best
+        factor is below :data:`PAIR_SCALE_MIN` is not a pair of fingers (one of them is not
+        there) and is left out."""
         z = self.project(target / self.sigma)
-        a = self.norm2[self.pair_rows] - 2.0 * (self.D[self.pair_rows] @ z)
-        cost = a[:, None] + a[None, :] + self.gram  # the lower triangle is +inf in ``gram``
-        flat = np.argpartition(cost, n - 1, axis=None)[:n]
-        flat = flat[np.argsort(cost.ravel()[flat])]
-        m = cost.shape[1]
-        return [(int(self.pair_rows[f // m]), int(self.pair_rows[f % m])) for f in flat]
+        rows = self.pair_rows
+        p = self.D[rows] @ z
+        if not scaled:
+            a = self.norm2[rows] - 2.0 * p
+            cost = a[:, None] + a[None, :] + self.gram  # the lower triangle is +inf in ``gram``
+            flat = np.argpartition(cost, n - 1, axis=None)[:n]
+            flat = flat[np.argsort(cost.ravel()[flat])]
+            m = cost.shape[1]
+            return [(int(rows[f // m]), int(rows[f % m])) for f in flat]
+        i, j, h11, h12, h22 = self._pair_solve()
+        p = p + PAIR_SCALE_RIDGE
+        pi, pj = p[i], p[j]
+        fa = h11 * pi + h12 * pj  # the factors (a, b): the 2 × 2 inverse times (p_i, p_j) + w²
+        fb = h12 * pi + h22 * pj
+        ok = (fa >= PAIR_SCALE_MIN) & (fb >= PAIR_SCALE_MIN)
+        cost = np.where(ok, -(fa * pi + fb * pj), np.inf)  # less ||z||² + 2 w²
+        n = min(n, int(ok.sum())) or 1
+        flat = np.argpartition(cost, n - 1)[:n]
+        flat = flat[np.argsort(cost[flat])]
+        return [(int(rows[i[f]]), int(rows[j[f]])) for f in flat]
+
+    def _pair_solve(self) -> tuple[np.ndarray, ...]:
+        """Each pair i < j of the subset (positions in ``pair_rows``, only pairs whose 2 × 2
+        system is regular) and the inverse of its matrix [[g_i, c], [c, g_j]] (g: ||d||² + w²,
+        c = d_i·d_j): built at the first scaled search, it does not depend on the frame."""
+        if self.pair_solve is None:
+            g = self.norm2[self.pair_rows] + PAIR_SCALE_RIDGE
+            i, j = np.triu_indices(len(self.pair_rows), 1)
+            c = 0.5 * self.gram[i, j]
+            det = g[i] * g[j] - c * c
+            ok = det > 0
+            i, j, c, det = i[ok], j[ok], c[ok], det[ok]
+            self.pair_solve = (i, j, g[j] / det, -c / det, g[i] / det)
+        return self.pair_solve
 
     def starts(self, target: np.ndarray, n: int, scale_w: float = 0.0) -> list[int]:
         """The nearest node of each (face, mode) group, best first, at most ``n`` of them
