@@ -168,6 +168,47 @@ def test_the_push_is_chosen_on_the_validation_frames(world, tmp_path, monkeypatc
     assert [n for _, n in seen] == [2, 5, 5 if p["use"] else 2]
 
 
+def test_two_finger_frames_beyond_the_cap_are_inverted_and_scored_apart(world, tmp_path,
+                                                                         monkeypatch):
+    """Every test frame with two fingers on the skin is scored in ``two_finger``, those of the
+    evenly spread frames and the others besides them, each counted as Inversion.fit counts it;
+    the spread's metrics stay the spread's. (The tiny experiment has one finger: every third
+    one-finger frame is labelled with a second finger 30 mm further along v.)"""
+    config, fields, path = world
+    config = _out(tmp_path, config, test=TEST[:2])
+    real = pinv._dataset
+
+    def marked(rec, trials):
+        d = real(rec, trials)
+        count, face, uv = d.count.copy(), d.face.copy(), d.uv.copy()
+        on = np.flatnonzero(count == 1)[::3]
+        count[on], face[on, 1], uv[on, 1] = 2, face[on, 0], uv[on, 0] + (0.0, 30.0)
+        return replace(d, count=count, face=face, uv=uv)
+
+    monkeypatch.setattr(pinv, "_dataset", marked)
+    rec = read_recording(path)
+    data = marked(rec, TEST[:2])
+    two = np.flatnonzero(data.count == 2)
+    spread = pinv._frames(data, False, 30)
+    inv = Inversion(fields, config.contact_protocol().readout)
+    by_hand = [sum(f.contact for f in inv.fit(rec.trial(data.group_names[data.group[i]])
+                                              .capacitance[data.frame[i]], (0.0, 0.0, 0.0)).fingers)
+               for i in two]
+    m = pinv.inversion_step(StepRunner(config.out_dir, False), config, fields, (path, {}),
+                            push="off", max_frames=30)
+    b = m["two_finger"]
+    assert two.size > np.isin(two, spread).sum() > 0
+    assert b["n_frames"] == two.size and b["n_trials"] == np.unique(data.group[two]).size
+    assert b["count_predicted"] == np.bincount(np.clip(by_hand, 0, 2), minlength=3).tolist()
+    assert b["count_accuracy"] == pytest.approx(np.mean(np.asarray(by_hand) == 2))
+    assert m["n_frames"] == 30 and m["multi"]["n_two_finger_frames"] == np.isin(two, spread).sum()
+    # none besides the spread's: the spread's two-finger frames alone
+    config = _out(tmp_path / "b", world[0], test=TEST[:2])
+    m = pinv.inversion_step(StepRunner(config.out_dir, False), config, fields, (path, {}),
+                            push="off", max_frames=30, two_finger_frames=0)
+    assert m["two_finger"]["n_frames"] == np.isin(two, spread).sum()
+
+
 def test_bad_input_is_refused(world, tmp_path):
     config, fields, path = world
     runner = StepRunner(tmp_path, False)
@@ -223,3 +264,7 @@ def test_the_metrics_block_sets_contactnet_and_the_bound_beside_each_state():
     assert s["baseline_loc_mm_mean"] == {"knn": 4.0, "ridge": 1.0}
     assert b["per_state"]["20/0/0 ml"]["bound_loc_mm_mean"] is None
     assert inversion_block(inv, None, None)["contact_loc_mm_mean"] is None
+    assert b["two_finger"] is None  # a step without two-finger frames
+    two = {"count_accuracy": 0.75, "n_trials": 2, "count_accuracy_by_trial": {"a": 1.0, "b": 0.5}}
+    assert inversion_block({**inv, "two_finger": two}, None, None)["two_finger"] == {
+        "count_accuracy": 0.75, "n_trials": 2}

@@ -111,3 +111,14 @@ def test_the_report_says_what_the_fit_assumed_beyond_the_field():
                                   "press_check": False}
     text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
     assert "untouched readout" not in text and "prior sd" not in text and "pressing" not in text
+
+
+def test_the_report_gives_the_two_finger_frames_scored_apart():
+    m = _metrics()
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert "Two fingers on the skin" not in text
+    m["inversion"]["two_finger"] = {"n_frames": 400, "n_trials": 3, "count_accuracy": 0.85,
+                                    "loc_mm_mean": 4.5, "loc_mm_median": 3.0}
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert "Two fingers on the skin: 400 test frames of 3 trial(s)" in text
+    assert "counted two on 85.00 %" in text and "4.50 mm" in text and "(median 3.00 mm)" in text

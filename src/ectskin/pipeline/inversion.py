@@ -39,6 +39,14 @@ a common gain and offset cannot absorb (docs/inversion.md).
 ``press_check``: each hovering finger of the chosen fit is refitted pressing, and kept so where
 that fits about as well (``Inversion(press_check=True)``).
 
+Two fingers (``two_finger``): the evenly spread frames hold few with two fingers on the skin
+(some 50-70 of 3000 in a quick reproduction, from a few trials), too few to tell a count
+accuracy of 95 %; up to ``two_finger_frames`` (:data:`MAX_TWO_FINGER_FRAMES`) more of the test
+frames with two fingers on the skin are inverted besides them and scored with them apart
+(:func:`two_finger_score`: the count, the point error of each finger after matching, the count
+accuracy per trial). The spread's metrics (``multi`` among them) stay the spread's. The labels
+only pick which frames are scored, as they pick the one-finger frames of the point error.
+
 :func:`ectskin.pipeline.metrics.inversion_block` turns the step's metrics into metrics.json's
 ``inversion``.
 """
@@ -59,8 +67,9 @@ from ectskin.inversion import Inversion, fit_frames, push_basis, results_to_arra
 from ectskin.io import Recording, read_recording
 from ectskin.io.calibration import is_no_contact
 from ectskin.learn.data.contact import HOVER_MAX_MM, MAX_FINGERS, ContactData, contact_dataset
+from ectskin.learn.metrics.contact import multi_metrics, rest_points
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
-from ectskin.learn.tasks.contact import contact_report
+from ectskin.learn.tasks.contact import contact_report, slot_columns
 from ectskin.pipeline.bound import state_key
 from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
 from ectskin.pipeline.metrics import beside
@@ -81,6 +90,10 @@ PUSH_CHOICE_FRAMES = 240
 #: test frames inverted (at most, evenly spread over the test trials' frames in order): the
 #: inversion takes about 10-20 ms a frame, and a quick reproduction holds some 35 000 test frames
 MAX_FRAMES = 3000
+#: test frames with two fingers on the skin inverted besides the evenly spread ones (at most,
+#: evenly spread over them) and scored apart (``two_finger``): the even spread holds some 50-70
+#: of them in a quick reproduction, from a few trials, too few to tell a count accuracy of 95 %
+MAX_TWO_FINGER_FRAMES = 1000
 #: force is called observable at a frame whose fitted force's standard error (the Cramér–Rao
 #: bound at the solution) is below this (N), as the bound step's ``force_threshold_n``
 FORCE_OBSERVABLE_N = 0.1
@@ -248,6 +261,46 @@ def score(data: ContactData, arrays: Mapping[str, np.ndarray], seconds: np.ndarr
     return out
 
 
+def two_finger_rows(data: ContactData, skip: np.ndarray, limit: int | None) -> np.ndarray:
+    """Rows of ``data`` with two fingers on the skin that are not in ``skip``, at most ``limit``
+    evenly spread (in order)."""
+    rows = np.setdiff1d(np.flatnonzero(data.count == 2), skip)
+    if limit is not None and rows.size > limit:
+        rows = rows[np.unique(np.linspace(0, rows.size - 1, limit).round().astype(int))]
+    return rows
+
+
+def two_finger_score(data: ContactData, arrays: Mapping[str, np.ndarray]) -> dict[str, Any]:
+    """The count and the per-finger point error of frames with two fingers on the skin (``data``:
+    those frames only, every one inverted, in order): ``count_accuracy``, ``count_predicted``
+    (how many frames were counted 0, 1 and 2 fingers), the point error of each finger after
+    matching where two were counted (``loc_mm_*``, ``n_fingers``:
+    :func:`~ectskin.learn.metrics.contact.multi_metrics`), and the count accuracy per trial (a
+    trial's frames are one pair of fingers' moves, not independent draws)."""
+    pred = prediction_columns(arrays, data.faces, data.face_extent)
+    width, thickness = data.body_mm
+    true_pts = rest_points(data.faces, np.clip(data.face, 0, None), data.uv,
+                           width_mm=width, thickness_mm=thickness)
+    p_face = np.stack([slot_columns(pred, s)["face"] for s in range(MAX_FINGERS)], 1).astype(int)
+    p_uv = np.stack([np.column_stack([slot_columns(pred, s)["u_mm"], slot_columns(pred, s)["v_mm"]])
+                     for s in range(MAX_FINGERS)], 1)
+    pred_pts = rest_points(data.faces, np.clip(p_face, 0, len(data.faces) - 1), p_uv,
+                           width_mm=width, thickness_mm=thickness)
+    count = pred[:, PRED_COLUMNS.index("count")].astype(int)
+    multi = multi_metrics(data.count, count, true_pts, pred_pts, MAX_FINGERS)
+    right = count == data.count
+    per_trial = {data.group_names[g]: float(right[data.group == g].mean())
+                 for g in np.unique(data.group)}
+    return {
+        "count_accuracy": multi["count_accuracy"],
+        "count_predicted": np.bincount(np.clip(count, 0, MAX_FINGERS),
+                                       minlength=MAX_FINGERS + 1).tolist(),
+        **{k: multi[k] for k in ("loc_mm_mean", "loc_mm_median", "loc_mm_p90", "n_fingers")},
+        "n_frames": int(data.n_samples), "n_trials": len(per_trial),
+        "count_accuracy_by_trial": per_trial,
+    }
+
+
 def _dataset(rec: Recording, trials: Sequence[str]) -> ContactData | None:
     return contact_dataset(rec, window=1, trials=list(trials)) if trials else None
 
@@ -286,6 +339,7 @@ def inversion_step(
     finger_scale_sd: float | None = None,
     untouched: str = "field",
     press_check: bool = False,
+    two_finger_frames: int | None = MAX_TWO_FINGER_FRAMES,
 ) -> dict[str, Any]:
     """Step "inversion": OUT_DIR/inversion/metrics.json (module docstring); returns it.
 
@@ -298,10 +352,19 @@ def inversion_step(
     one). ``push``: "auto", "on" or "off"; ``finger_scale_sd``: the finger scale's prior;
     ``untouched``: "field" or "auto" (the no-contact trials outside the test trials);
     ``press_check``: refit hovering fingers pressing (module docstring).
+    ``two_finger_frames``: the test frames with two fingers on the skin that are not among those
+    ``max_frames`` spreads inverted besides them (at most, evenly spread; 0: none): the result's
+    ``two_finger`` (:func:`two_finger_score`) scores them with the spread's own two-finger frames;
+    the spread's metrics stay the spread's.
     """
     if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
         raise EctskinError(f"inversion_step: max_frames must be an integer >= 1 or None, got "
                            f"{max_frames!r}")
+    if two_finger_frames is not None and not (
+            isinstance(two_finger_frames, int) and not isinstance(two_finger_frames, bool)
+            and two_finger_frames >= 0):
+        raise EctskinError(f"inversion_step: two_finger_frames must be an integer >= 0 or None, "
+                           f"got {two_finger_frames!r}")
     if not fields:
         raise EctskinError("inversion_step: no response fields given")
     check_option("push", push, PUSH_CHOICES)
@@ -326,6 +389,7 @@ def inversion_step(
         "push": push, "push_choice_frames": PUSH_CHOICE_FRAMES, "noise": noise,
         "window": 1, "force_observable_n": FORCE_OBSERVABLE_N, "max_frames": max_frames,
         "finger_scale_sd": finger_scale_sd, "untouched": untouched, "press_check": press_check,
+        "two_finger_frames": two_finger_frames,
     }
 
     def make() -> None:
@@ -366,6 +430,18 @@ def inversion_step(
             result = score(test_data, arrays, seconds)
             result["timing"]["push_basis_s"] = t_push
             result["n_frames_in_field_states"] = int(data.n_samples)
+            parts = [(rows, arrays)]
+            if two_finger_frames != 0:
+                extra = two_finger_rows(data, rows, two_finger_frames)
+                if extra.size:
+                    parts.append((extra, invert_rows(inv, rec, data, extra)[0]))
+            every = np.concatenate([r for r, _ in parts])
+            order = np.argsort(every, kind="stable")
+            keep = data.count[every[order]] == 2
+            if keep.any():
+                joined = {k: np.concatenate([np.asarray(a[k]) for _, a in parts])[order][keep]
+                          for k in arrays}
+                result["two_finger"] = two_finger_score(data.take(every[order][keep]), joined)
         total = result.get("n_frames_in_field_states", 0) + n_without
         result.update(
             frames_without_field=without, n_frames_without_field=n_without,

@@ -408,7 +408,8 @@ def beside(contact: Mapping[str, Any] | None, inversion: Mapping[str, Any]) -> d
 def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
                     bound: Mapping[str, Any] | None) -> dict[str, Any]:
     """metrics.json's ``inversion`` from the inversion step's metrics (``docs/reproduce.md``):
-    its contact metrics (:data:`INVERSION_KEYS`), the count by true count, force where its
+    its contact metrics (:data:`INVERSION_KEYS`), the count by true count, the two-finger frames
+    scored apart (``two_finger``, without its per-trial list), force where its
     standard error says it is observable, the time per frame, and per state its numbers beside
     ContactNet's, the baselines' and the bound's at the same state's test frames; ``contact``
     and ``bound``: metrics.json's blocks (or None)."""
@@ -432,6 +433,8 @@ def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
     return {
         **{k: inv.get(k) for k in INVERSION_KEYS},
         "count_accuracy_by_true": (inv.get("multi") or {}).get("count_accuracy_by_true"),
+        "two_finger": {k: v for k, v in (inv.get("two_finger") or {}).items()
+                       if k != "count_accuracy_by_trial"} or None,
         "force_mae_n_observable": fo.get("force_mae_n"),
         "force_observable_share": fo.get("share"),
         "force_observable_threshold_n": fo.get("threshold_n"),

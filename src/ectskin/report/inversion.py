@@ -168,6 +168,14 @@ def inversion_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
     line = force_line(inv, lookup(metrics, "bound"))
     if line:
         s.append(("p", line))
+    two = inv.get("two_finger") or {}
+    if two.get("n_frames"):
+        s.append(("p", f"Two fingers on the skin: {two['n_frames']} test frames of "
+                       f"{two.get('n_trials')} trial(s), inverted apart from the spread above; "
+                       f"counted two on {_pct(two.get('count_accuracy'))}, each finger "
+                       f"{_mm(two.get('loc_mm_mean'))} from its true point after matching "
+                       f"(median {_mm(two.get('loc_mm_median'))}). The frames of one trial are "
+                       "one pair of fingers' moves: few trials make this number coarse."))
     med, p95 = inv.get("ms_per_frame_median"), inv.get("ms_per_frame_p95")
     if isinstance(med, int | float):
         s.append(("p", f"Time per frame on one core (this run, on its machine): median "
