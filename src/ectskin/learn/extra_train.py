@@ -91,11 +91,10 @@ def join_training(train: Any, extras: Sequence[Any], paths: Sequence[str | Path]
         return train
     extras = list(extras)
     for i, (ds, path) in enumerate(zip(extras, paths)):
-        if hasattr(ds, "aligned_to"):  # contact: some of the run's states are enough
-            try:
-                extras[i] = ds = ds.aligned_to(train)
-            except EctskinError as exc:
-                raise EctskinError(f"extra training recording {path}: {exc}") from None
+        try:  # contact: some of the run's inflation states are enough
+            extras[i] = ds = ds.aligned_to(train)
+        except EctskinError as exc:
+            raise EctskinError(f"extra training recording {path}: {exc}") from None
         for f in type(train).MATCH_FIELDS:
             a, b = getattr(ds, f), getattr(train, f)
             arrays = isinstance(a, np.ndarray) or isinstance(b, np.ndarray)

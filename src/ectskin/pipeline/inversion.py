@@ -67,9 +67,9 @@ from ectskin.inversion import Inversion, fit_frames, push_basis, results_to_arra
 from ectskin.io import Recording, read_recording
 from ectskin.io.calibration import is_no_contact
 from ectskin.learn.data.contact import HOVER_MAX_MM, MAX_FINGERS, ContactData, contact_dataset
-from ectskin.learn.metrics.contact import multi_metrics, rest_points
+from ectskin.learn.metrics.contact import multi_metrics
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
-from ectskin.learn.tasks.contact import contact_report, slot_columns
+from ectskin.learn.tasks.contact import contact_report, slot_points
 from ectskin.pipeline.bound import state_key
 from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
 from ectskin.pipeline.metrics import beside
@@ -278,14 +278,7 @@ def two_finger_score(data: ContactData, arrays: Mapping[str, np.ndarray]) -> dic
     :func:`~ectskin.learn.metrics.contact.multi_metrics`), and the count accuracy per trial (a
     trial's frames are one pair of fingers' moves, not independent draws)."""
     pred = prediction_columns(arrays, data.faces, data.face_extent)
-    width, thickness = data.body_mm
-    true_pts = rest_points(data.faces, np.clip(data.face, 0, None), data.uv,
-                           width_mm=width, thickness_mm=thickness)
-    p_face = np.stack([slot_columns(pred, s)["face"] for s in range(MAX_FINGERS)], 1).astype(int)
-    p_uv = np.stack([np.column_stack([slot_columns(pred, s)["u_mm"], slot_columns(pred, s)["v_mm"]])
-                     for s in range(MAX_FINGERS)], 1)
-    pred_pts = rest_points(data.faces, np.clip(p_face, 0, len(data.faces) - 1), p_uv,
-                           width_mm=width, thickness_mm=thickness)
+    *_, true_pts, pred_pts = slot_points(data, pred)
     count = pred[:, PRED_COLUMNS.index("count")].astype(int)
     multi = multi_metrics(data.count, count, true_pts, pred_pts, MAX_FINGERS)
     right = count == data.count

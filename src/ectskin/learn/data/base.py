@@ -117,6 +117,12 @@ class SampleData:
             )
         return self._with_rows(idx.astype(np.int64, copy=False))
 
+    def aligned_to(self, other: Self) -> Self:
+        """These samples made joinable to ``other``'s (:meth:`concat`): as they are here; a
+        data set whose samples index a list that may differ between recordings (contact's
+        inflation states) maps them onto ``other``'s."""
+        return self
+
     def _with_rows(self, index: np.ndarray) -> Self:
         return replace(self, **{f: getattr(self, f)[index] for f in self.SAMPLE_FIELDS})
 

@@ -439,14 +439,13 @@ def _state_name(state: tuple[float, ...]) -> str:
     return "/".join(f"{v:g}" for v in state) + " ml" if state else "-"
 
 
-def contact_report(
-    test: ContactData, pred: np.ndarray, *, with_maps: bool = True
-) -> dict[str, Any]:
-    """Every contact metric of predictions ``pred`` (columns of :meth:`ContactTask.predict`) on
-    ``test``; the map arrays (for the figure) only ``with_maps``."""
+def slot_points(test: ContactData, pred: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Per frame and finger slot, of the truth in ``test`` and of predictions ``pred`` (columns
+    of :meth:`ContactTask.predict`): (true face (n, S), predicted face (n, S), predicted (u, v)
+    (n, S, 2), true and predicted rest points (n, S, 3), :func:`rest_points` on ``test``'s
+    body)."""
     width, thickness = test.body_mm
     faces = list(test.faces)
-    n = test.n_samples
     p_face = np.stack([slot_columns(pred, s)["face"] for s in range(MAX_FINGERS)], 1).astype(int)
     p_uv = np.stack(
         [
@@ -460,6 +459,18 @@ def contact_report(
     pred_pts = rest_points(
         faces, np.clip(p_face, 0, len(faces) - 1), p_uv, width_mm=width, thickness_mm=thickness
     )
+    return t_face, p_face, p_uv, true_pts, pred_pts
+
+
+def contact_report(
+    test: ContactData, pred: np.ndarray, *, with_maps: bool = True
+) -> dict[str, Any]:
+    """Every contact metric of predictions ``pred`` (columns of :meth:`ContactTask.predict`) on
+    ``test``; the map arrays (for the figure) only ``with_maps``."""
+    width, thickness = test.body_mm
+    faces = list(test.faces)
+    n = test.n_samples
+    t_face, p_face, p_uv, true_pts, pred_pts = slot_points(test, pred)
     single = test.count == 1
     over_skin = np.empty(int(single.sum()))
     tf, pf = t_face[single, 0], np.clip(p_face[single, 0], 0, len(faces) - 1)
