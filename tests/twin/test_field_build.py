@@ -17,6 +17,7 @@ from ectskin._check import EctskinError
 from ectskin.twin import (
     Finger,
     ManipulatorConfig,
+    Touch,
     field_build,
     field_solve,
     field_spec,
@@ -245,11 +246,11 @@ def test_a_damaged_chunk_is_solved_again(spec, one_go, tmp_path):
 def test_a_chunk_error_names_the_chunk_and_keeps_the_others(spec, tmp_path, monkeypatch):
     calls = []
 
-    def failing(s, chunk):
+    def failing(s, chunk, physics=None, device=None):
         calls.append(chunk.name)
         if len(calls) == 3:
             raise EctskinError("boom")
-        return field_solve.solve_chunk(s, chunk)
+        return field_solve.solve_chunk(s, chunk, physics, device)
 
     monkeypatch.setattr(field_build, "solve_chunk", failing)
     with pytest.raises(EctskinError, match=f"field chunk {chunks_of(spec)[2].name}: boom"):
@@ -287,12 +288,53 @@ def test_the_hover_path_falls_back_to_the_direct_solve(spec, monkeypatch):
     np.testing.assert_allclose(slow, fast, rtol=1e-10, atol=0)
 
 
+def test_a_contact_row_batched_on_a_torch_device_equals_the_direct_solves(spec, monkeypatch):
+    sensor = spec.sensor()
+    v = np.array([54.0, 56.0])
+    forces = spec.forces()  # 2 forces: the row's nodes are (v0, f0), (v0, f1), (v1, f0), (v1, f1)
+    direct = field_solve.contact_row(sensor, spec.inflation_ml, "front", 2.0, v, forces)
+    fast = field_solve.contact_row(sensor, spec.inflation_ml, "front", 2.0, v, forces, device="cpu")
+    np.testing.assert_allclose(fast, direct, rtol=1e-11, atol=1e-15)
+    # a node the batch cannot factor (node 2: v1 at f0) is solved with a refined fingertip, as the
+    # direct solve does; the others keep the batch's values
+    real = field_solve.readout_batch
+
+    def node_2_fails(sets, **kw):
+        out, ok = real(sets, **kw)
+        ok[2], out[2] = False, np.nan
+        return out, ok
+
+    monkeypatch.setattr(field_solve, "readout_batch", node_2_fails)
+    got = field_solve.contact_row(sensor, spec.inflation_ml, "front", 2.0, v, forces, device="cpu")
+    touch = Touch("front", (2.0, 56.0))
+    refined = sensor.refined_readout(
+        spec.inflation_ml, touch, forces, None, None, 0,
+        *sensor.solve_sets(spec.inflation_ml, touch, forces)[0],
+    )
+    np.testing.assert_array_equal(got[1, 0], refined)
+    assert np.max(np.abs(refined - direct[1, 0])) > 0  # the refined fingertip is another mesh
+    np.testing.assert_allclose(np.delete(got.reshape(4, -1), 2, 0),
+                               np.delete(direct.reshape(4, -1), 2, 0), rtol=1e-11, atol=1e-15)
+
+
 # ---------------------------------------------------------------------- Dask
 def test_one_and_two_workers_give_the_same_bits(spec, one_go, tmp_path):
     a = build_field(spec, tmp_path / "w1", workers=1, progress=False)
     b = build_field(spec, tmp_path / "w2", workers=2, progress=False)
     _same(a, b)
     _same(a, one_go)
+
+
+def test_a_build_with_batched_solves_on_workers_is_the_field_to_round_off(spec, one_go, tmp_path):
+    # the device reaches the workers: their contact rows are the batched solves, not the bits of
+    # the NumPy path, yet the same field to round-off
+    a = build_field(spec, tmp_path / "torch", workers=1, progress=False, device="cpu")
+    np.testing.assert_array_equal(a.untouched, one_go.untouched)
+    for face in a.faces:
+        got, want = a.node_values(face), one_go.node_values(face)
+        np.testing.assert_allclose(got, want, rtol=1e-11, atol=1e-15)
+        assert not np.array_equal(got, want)
+        np.testing.assert_array_equal(a.node_values(face, "hover"), one_go.node_values(face, "hover"))
 
 
 def test_a_running_scheduler_builds_the_same_field(spec, one_go, tmp_path):

@@ -16,7 +16,11 @@ finished chunks and the next build solves only the missing ones; a complete fiel
 ``field.npz`` without starting anything.
 
 Each chunk is solved with BLAS limited to one thread (``threadpoolctl``) and depends only on
-the spec and the chunk, so a field is bit-identical for any number of workers.
+the spec and the chunk, so a field is bit-identical for any number of workers. The contact
+rows' solves may run batched on a torch device (``device``, or ``$ECTSKIN_SOLVE_DEVICE``:
+"cuda" for a GPU, :mod:`ectskin.electrostatics.batched`): the same readouts to round-off
+(about 1e-14 relative), so the device is not part of the cache key; a field is bit-identical
+for any number of workers on one device.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ import ectskin
 from ectskin._check import EctskinError
 from ectskin._dask import dask_client
 from ectskin._files import atomic_write, read_json_object, write_json_atomic
+from ectskin.electrostatics.batched import solve_device
 from ectskin.twin.field import ResponseField
 from ectskin.twin.field_solve import Chunk, chunks_of, solve_chunk
 from ectskin.twin.field_spec import FIELD_FORMAT, FieldSpec, physics_digest
@@ -187,11 +192,14 @@ def build_chunks(
     workers: int | None = None,
     progress: bool = True,
     max_chunks: int | None = None,
+    device: str | None = None,
 ) -> BuildReport:
     """Solve the chunks of ``specs``' fields that are not cached yet (all specs on one cluster).
 
     ``max_chunks`` stops after that many newly solved chunks (a time budget; the next build
-    resumes). Complete fields are assembled into ``field.npz``.
+    resumes). Complete fields are assembled into ``field.npz``. ``device``: where the contact
+    rows' solves run (:func:`~ectskin.electrostatics.batched.solve_device`: a torch device,
+    "auto", or None for ``$ECTSKIN_SOLVE_DEVICE``, unset meaning NumPy).
     """
     specs = list(specs)
     for k, s in enumerate(specs):
@@ -201,6 +209,7 @@ def build_chunks(
     if max_chunks is not None and (isinstance(max_chunks, bool) or not isinstance(max_chunks, int)
                                    or max_chunks < 0):
         raise EctskinError(f"max_chunks must be None or an integer >= 0, got {max_chunks!r}")
+    device = solve_device(device)
     t0 = time.perf_counter()
     todo: list[tuple[FieldSpec, Path, Chunk]] = []
     total = cached = 0
@@ -220,13 +229,14 @@ def build_chunks(
                 todo.append((spec, folder, c))
     if max_chunks is not None:
         todo = todo[:max_chunks]
-    log.info("response field: %d chunk(s), %d cached, %d to solve", total, cached, len(todo))
+    log.info("response field: %d chunk(s), %d cached, %d to solve (solves on %s)", total, cached,
+             len(todo), device or "numpy")
     solved = 0
     if todo:
         with _client(scheduler, workers, len(todo)) as client, tqdm(
             total=len(todo), desc="field chunks", unit="chunk", disable=not progress
         ) as bar:
-            for (_, folder, chunk), values in _run(client, todo):
+            for (_, folder, chunk), values in _run(client, todo, device):
                 _write_chunk(folder, chunk, values)
                 solved += 1
                 bar.update(1)
@@ -242,17 +252,21 @@ def build_chunks(
     return BuildReport(total, cached, solved, complete, time.perf_counter() - t0)
 
 
-def _run(client, todo: list[tuple[FieldSpec, Path, Chunk]]) -> Iterator[tuple[tuple, np.ndarray]]:
+def _run(
+    client, todo: list[tuple[FieldSpec, Path, Chunk]], device: str | None = None
+) -> Iterator[tuple[tuple, np.ndarray]]:
     """Yield (job, values) as chunks finish; a chunk's error is raised here (naming it) and the
     chunks still running are cancelled."""
     if client is None:
         for job in todo:
-            yield job, _solve_named(job[0], job[2])
+            yield job, _solve_named(job[0], job[2], device)
         return
     from distributed import as_completed  # deferred: start-up speed of the package
 
     physics = physics_digest()
-    futures = [client.submit(solve_chunk, job[0], job[2], physics, pure=False) for job in todo]
+    futures = [
+        client.submit(solve_chunk, job[0], job[2], physics, device, pure=False) for job in todo
+    ]
     jobs = {f.key: job for f, job in zip(futures, todo)}
     try:
         for fut in as_completed(futures):
@@ -267,9 +281,9 @@ def _run(client, todo: list[tuple[FieldSpec, Path, Chunk]]) -> Iterator[tuple[tu
             fut.cancel()
 
 
-def _solve_named(spec: FieldSpec, chunk: Chunk) -> np.ndarray:
+def _solve_named(spec: FieldSpec, chunk: Chunk, device: str | None = None) -> np.ndarray:
     try:
-        return solve_chunk(spec, chunk)
+        return solve_chunk(spec, chunk, device=device)
     except EctskinError as exc:
         raise EctskinError(f"field chunk {chunk.name}: {exc}") from None
 
@@ -281,9 +295,13 @@ def build_fields(
     scheduler: str | None = None,
     workers: int | None = None,
     progress: bool = True,
+    device: str | None = None,
 ) -> list[ResponseField]:
-    """The fields of ``specs`` (several states on one cluster), built where not cached."""
-    report = build_chunks(specs, cache_dir, scheduler=scheduler, workers=workers, progress=progress)
+    """The fields of ``specs`` (several states on one cluster), built where not cached
+    (``device``: :func:`build_chunks`)."""
+    report = build_chunks(
+        specs, cache_dir, scheduler=scheduler, workers=workers, progress=progress, device=device
+    )
     if not report.complete:  # (cannot happen without max_chunks)
         raise EctskinError("response fields incomplete after the build; build them again")
     return [load_field(s, cache_dir) for s in specs]
@@ -296,12 +314,13 @@ def build_field(
     scheduler: str | None = None,
     workers: int | None = None,
     progress: bool = True,
+    device: str | None = None,
 ) -> ResponseField:
     """The field of ``spec``: loaded from ``cache_dir`` if complete, else built (resuming from
     the cached chunks) on Dask: a LocalCluster of ``workers`` processes (default one per core),
     the scheduler at ``scheduler`` (tcp://HOST:PORT), or here (``workers=0``)."""
     return build_fields(
-        [spec], cache_dir, scheduler=scheduler, workers=workers, progress=progress
+        [spec], cache_dir, scheduler=scheduler, workers=workers, progress=progress, device=device
     )[0]
 
 

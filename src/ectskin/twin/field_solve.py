@@ -3,7 +3,9 @@
 * **Contact** (the finger pressing with force F): the twin's direct solve,
   :meth:`SensorModel.capacitance`. The finger dents the skin under it and bends the body, so
   the electrode panels move with the point and the force and nothing of the electrode block can
-  be factored once: each node is a full method-of-moments solve. (Keeping the electrodes where
+  be factored once: each node is a full method-of-moments solve. With a solve device (a torch
+  device, :func:`~ectskin.electrostatics.batched.solve_device`) a row's nodes are solved as one
+  batch there (batched Cholesky on a GPU). (Keeping the electrodes where
   the untouched state has them and moving only the finger would allow the Schur path below for
   contact too; it is off by up to a quarter of the finger's signal near the tip at 2 N, see
   ``docs/field.md``.)
@@ -25,8 +27,10 @@ the sensor, the state and the shape), so a field is the same whichever worker so
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import weakref
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +38,7 @@ from threadpoolctl import threadpool_limits
 
 from ectskin._check import EctskinError
 from ectskin.electrostatics import EPS0_PF_PER_MM, Panels
+from ectskin.electrostatics.batched import readout_batch
 from ectskin.electrostatics.schur import FixedConductors
 from ectskin.twin.field_spec import FieldSpec, physics_digest
 from ectskin.twin.finger import hovering
@@ -70,11 +75,14 @@ def chunks_of(spec: FieldSpec) -> list[Chunk]:
 _SENSORS: dict[str, SensorModel] = {}  # per worker process: the sensor of a spec, by key
 
 
-def solve_chunk(spec: FieldSpec, chunk: Chunk, physics: str | None = None) -> np.ndarray:
+def solve_chunk(
+    spec: FieldSpec, chunk: Chunk, physics: str | None = None, device: str | None = None
+) -> np.ndarray:
     """The node values of one chunk (BLAS on one thread, so the result is the same anywhere).
 
     ``physics``: the :func:`~ectskin.twin.field_spec.physics_digest` of the process that keys the
-    cache; a worker whose ectskin computes other physics refuses the chunk.
+    cache; a worker whose ectskin computes other physics refuses the chunk. ``device``: a torch
+    device for the contact rows' batched solves (:func:`contact_row`), None for NumPy.
     """
     if physics is not None and physics != physics_digest():
         raise EctskinError(
@@ -88,13 +96,15 @@ def solve_chunk(spec: FieldSpec, chunk: Chunk, physics: str | None = None) -> np
         if len(_SENSORS) >= 4:
             _SENSORS.pop(next(iter(_SENSORS)))
         sensor = _SENSORS[key] = spec.sensor()
-    with threadpool_limits(limits=1):
+    with threadpool_limits(limits=1), _torch_threads(1 if device else None):
         if chunk.kind == "untouched":
             return untouched_readout(sensor, spec.inflation_ml)
         u = float(spec.grid(chunk.face)[0][chunk.iu])
         v = spec.grid(chunk.face)[1]
         if chunk.kind == "contact":
-            return contact_row(sensor, spec.inflation_ml, chunk.face, u, v, spec.forces())
+            return contact_row(
+                sensor, spec.inflation_ml, chunk.face, u, v, spec.forces(), device=device
+            )
         return hover_row(sensor, spec.inflation_ml, chunk.face, u, v, spec.heights())
 
 
@@ -105,13 +115,35 @@ def untouched_readout(sensor: SensorModel, inflation_ml) -> np.ndarray:
 
 
 def contact_row(
-    sensor: SensorModel, inflation_ml, face: str, u_mm: float, v_mm: np.ndarray, forces_n
+    sensor: SensorModel, inflation_ml, face: str, u_mm: float, v_mm: np.ndarray, forces_n,
+    device: str | None = None,
 ) -> np.ndarray:
-    """(n_v, n_forces, n_pairs) pF: the finger pressing at (u, v_k) with each force (direct)."""
+    """(n_v, n_forces, n_pairs) pF: the finger pressing at (u, v_k) with each force (direct).
+
+    ``device`` None: :meth:`SensorModel.capacitance` point by point. A torch device ("cpu",
+    "cuda"): the row's n_v × n_forces method-of-moments solves as one batch
+    (:func:`~ectskin.electrostatics.batched.readout_batch`; the panels are placed as the twin
+    places them, :meth:`SensorModel.solve_sets`), the same readouts to round-off; a node that
+    does not factor is solved with a refined fingertip, as the direct solve does.
+    """
     forces = np.asarray(forces_n, dtype=np.float64)
-    return np.stack(
-        [sensor.capacitance(inflation_ml, Touch(face, (float(u_mm), float(v))), forces) for v in v_mm]
+    touches = [Touch(face, (float(u_mm), float(v))) for v in v_mm]
+    if device is None:
+        return np.stack([sensor.capacitance(inflation_ml, t, forces) for t in touches])
+    sets = [row for t in touches for row in sensor.solve_sets(inflation_ml, t, forces)]
+    cavities = sensor.chamber_eps_r is not None and sensor.chamber_eps_r != sensor.eps_r
+    out, ok = readout_batch(
+        [p for p, _, _ in sets], eps_r=sensor.eps_r, n_electrodes=sensor.n_electrodes,
+        pairs=sensor.layout.pairs, device=device, chamber_eps_r=sensor.chamber_eps_r,
+        blocks=[b for _, b, _ in sets],
+        cells=[c for _, _, c in sets] if cavities else None,  # type: ignore[misc]
     )
+    n_f = forces.size
+    for k in np.flatnonzero(~ok):
+        out[k] = sensor.refined_readout(
+            inflation_ml, touches[k // n_f], forces, None, None, int(k % n_f), *sets[k]
+        )
+    return out.reshape(len(touches), n_f, -1)
 
 
 def hover_row(
@@ -203,6 +235,22 @@ def _readouts(
         Kn = Kn + EPS0_PF_PER_MM * (sensor.chamber_eps_r - sensor.eps_r) * S
     pairs = sensor.layout.pairs
     return -Kn[:, pairs[:, 0], pairs[:, 1]]
+
+
+@contextlib.contextmanager
+def _torch_threads(n: int | None) -> Iterator[None]:
+    """Torch's CPU threads limited to ``n`` (None: untouched) for the duration."""
+    if n is None:
+        yield
+        return
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 def _check_unmoved(sensor: SensorModel, inflation_ml, touch: Touch, base: Panels) -> None:

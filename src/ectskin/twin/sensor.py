@@ -403,53 +403,82 @@ class SensorModel:
         Several fingers: ``touch`` a tuple of T touches, ``forces`` and ``heights_mm`` (F, T)
         (one row per frame); the fingers are one grounded conductor (module docstring).
         """
-        forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
-        per_touch = touch_loads(forces, touch)[1]
-        n_rows = per_touch.shape[0]
-        if not (touch is None or isinstance(touch, Touch)):
-            forces = per_touch  # (F, T): one row per frame
-            if heights_mm is not None:
-                heights_mm = _heights(heights_mm, forces.shape)
+        forces, heights_mm, n_rows = self._frame_loads(touch, forces, heights_mm)
         static = touch is None and handling is None
         if static:
             forces = forces[:1]  # one solve: nothing changes from row to row
         n_f = 1 if static else n_rows
-        if self._with_cavities:
-            pts, vols = self.cavity_cells(inflation_ml, touch, forces, handling)
-        else:
-            pts, vols = [None] * n_f, [None] * n_f  # type: ignore[assignment]
-        electrodes = self.electrode_panels(inflation_ml, touch, forces, handling)
         out = np.empty((n_f, len(self._pairs)))
         if touch is None or not with_finger:
+            pts, vols = self._cells(inflation_ml, touch, forces, handling, n_f)
+            electrodes = self.electrode_panels(inflation_ml, touch, forces, handling)
             for f, pe in enumerate(electrodes):
                 out[f] = self._readout(_without_finger(pe, self.n_electrodes), (pts[f], vols[f]))
             return np.repeat(out, n_rows, axis=0) if static else out
-        fingers = self.finger_sets(inflation_ml, touch, forces, handling, heights_mm=heights_mm)
-        for f, (pe, (pf, blocks)) in enumerate(zip(electrodes, fingers)):
+        sets = self._solve_sets(inflation_ml, touch, forces, handling, heights_mm)
+        for f, (panels, blocks, cells) in enumerate(sets):
             try:
-                out[f] = self._readout(
-                    Panels.concatenate([pe, pf]), (pts[f], vols[f]),
-                    [(pe.n_panels + s, block) for s, block in blocks],
-                )
+                out[f] = self._readout(panels, cells, blocks)
             except EctskinError:
-                # a coarse fingertip panel very close to a fine wire-end panel can make the
-                # collocation matrix indefinite: refine the fingertip and solve again
-                log.debug("refining the fingertip at %s, %s N", touch, forces[f])
-                one = None if handling is None else _handling_rows(handling, f)
-                h = None if heights_mm is None else np.atleast_1d(heights_mm)[f : f + 1]
-                pf, blocks = self.finger_sets(
-                    inflation_ml,
-                    touch,
-                    forces[f : f + 1],
-                    one,
-                    heights_mm=h,
-                    sphere_n=2 * self.discretisation.finger_sphere_n,
-                )[0]
-                out[f] = self._readout(
-                    Panels.concatenate([pe, pf]), (pts[f], vols[f]),
-                    [(pe.n_panels + s, block) for s, block in blocks],
+                out[f] = self.refined_readout(
+                    inflation_ml, touch, forces, handling, heights_mm, f, panels, blocks, cells
                 )
         return out
+
+    def solve_sets(
+        self, inflation_ml, touch: Touch | tuple[Touch, ...], forces=0.0,
+        handling: Handling | None = None, *, heights_mm=None,
+    ) -> list[tuple[Panels, list[tuple[int, np.ndarray]], tuple[np.ndarray | None, np.ndarray | None]]]:
+        """The method-of-moments inputs of :meth:`capacitance`'s rows with a finger, one per row:
+        (panels: the electrodes', then the fingers'; the fingertips' own potential blocks as
+        (first panel, block); the cavity cells (points, volumes), or (None, None) without
+        cavities). A batched solver (:func:`ectskin.electrostatics.batched.readout_batch`) takes
+        them as they are; a row it cannot factor goes to :meth:`refined_readout`."""
+        forces, heights_mm, _ = self._frame_loads(touch, forces, heights_mm)
+        return self._solve_sets(inflation_ml, touch, forces, handling, heights_mm)
+
+    def _frame_loads(self, touch, forces, heights_mm):
+        """(forces, heights, rows); with several touches the per-frame (F, T) ones."""
+        forces = np.atleast_1d(np.asarray(forces, dtype=np.float64))
+        per_touch = touch_loads(forces, touch)[1]
+        if not (touch is None or isinstance(touch, Touch)):
+            forces = per_touch  # (F, T): one row per frame
+            if heights_mm is not None:
+                heights_mm = _heights(heights_mm, forces.shape)
+        return forces, heights_mm, per_touch.shape[0]
+
+    def _cells(self, inflation_ml, touch, forces, handling, n_f):
+        if self._with_cavities:
+            return self.cavity_cells(inflation_ml, touch, forces, handling)
+        return [None] * n_f, [None] * n_f
+
+    def _solve_sets(self, inflation_ml, touch, forces, handling, heights_mm):
+        n_f = touch_loads(forces, touch)[1].shape[0]
+        pts, vols = self._cells(inflation_ml, touch, forces, handling, n_f)
+        electrodes = self.electrode_panels(inflation_ml, touch, forces, handling)
+        fingers = self.finger_sets(inflation_ml, touch, forces, handling, heights_mm=heights_mm)
+        return [(Panels.concatenate([pe, pf]), [(pe.n_panels + s, b) for s, b in blocks],
+                 (pts[f], vols[f])) for f, (pe, (pf, blocks)) in enumerate(zip(electrodes, fingers))]
+
+    def refined_readout(
+        self, inflation_ml, touch, forces, handling, heights_mm, f: int, panels: Panels,
+        blocks: list[tuple[int, np.ndarray]], cells,
+    ) -> np.ndarray:
+        """Row ``f`` of :meth:`solve_sets` solved with a refined fingertip: a coarse fingertip
+        panel very close to a fine wire-end panel can make the collocation matrix indefinite."""
+        log.debug("refining the fingertip at %s, %s N", touch, forces[f])
+        n_e = blocks[0][0]  # the electrodes' panels come first
+        pe = Panels(panels.centres[:n_e], panels.u[:n_e], panels.v[:n_e],
+                    panels.conductor[:n_e], panels.n_conductors)
+        one = None if handling is None else _handling_rows(handling, f)
+        h = None if heights_mm is None else np.atleast_1d(heights_mm)[f : f + 1]
+        pf, fine = self.finger_sets(
+            inflation_ml, touch, forces[f : f + 1], one, heights_mm=h,
+            sphere_n=2 * self.discretisation.finger_sphere_n,
+        )[0]
+        return self._readout(
+            Panels.concatenate([pe, pf]), cells, [(pe.n_panels + s, block) for s, block in fine]
+        )
 
     def marker_positions(
         self, inflation_ml, touch: Touch | tuple[Touch, ...] | None = None, forces=0.0,
