@@ -213,7 +213,8 @@ def test_a_second_finger_at_the_protocols_separation(field, sensor):
     and screen each other, so plain superposition is off by about a quarter of the signal; with
     two-finger anchors along the frames with both on (3, linear in time) those frames are
     within 3 % of the signal while the first slides 5.7 mm, those with the second finger alone
-    (the first lifted to 6-8 mm, its one anchor at the median height) within 4 %."""
+    (the first lifted to 6-8 mm, anchors at 4 heights spanning them) within 4 % (the screening
+    over a trial's whole range of heights: tests/twin/test_field_response_second.py)."""
     n = 14
     t = np.linspace(0, 1, n)
     uv1 = np.c_[1.0 + 4.0 * t, 51.0 + 4.0 * t]

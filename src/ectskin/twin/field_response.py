@@ -35,13 +35,22 @@ trial. A frame's readout is
   fingers press, their coupling (they are one grounded conductor and screen each other: a
   quarter of the signal at the protocol's separation) and the second finger's difference come
   from direct two-finger solves at ``coupling_nodes`` times along those frames, linear in time
-  between them; where the second presses and the first is above the skin, from one two-finger
-  solve (the first finger at those frames' mean point and median height).
+  between them. Where the second presses and the first is above the skin, the first still
+  screens it, the more the lower it is (at the protocol's separation, largest over the pairs:
+  0.8-0.95 times the second finger's signal with the first at 0.5 mm, 0.65-0.85 at 10 mm,
+  about a third at 40 mm, 6-7 % at 100 mm): the correction (the two-finger solve less the field's second finger and
+  the first finger's :meth:`~FieldTouchResponse.finger_above`) comes from ``screen_nodes``
+  two-finger solves at those frames' mean points and the second finger's mean force, the first
+  finger at heights spanning those frames' (Chebyshev-Lobatto in ln(h + ``screen_scale_mm``):
+  the screening is flat in h below a fingertip's size and falls off in ln h above it),
+  interpolated by the polynomial through them (one solve where the heights are all one).
 
 What is neglected: the hand's push times the finger (B is taken without it), the finger's
 difference between the anchors (bilinear) and its curvature in force, the finger's point up
-high, the coupling's change between its anchors and with the first finger's height. Each is
-bounded against direct ``SensorModel.capacitance`` solves in ``tests/twin/test_field_response.py``.
+high, the coupling's change between its anchors, and, while the second finger presses alone,
+its force's and both fingers' points' change over those frames (the anchors take their means).
+Each is bounded against direct ``SensorModel.capacitance`` solves in
+``tests/twin/test_field_response.py`` and ``tests/twin/test_field_response_second.py``.
 """
 
 from __future__ import annotations
@@ -125,6 +134,10 @@ class FieldTouchResponse:
     grid_nodes = (2, 4)
     coupling_nodes = 3
     far_nodes = 4
+    #: the screening anchors while the second finger presses alone: heights (Chebyshev-Lobatto
+    #: in ln(h + screen_scale_mm), flat in h below the scale, ln h above it)
+    screen_nodes = 4
+    screen_scale_mm = 10.0
 
     def __init__(
         self,
@@ -225,10 +238,13 @@ class FieldTouchResponse:
         return out + self.f_slope * (np.asarray(force) - self.f_ref)[:, None]
 
     def _second(self, path, path2) -> None:
-        """The second finger's anchors: one while the first is above the skin, and a few along
-        the frames with both on (their coupling, in time)."""
+        """The second finger's anchors: a few at the first finger's heights while it is above
+        the skin (the screening), and a few along the frames with both on (their coupling, in
+        time)."""
         f = self.field
-        self.corr2 = np.zeros(f.n_pairs)
+        #: the screening anchors: their ln(h + screen_scale_mm) (k,), corrections (k, P) and the
+        #: first finger's lowest and highest height over those frames
+        self.screen: tuple[np.ndarray, np.ndarray, tuple[float, float]] | None = None
         self.coupling = None
         if path2 is None:
             return
@@ -237,16 +253,24 @@ class FieldTouchResponse:
         if alone2.any():  # the second finger pressing while the first is above the skin
             uv2, f2 = path2.uv_mm[alone2].mean(axis=0), float(path2.force_n[alone2].mean())
             sh2 = path2.shear_n[alone2].mean(axis=0)
-            uv1, h1 = path.uv_mm[alone2].mean(axis=0), float(np.median(path.height_mm[alone2]))
+            uv1 = path.uv_mm[alone2].mean(axis=0)
+            h = path.height_mm[alone2]
+            lo, hi = float(h.min()), float(h.max())
+            c = self.screen_scale_mm
+            k = self.screen_nodes if hi - lo > 1e-6 * hi else 1
+            x = lobatto_nodes(np.log(lo + c), np.log(hi + c), k) if k > 1 else np.log([lo + c])
+            nodes_h = np.clip(np.exp(x) - c, lo, hi)  # (exp∘log round-off kept inside)
+            shear = np.tile(np.stack([np.zeros(2), sh2]), (k, 1, 1))  # (k, 2 fingers, 2)
             direct = self._solve(
                 self.fsensor, (Touch(self.face, tuple(uv1)), Touch(self.face2, tuple(uv2))),
-                np.array([[0.0, f2]]), Handling(shear_n=np.stack([np.zeros(2), sh2])[None]),
-                heights=np.array([[h1, 0.0]]),
-            )[0]
-            self.corr2 = (
-                direct - f.untouched - contact_delta(f, self.face2, uv2[0], uv2[1], f2)[0]
-                - self.finger_above(uv1[None], np.array([h1]))[0]
+                np.tile([0.0, f2], (k, 1)), Handling(shear_n=shear),
+                heights=np.c_[nodes_h, np.zeros(k)],
             )
+            corr = (
+                direct - f.untouched - contact_delta(f, self.face2, uv2[0], uv2[1], f2)[0]
+                - self.finger_above(np.tile(uv1, (k, 1)), nodes_h)
+            )
+            self.screen = (x, corr, (lo, hi))
         both = np.flatnonzero(on1 & on2)
         if not both.size:
             return
@@ -325,6 +349,21 @@ class FieldTouchResponse:
             out[far] = dh + (at_top - d_top) * shrink[:, None]
         return out
 
+    def second_alone(self, h: np.ndarray) -> np.ndarray:
+        """(n, P) the correction of the superposed second finger while it presses and the first
+        is ``h`` (n,) above the skin: the anchors' polynomial in ln(h + ``screen_scale_mm``)."""
+        if self.screen is None:
+            raise EctskinError("FieldTouchResponse: the second finger presses alone, but the model "
+                               "was built from paths in which it never does")
+        x, corr, (lo, hi) = self.screen
+        h = np.asarray(h, dtype=np.float64)
+        if np.any(h < lo * (1 - 1e-9)) or np.any(h > hi * (1 + 1e-9)):
+            raise EctskinError(
+                f"FieldTouchResponse: the first finger at {h.min():.4g}-{h.max():.4g} mm, the "
+                f"second finger's anchors span {lo:.4g}-{hi:.4g} mm (the paths it was built from)"
+            )
+        return _poly(x, corr, np.log(h + self.screen_scale_mm))
+
     def __call__(self, path, hand: Handling, path2=None) -> np.ndarray:
         """(n, n_pairs) readout of every frame of ``path`` (the path the model was built from)."""
         f, face = self.field, self.face
@@ -341,7 +380,9 @@ class FieldTouchResponse:
         if on2.any():
             uv2 = path2.uv_mm[on2]
             out[on2] += contact_delta(f, self.face2, uv2[:, 0], uv2[:, 1], path2.force_n[on2])
-        out[on2 & ~on1] += self.corr2
+        alone2 = on2 & ~on1
+        if alone2.any():
+            out[alone2] += self.second_alone(path.height_mm[alone2])
         both = np.flatnonzero(on1 & on2)
         if both.size and self.coupling is not None:
             t, values = self.coupling
