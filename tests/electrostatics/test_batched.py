@@ -146,3 +146,34 @@ def test_a_large_batch_is_cut_into_parts(monkeypatch):
     assert ok.all()
     for k, p in enumerate(sets):
         np.testing.assert_allclose(K[k], maxwell_capacitance(p), rtol=1e-11)
+
+
+def test_the_schur_batch_equals_the_fixed_conductors_one_at_a_time():
+    from ectskin.electrostatics.batched_schur import schur_batch
+    from ectskin.electrostatics.schur import FixedConductors
+
+    plates = Panels.concatenate([
+        rectangle_panels((-6, 0, 0), (1, 0, 0), (0, 1, 0), 8, 20, 3, 6, 0, n_conductors=3),
+        rectangle_panels((6, 0, 0), (1, 0, 0), (0, 1, 0), 8, 20, 3, 6, 1, n_conductors=3),
+    ])
+    cells = _cells(-3.0)
+    fixed = FixedConductors(plates, 2.0, cells=cells)
+    shape = sphere_panels(np.zeros(3), 4.0, 3, 2, n_conductors=3)
+    own = potential_matrix(shape, 2.0)
+    added = [Panels(shape.centres + [x, 1.0, z], shape.u, shape.v, shape.conductor, 3)
+             for x, z in [(0, 5), (3, 7), (-5, 4.6), (1, 12)]]
+    K_ref, S_ref = fixed.capacitance(added, sensitivity_columns=2, blocks=[own] * 4)
+    K, S, ok = schur_batch(fixed, added, [own] * 4, device="cpu", sensitivity_columns=2)
+    assert ok.all()
+    np.testing.assert_allclose(K, K_ref, rtol=1e-11, atol=1e-14)
+    np.testing.assert_allclose(S, S_ref, rtol=1e-10, atol=1e-14 * np.abs(S_ref).max())
+    # the whole system solved at once is the same again (independent of the Schur algebra)
+    full = maxwell_capacitance(Panels.concatenate([plates, added[1]]), 2.0)
+    np.testing.assert_allclose(K[1], full, rtol=1e-9)
+    # a set whose Schur complement is spoilt is flagged; the others are untouched
+    bad = [own, -own, own, own]
+    K2, _, ok2 = schur_batch(fixed, added, bad, device="cpu")
+    assert ok2.tolist() == [True, False, True, True]
+    np.testing.assert_allclose(np.delete(K2, 1, 0), np.delete(K, 1, 0), rtol=1e-12)
+    with pytest.raises(EctskinError, match="one own block per added set"):
+        schur_batch(fixed, added, [own], device="cpu")

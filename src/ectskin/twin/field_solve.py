@@ -5,7 +5,8 @@
   the electrode panels move with the point and the force and nothing of the electrode block can
   be factored once: each node is a full method-of-moments solve. With a solve device (a torch
   device, :func:`~ectskin.electrostatics.batched.solve_device`) a row's nodes are solved as one
-  batch there (batched Cholesky on a GPU). (Keeping the electrodes where
+  batch there (batched Cholesky on a GPU), and so are the hover rows' Schur complements
+  (:func:`~ectskin.electrostatics.batched_schur.schur_batch`). (Keeping the electrodes where
   the untouched state has them and moving only the finger would allow the Schur path below for
   contact too; it is off by up to a quarter of the finger's signal near the tip at 2 N, see
   ``docs/field.md``.)
@@ -39,6 +40,7 @@ from threadpoolctl import threadpool_limits
 from ectskin._check import EctskinError
 from ectskin.electrostatics import EPS0_PF_PER_MM, Panels
 from ectskin.electrostatics.batched import readout_batch
+from ectskin.electrostatics.batched_schur import schur_batch
 from ectskin.electrostatics.schur import FixedConductors
 from ectskin.twin.field_spec import FieldSpec, physics_digest
 from ectskin.twin.finger import hovering
@@ -105,7 +107,7 @@ def solve_chunk(
             return contact_row(
                 sensor, spec.inflation_ml, chunk.face, u, v, spec.forces(), device=device
             )
-        return hover_row(sensor, spec.inflation_ml, chunk.face, u, v, spec.heights())
+        return hover_row(sensor, spec.inflation_ml, chunk.face, u, v, spec.heights(), device)
 
 
 # ---------------------------------------------------------------------- the rows
@@ -147,10 +149,13 @@ def contact_row(
 
 
 def hover_row(
-    sensor: SensorModel, inflation_ml, face: str, u_mm: float, v_mm: np.ndarray, heights_mm
+    sensor: SensorModel, inflation_ml, face: str, u_mm: float, v_mm: np.ndarray, heights_mm,
+    device: str | None = None,
 ) -> np.ndarray:
     """(n_v, n_heights, n_pairs) pF: the finger hovering over (u, v_k) at each height, force 0,
-    by the Schur path over the untouched electrodes (module docstring)."""
+    by the Schur path over the untouched electrodes (module docstring); with a torch
+    ``device`` the row's sets as one batch there
+    (:func:`~ectskin.electrostatics.batched_schur.schur_batch`)."""
     heights = np.asarray(heights_mm, dtype=np.float64)
     zeros = np.zeros(heights.size)
     solver = untouched_conductors(sensor, inflation_ml)
@@ -166,11 +171,15 @@ def hover_row(
             for t in touches
         ]  # n_v lists of n_heights (panels, their own block)
         try:  # the whole row in one batch
-            flat = _readouts(sensor, solver, [p for per_v in fingers for p in per_v], cavities)
+            flat = _readouts(
+                sensor, solver, [p for per_v in fingers for p in per_v], cavities, device
+            )
             return flat.reshape(len(v_mm), heights.size, -1)
         except EctskinError:
             pass
-        return _one_by_one(sensor, inflation_ml, solver, touches, fingers, heights, cavities)
+        return _one_by_one(
+            sensor, inflation_ml, solver, touches, fingers, heights, cavities, device
+        )
 
 
 #: per sensor, the last few states' untouched electrodes factored (:func:`untouched_conductors`)
@@ -202,14 +211,16 @@ def untouched_conductors(sensor: SensorModel, inflation_ml) -> FixedConductors:
     return solver
 
 
-def _one_by_one(sensor, inflation_ml, solver, touches, fingers, heights, cavities) -> np.ndarray:
+def _one_by_one(
+    sensor, inflation_ml, solver, touches, fingers, heights, cavities, device=None
+) -> np.ndarray:
     """The hover row point by point, where the batch failed: a point whose Schur complement is
     not positive definite is solved directly."""
     zeros = np.zeros(heights.size)
     out = np.empty((len(touches), heights.size, sensor.layout.n_pairs))
     for k, (touch, per_v) in enumerate(zip(touches, fingers)):
         try:
-            out[k] = _readouts(sensor, solver, per_v, cavities)
+            out[k] = _readouts(sensor, solver, per_v, cavities, device)
         except EctskinError as exc:
             # a fingertip panel too close to a wire panel: the twin's own solve refines it
             log.debug("hover at %s: %s; solving directly", touch, exc)
@@ -219,16 +230,21 @@ def _one_by_one(sensor, inflation_ml, solver, touches, fingers, heights, cavitie
 
 def _readouts(
     sensor: SensorModel, solver: FixedConductors, fingers: list[tuple[Panels, np.ndarray]],
-    cavities: bool,
+    cavities: bool, device: str | None = None,
 ) -> np.ndarray:
     """(len(fingers), n_pairs) C_ij = −K_ij of the fingers (panels, their own potential block),
     with the cavities' first-order term as the twin adds it (:class:`SensorModel`,
-    ``chamber_eps_r``)."""
+    ``chamber_eps_r``); batched on ``device`` where given and the fingers have one panel count.
+    Raises :class:`EctskinError` where a Schur complement does not factor, either way."""
     n = sensor.n_electrodes
-    K, S = solver.capacitance(
-        [p for p, _ in fingers], sensitivity_columns=n if cavities else None,
-        blocks=[b for _, b in fingers],
-    )
+    n_s = n if cavities else None
+    panels, blocks = [p for p, _ in fingers], [b for _, b in fingers]
+    if device is not None and len({p.n_panels for p in panels}) == 1:
+        K, S, ok = schur_batch(solver, panels, blocks, device=device, sensitivity_columns=n_s)
+        if not ok.all():
+            raise EctskinError("the Schur complement of an added finger is not positive definite")
+    else:
+        K, S = solver.capacitance(panels, sensitivity_columns=n_s, blocks=blocks)
     Kn = K[:, :n, :n]
     if S is not None:
         assert sensor.chamber_eps_r is not None  # (cavities says so)
