@@ -3,16 +3,19 @@
 ``docs/inversion.md`` describes the model, its assumptions and the API:
 :class:`Inversion` (``fit`` one frame), :func:`fit_frames` and :func:`invert_recording` (many),
 :func:`push_basis` (the hand's push as nuisance columns, from direct solves);
+:class:`FingerGuess` (a guess that seeds a fit, :mod:`ectskin.inversion.seed`);
 :mod:`ectskin.inversion.coupling` (two fingers as coupled conductors).
 """
 
 from ectskin.inversion.fit import FingerEstimate, Inversion, InversionResult
 from ectskin.inversion.frames import fit_frames, invert_recording, results_to_arrays
 from ectskin.inversion.model import FieldLike, StateModel, push_basis
+from ectskin.inversion.seed import FingerGuess
 
 __all__ = [
     "FieldLike",
     "FingerEstimate",
+    "FingerGuess",
     "Inversion",
     "InversionResult",
     "StateModel",

@@ -28,6 +28,8 @@ passes the gate the coarse search of that count is skipped. Otherwise the count 
 its cold starts too and the better fit kept. Every other count is fitted as without ``warm``
 (a two-finger stream still fits one finger from its coarse search: the count is chosen by BIC
 against the same one-finger fit as a cold fit's), so a warm fit only ever adds a start.
+**Seeds** (``fit(..., seeds=...)``, e.g. a learned model's guess): more starts of their counts,
+beside the coarse search's or in place of it (``seed_search``; :mod:`ectskin.inversion.seed`).
 
 Each fit's Gaussian log-likelihood ℓ = −½ χ² − Σ ln σ − (n/2) ln 2π, with the same σ for all
 three (the noise at the frame's readout), and its BIC = k ln n − 2 ℓ (k: 3 per finger, + 1 for a
@@ -66,10 +68,11 @@ import numpy as np
 from scipy.optimize import leastsq
 from scipy.stats import chi2
 
-from ectskin._check import EctskinError
+from ectskin._check import EctskinError, check_option
 from ectskin.inversion.coupling import RHO_MAX
 from ectskin.inversion.model import MODES, FieldLike, StateModel
 from ectskin.inversion.result import FingerEstimate, Fit, InversionResult, build_result
+from ectskin.inversion.seed import SEED_SEARCH, FingerGuess, seed_starts
 from ectskin.twin.readout import ReadoutConfig
 
 # FingerEstimate and InversionResult live in :mod:`ectskin.inversion.result`; named here too
@@ -141,6 +144,9 @@ class Inversion:
         signal scaled by its best factor (:meth:`NodeTable.pairs` ``scaled``; two fingers
         screen each other), in place of the second best plain pair; off by default
         (docs/inversion.md).
+    seed_search : how the seeds of :meth:`fit` join a count's starts: "add" (beside the
+        coarse search's; the best fit is kept) or "replace" (the count's coarse search is
+        skipped where a seed gives it a start; :mod:`ectskin.inversion.seed`).
     two_fingers : "coupled" (two fingers as coupled conductors, one more parameter ρ:
         :mod:`ectskin.inversion.coupling`) or "superposition" (the sum of their signals).
     gate_p : a count of k + 1 fingers, or a further start, is tried only while the fits so
@@ -167,6 +173,7 @@ class Inversion:
         press_check: bool = False,
         contact_bias: float = CONTACT_BIAS,
         scaled_pairs: bool = False,
+        seed_search: str = "add",
     ) -> None:
         if not isinstance(fields, Mapping) or not fields:
             raise EctskinError(
@@ -208,6 +215,8 @@ class Inversion:
         if not isinstance(scaled_pairs, bool):
             raise EctskinError(f"Inversion: scaled_pairs must be True or False, got {scaled_pairs!r}")
         self.scaled_pairs = scaled_pairs
+        check_option("seed_search", seed_search, SEED_SEARCH)
+        self.seed_search = seed_search
         self.noise = noise or ReadoutConfig()
         self.max_fingers = int(max_fingers)
         self.model_error = (a, r)
@@ -313,10 +322,12 @@ class Inversion:
 
     # ------------------------------------------------------------------ one frame
     def fit(self, readouts: Any, state: Any, *, kind: str = "absolute",
-            reference: Any = None, warm: InversionResult | None = None) -> InversionResult:
+            reference: Any = None, warm: InversionResult | None = None,
+            seeds: Sequence[Sequence[FingerGuess]] | None = None) -> InversionResult:
         """Invert one frame (or a window of frames, averaged) of ``state``; ``warm``: the
         result of the previous frame of a stream (of the same state), the start of the fit of
-        its count (module docstring)."""
+        its count (module docstring); ``seeds``: guesses of the fingers, each one more start of
+        its count's fit (:mod:`ectskin.inversion.seed`)."""
         m = self.model(state)
         warm_start = self._warm_start(m, warm)
         y, w = self.observed(readouts, state, kind, reference)
@@ -335,23 +346,28 @@ class Inversion:
         fits: list[Fit | None] = [self._fit_none(m, delta, sigma)]
         passed = [self._passes(fits[0], 0, nb, n)]
         starts: list[list[list[tuple[int, int, np.ndarray]]]] = [[]]
+        seeded = seed_starts(m, seeds, self.max_fingers)
         # counts in turn, each from its first start while no count passes the gate; a count's
         # further starts only when no larger count passes either (a two-finger frame does not
         # spend them on one finger)
         for k in range(1, self.max_fingers + 1):
             if passed[-1]:
                 break
-            hot = None
-            if warm_start is not None and len(warm_start) == k:
-                hot = self._fit_fingers(m, delta, sigma, warm_start, self.coupled)
-                if self._passes(hot, k, nb, n):  # explained: no coarse search for this count
-                    starts.append([])
-                    fits.append(hot)
-                    passed.append(True)
-                    continue
-            starts.append(self._starts(m, delta, k, fits[1] if k > 1 else None))
-            cold = self._fit_fingers(m, delta, sigma, starts[k][0], self.coupled)
-            fits.append(hot if hot is not None and hot.chi2 < cold.chi2 else cold)
+            hot = None  # the best fit of the warm start and the seeds of k fingers
+            for start in ([warm_start] if warm_start is not None and len(warm_start) == k
+                          else []) + seeded.get(k, []):
+                f = self._fit_fingers(m, delta, sigma, start, self.coupled)
+                hot = f if hot is None or f.chi2 < hot.chi2 else hot
+            # a warm start that explains the frame, or seeds that replace the search: no
+            # coarse search for this count
+            if hot is not None and (self.seed_search == "replace" and k in seeded
+                                    or k not in seeded and self._passes(hot, k, nb, n)):
+                starts.append([])
+                fits.append(hot)
+            else:
+                starts.append(self._starts(m, delta, k, fits[1] if k > 1 else None))
+                cold = self._fit_fingers(m, delta, sigma, starts[k][0], self.coupled)
+                fits.append(hot if hot is not None and hot.chi2 < cold.chi2 else cold)
             passed.append(self._passes(fits[k], k, nb, n))
             if k == self.max_fingers:
                 for j in range(k, 0, -1):

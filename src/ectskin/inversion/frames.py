@@ -34,6 +34,7 @@ def fit_frames(
     window: int = 1,
     kind: str = "absolute",
     reference: Any = None,
+    seeds: Sequence[Any] | None = None,
 ) -> tuple[list[InversionResult], np.ndarray]:
     """Invert every frame of ``readouts`` (n_frames, n_pairs), or of every trial of a
     :class:`~ectskin.io.recording.Recording` (each at its trial's inflation, windows within a
@@ -42,12 +43,15 @@ def fit_frames(
 
     ``states``: one inflation vector for all frames, or (n_frames, n_chambers). ``window`` w:
     frame f is fitted to the mean of frames f − w + 1 … f (fewer at the start), its noise
-    divided by √(frames averaged). ``kind`` and ``reference`` as :meth:`Inversion.fit`. BLAS
-    runs on one thread meanwhile (the products are tiny; threads only add overhead).
+    divided by √(frames averaged). ``kind`` and ``reference`` as :meth:`Inversion.fit`;
+    ``seeds``: one entry per frame, that frame's ``seeds`` of :meth:`Inversion.fit` (None: none;
+    arrays only). BLAS runs on one thread meanwhile (the products are tiny; threads only add
+    overhead).
     """
     if isinstance(readouts, Recording):
-        if states is not None:
-            raise EctskinError("fit_frames: a recording's trials carry their states; give no states")
+        if states is not None or seeds is not None:
+            raise EctskinError("fit_frames: a recording's trials carry their states; give no "
+                               "states or seeds")
         parts = [fit_frames(inversion, t.capacitance, t.inflation, window=window, kind=kind,
                             reference=reference) for t in readouts.trials]
         return ([r for res, _ in parts for r in res],
@@ -69,12 +73,16 @@ def fit_frames(
         )
     if not (isinstance(window, int) and window >= 1):
         raise EctskinError(f"fit_frames: window must be an integer >= 1, got {window!r}")
+    if seeds is not None and len(seeds) != n:
+        raise EctskinError(f"fit_frames: seeds must hold one entry per frame ({n}), got "
+                           f"{len(seeds)}")
     results, seconds = [], np.empty(n)
     with threadpool_limits(limits=1):  # the products are tiny: BLAS threads only cost
         for f in range(n):
             t0 = time.perf_counter()
             results.append(inversion.fit(y[max(0, f - window + 1): f + 1], s[f], kind=kind,
-                                         reference=reference))
+                                         reference=reference,
+                                         seeds=None if seeds is None else seeds[f]))
             seconds[f] = time.perf_counter() - t0
     return results, seconds
 

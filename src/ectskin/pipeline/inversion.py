@@ -47,6 +47,14 @@ frames with two fingers on the skin are inverted besides them and scored with th
 accuracy per trial). The spread's metrics (``multi`` among them) stay the spread's. The labels
 only pick which frames are scored, as they pick the one-finger frames of the point error.
 
+The contact model of the states with a field (``choice``, as the reproduction runs the step):
+the contact run's model, its k-NN and ridge baselines, the inversion and the hybrid (the
+inversion seeded with the run's model's answer for the frame) are scored on up to
+:data:`~ectskin.pipeline.contact_pick.CHOICE_FRAMES` frames of the *validation* trials in states
+with a field, spread as the test frames; the lowest mean point error is chosen, and every
+candidate is scored on the test frames too (:mod:`ectskin.pipeline.contact_pick`; the result's
+``choice``). A frame of a state without a field can only be answered by the learned model.
+
 :func:`ectskin.pipeline.metrics.inversion_block` turns the step's metrics into metrics.json's
 ``inversion``.
 """
@@ -64,6 +72,7 @@ import numpy as np
 from ectskin._check import EctskinError, check_option
 from ectskin._files import read_json, to_jsonable, write_json_atomic
 from ectskin.inversion import Inversion, fit_frames, push_basis, results_to_arrays
+from ectskin.inversion.seed import SEED_SEARCH
 from ectskin.io import Recording, read_recording
 from ectskin.io.calibration import is_no_contact
 from ectskin.learn.data.contact import HOVER_MAX_MM, MAX_FINGERS, ContactData, contact_dataset
@@ -72,8 +81,10 @@ from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
 from ectskin.learn.tasks.contact import contact_report, slot_points
 from ectskin.pipeline.bound import state_key
 from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
+from ectskin.pipeline.contact_pick import CHOICE_FRAMES, contact_choice, load_learned
 from ectskin.pipeline.metrics import beside
 from ectskin.pipeline.runner import StepRunner, digest
+from ectskin.pipeline.steps import run_settings
 from ectskin.twin.field import ResponseField
 from ectskin.twin.readout import ReadoutConfig
 
@@ -197,10 +208,14 @@ def _frames(data: ContactData, single_only: bool, limit: int | None) -> np.ndarr
     return rows
 
 
-def invert_rows(inv: Inversion, rec: Recording, data: ContactData,
-                rows: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def invert_rows(inv: Inversion, rec: Recording, data: ContactData, rows: np.ndarray,
+                seeds: Sequence[Any] | None = None) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Invert the frames ``rows`` of ``data`` (samples of ``rec``'s trials, window 1): the
-    arrays of :func:`ectskin.inversion.results_to_arrays` and each frame's seconds."""
+    arrays of :func:`ectskin.inversion.results_to_arrays` and each frame's seconds; ``seeds``:
+    per row, the ``seeds`` of :meth:`ectskin.inversion.Inversion.fit` (the hybrid)."""
+    if seeds is not None and len(seeds) != rows.size:
+        raise EctskinError(f"invert_rows: seeds must hold one entry per row ({rows.size}), got "
+                           f"{len(seeds)}")
     groups = np.unique(data.group[rows])
     # rows grouped by trial in the order of np.unique: the rows must come in that order
     if not np.array_equal(np.concatenate([rows[data.group[rows] == g] for g in groups])
@@ -209,8 +224,9 @@ def invert_rows(inv: Inversion, rec: Recording, data: ContactData,
     results, seconds = [], []
     for g in groups:
         t = rec.trial(data.group_names[g])
-        frames = data.frame[rows[data.group[rows] == g]]
-        res, sec = fit_frames(inv, t.capacitance[frames], t.inflation)
+        of_g = np.flatnonzero(data.group[rows] == g)
+        res, sec = fit_frames(inv, t.capacitance[data.frame[rows[of_g]]], t.inflation,
+                              seeds=None if seeds is None else [seeds[int(i)] for i in of_g])
         results += res
         seconds.append(sec)
     return results_to_arrays(results), np.concatenate(seconds) if seconds else np.zeros(0)
@@ -320,6 +336,34 @@ def _choose_push(rec: Recording, fields: Mapping[tuple[float, ...], ResponseFiel
             "n_frames": int(rows.size), "why": "lower validation point error"}
 
 
+def _choice(runner: StepRunner, config: ReproduceConfig, rec: Recording, source: str,
+            inv: Inversion, split: Mapping[str, Any], val: Sequence[str], test: ContactData,
+            own: tuple[Mapping[str, np.ndarray], np.ndarray], n_field: int, n_without: int
+            ) -> dict[str, Any]:
+    """The contact model choice on the field states (:func:`ectskin.pipeline.contact_pick.
+    contact_choice`): validation frames of ``val`` spread as the test frames, at most
+    :data:`~ectskin.pipeline.contact_pick.CHOICE_FRAMES`; ``test``: the test frames inverted,
+    ``own`` their inversion (arrays, seconds); ``n_field``, ``n_without``: the test frames in
+    states with and without a field."""
+    val_data = _dataset(rec, val)
+    val_rows = (_frames(val_data, False, CHOICE_FRAMES) if val_data is not None
+                else np.zeros(0, np.int64))
+
+    def invert(data: ContactData, rows: np.ndarray, seeds: Sequence[Any] | None
+               ) -> tuple[np.ndarray, np.ndarray]:
+        arrays, seconds = invert_rows(inv, rec, data, rows, seeds)
+        return prediction_columns(arrays, data.faces, data.face_extent), seconds
+
+    learned = load_learned(runner.out / "runs" / CONTACT_RUN, rec, source)
+    total = n_field + n_without
+    return contact_choice(
+        learned, invert, val=val_data, val_rows=val_rows, test=test,
+        test_rows=np.arange(test.n_samples),
+        inversion_test=(prediction_columns(own[0], test.faces, test.face_extent), own[1]),
+        train_trials=list(split.get("train") or []), seed=config.seed,
+        share_without_field=n_without / total if total else None)
+
+
 def inversion_step(
     runner: StepRunner,
     config: ReproduceConfig,
@@ -333,6 +377,7 @@ def inversion_step(
     untouched: str = "field",
     press_check: bool = False,
     two_finger_frames: int | None = MAX_TWO_FINGER_FRAMES,
+    choice: bool = False,
 ) -> dict[str, Any]:
     """Step "inversion": OUT_DIR/inversion/metrics.json (module docstring); returns it.
 
@@ -349,6 +394,9 @@ def inversion_step(
     ``max_frames`` spreads inverted besides them (at most, evenly spread; 0: none): the result's
     ``two_finger`` (:func:`two_finger_score`) scores them with the spread's own two-finger frames;
     the spread's metrics stay the spread's.
+    ``choice``: also choose the contact model of the field states among the contact run's model
+    (runs/contact), its k-NN and ridge baselines, the inversion and the hybrid on validation
+    frames (:mod:`ectskin.pipeline.contact_pick`); the result's ``choice``.
     """
     if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
         raise EctskinError(f"inversion_step: max_frames must be an integer >= 1 or None, got "
@@ -362,8 +410,9 @@ def inversion_step(
         raise EctskinError("inversion_step: no response fields given")
     check_option("push", push, PUSH_CHOICES)
     check_option("untouched", untouched, UNTOUCHED_CHOICES)
-    if not isinstance(press_check, bool):
-        raise EctskinError(f"inversion_step: press_check must be True or False, got {press_check!r}")
+    for name, flag in (("press_check", press_check), ("choice", choice)):
+        if not isinstance(flag, bool):
+            raise EctskinError(f"inversion_step: {name} must be True or False, got {flag!r}")
     fields = {tuple(float(x) for x in s): f for s, f in fields.items()}
     data_path, data_settings = found
     split_file = runner.out / "runs" / CONTACT_RUN / "split.json"
@@ -384,6 +433,10 @@ def inversion_step(
         "finger_scale_sd": finger_scale_sd, "untouched": untouched, "press_check": press_check,
         "two_finger_frames": two_finger_frames,
     }
+    if choice:  # the run's model and its baselines' seed are candidates' settings too
+        settings.update(choice=True, choice_frames=CHOICE_FRAMES, seed=config.seed,
+                        seed_search=SEED_SEARCH[0],
+                        run=digest(run_settings(config, CONTACT_RUN, dict(data_settings))))
 
     def make() -> None:
         t0 = time.perf_counter()
@@ -401,16 +454,16 @@ def inversion_step(
         options: dict[str, Any] = {"press_check": press_check,
                                    "untouched": {s: b["pF"] for s, b in base.items()} or None}
         cols: dict[Any, np.ndarray] | None = None
-        choice: dict[str, Any] = {"use": push == "on", "why": f"push={push!r}"}
+        push_pick: dict[str, Any] = {"use": push == "on", "why": f"push={push!r}"}
         t_push = 0.0
         if push != "off":
             t1 = time.perf_counter()
             cols = {s: push_basis(f, noise=noise) for s, f in fields.items()}
             t_push = time.perf_counter() - t1
             if push == "auto":
-                choice = _choose_push(rec, fields, noise, [n for n in val if has[n]], cols,
+                push_pick = _choose_push(rec, fields, noise, [n for n in val if has[n]], cols,
                                       finger_scale_sd, **options)
-        inv = Inversion(fields, noise, push=cols if choice["use"] else None,
+        inv = Inversion(fields, noise, push=cols if push_pick["use"] else None,
                         finger_scale_sd=finger_scale_sd, **options)
         data = _dataset(rec, [n for n in test if has[n]])
         n_without = sum(without.values())
@@ -423,6 +476,10 @@ def inversion_step(
             result = score(test_data, arrays, seconds)
             result["timing"]["push_basis_s"] = t_push
             result["n_frames_in_field_states"] = int(data.n_samples)
+            if choice:
+                result["choice"] = _choice(runner, config, rec, str(data_path), inv, split,
+                                           [n for n in val if has[n]], test_data,
+                                           (arrays, seconds), data.n_samples, n_without)
             parts = [(rows, arrays)]
             if two_finger_frames != 0:
                 extra = two_finger_rows(data, rows, two_finger_frames)
@@ -439,7 +496,7 @@ def inversion_step(
         result.update(
             frames_without_field=without, n_frames_without_field=n_without,
             share_without_field=(n_without / total) if total else None,
-            n_test_trials=len(test), push=choice,
+            n_test_trials=len(test), push=push_pick,
             settings={"window": 1, "kind": "absolute", "noise": to_jsonable(noise),
                       "push": push, "max_fingers": inv.max_fingers,
                       "finger_scale_sd": finger_scale_sd, "press_check": press_check,

@@ -411,8 +411,9 @@ def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
     its contact metrics (:data:`INVERSION_KEYS`), the count by true count, the two-finger frames
     scored apart (``two_finger``, without its per-trial list), force where its
     standard error says it is observable, the time per frame, and per state its numbers beside
-    ContactNet's, the baselines' and the bound's at the same state's test frames; ``contact``
-    and ``bound``: metrics.json's blocks (or None)."""
+    ContactNet's, the baselines' and the bound's at the same state's test frames, and the
+    contact model choice of the field states (``choice``, :mod:`ectskin.pipeline.contact_pick`;
+    None where the step made none); ``contact`` and ``bound``: metrics.json's blocks (or None)."""
     timing = inv.get("timing") or {}
     fo = inv.get("force_observable") or {}
     near = beside(contact, inv)
@@ -446,6 +447,7 @@ def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
         "bound_loc_mm_mean": btest.get("loc_mm_mean"),
         "bound_force_n_mean": btest.get("force_n_mean"),
         "push": inv.get("push"),
+        "choice": inv.get("choice"),
         "settings": inv.get("settings"),
         "timing_s": {k: timing.get(k) for k in ("total_s", "invert_s", "push_basis_s")},
     }

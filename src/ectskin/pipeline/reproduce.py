@@ -102,9 +102,10 @@ def _physics_steps(
         return None, None
     bound = bound_step(runner, config, fields, found)
     # the skin's own untouched readout, people's finger sizes and the press check: chosen on the
-    # validation trials of the contact experiment (docs/inversion.md)
+    # validation trials of the contact experiment (docs/inversion.md); so is the contact model
+    # of the states with a field (choice: the run's model, its baselines, inversion, hybrid)
     inversion = inversion_step(runner, config, fields, found, contact, untouched="auto",
-                               finger_scale_sd=FINGER_SCALE_SD, press_check=True)
+                               finger_scale_sd=FINGER_SCALE_SD, press_check=True, choice=True)
     return bound, inversion
 
 

@@ -1,7 +1,9 @@
 """The report's section on the training-free physical inversion: its errors beside ContactNet's,
 the strongest baseline's and the physical limit's, overall and per inflation state, where force
-is observable, and its time per frame. It only words metrics.json's ``inversion`` block (with
-``contact``, ``multi`` and ``bound`` for the comparisons); nothing here computes a metric.
+is observable, its time per frame, and the contact model chosen for the states with a field
+(the run's model, its baselines, the inversion or the hybrid). It only words metrics.json's
+``inversion`` block (with ``contact``, ``multi`` and ``bound`` for the comparisons); nothing
+here computes a metric.
 """
 
 from __future__ import annotations
@@ -112,6 +114,41 @@ def force_line(inv: Mapping[str, Any], bound: Mapping[str, Any] | None) -> str |
     return text + "."
 
 
+#: the names of the contact choice's candidates in the report (others: ``baseline_name``)
+CHOICE_NAMES = {"contactnet": "ContactNet", "inversion": "the inversion", "hybrid": "the hybrid"}
+
+
+def _choice_name(key: Any) -> str:
+    return CHOICE_NAMES.get(str(key), baseline_name(str(key)))
+
+
+def choice_line(inv: Mapping[str, Any]) -> str | None:
+    """One sentence on the contact model chosen for the states with a field (metrics.json's
+    ``inversion.choice``): which, on how many validation frames, every candidate's validation
+    point error, the chosen one's test error, and who answers the states without a field;
+    None without a choice."""
+    c = inv.get("choice")
+    if not isinstance(c, Mapping) or not c.get("selected"):
+        return None
+    cands = c.get("candidates") or {}
+
+    def err(name: str, split: str) -> Any:
+        return ((cands.get(name) or {}).get(split) or {}).get("loc_mm_mean")
+
+    chosen = str(c["selected"])
+    others = ", ".join(f"{_choice_name(k)} {_mm(err(k, 'val'))}" for k in cands if k != chosen)
+    ans = (c.get("answers") or {}).get("states_without_field") or {}
+    share = ans.get("share_of_test_frames")
+    text = (f"Contact model of the states with a field, chosen on {c.get('n_val_frames')} "
+            f"validation frames by the mean point error: {_choice_name(chosen)}, "
+            f"{_mm(err(chosen, 'val'))} ({others}); {_mm(err(chosen, 'test'))} on the test "
+            "frames (the hybrid is the inversion seeded with the learned model's guess).")
+    if isinstance(share, int | float) and share > 0:
+        text += (f" The test frames of states without a field ({_pct(share)}) can only be "
+                 f"answered by the learned model ({_choice_name(ans.get('model'))}).")
+    return text
+
+
 def _options_text(settings: Mapping[str, Any]) -> str:
     """What the fit assumed beyond the field: whose untouched readout, people's finger sizes,
     the press check (the step's settings; "" for a step made before they existed)."""
@@ -165,6 +202,9 @@ def inversion_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
         s.append(("p", "Per inflation state (point error mean; force MAE of the one-finger "
                        "frames):"))
         s.append(("table", (head, rows)))
+    chosen = choice_line(inv)
+    if chosen:
+        s.append(("p", chosen))
     line = force_line(inv, lookup(metrics, "bound"))
     if line:
         s.append(("p", line))
