@@ -425,6 +425,10 @@ def test_reproduce_tiny_twin_experiment(tmp_path, monkeypatch):
         inv["frames_without_field"])
     assert (out / "inversion" / "metrics.json").is_file()
     assert {"bound", "inversion"} <= set(m["timings_s"])
+    # the contact model of the field states, chosen on validation frames where there are any
+    choice = inv["choice"]
+    assert choice is None or (choice["selected"] in choice["order"]
+                              and set(choice["candidates"]) == set(choice["order"]))
     assert m["data"]["trials"] == protocol.n_trials == 16
     assert m["protocol"]["levels_ml"] == [0.0, 20.0]
     for rel in (
