@@ -10,8 +10,9 @@ Three measurements, on the reproduction's fullest contact state (20/20/20 ml):
   of ``--repeat``) and the largest difference from the NumPy readouts, relative to the largest
   readout. Done for the field's coarse mesh and for the twin's default mesh (the paper
   experiment's solves).
-* ``rows``: whole contact chunks (:func:`ectskin.twin.field_solve.solve_chunk`, placement
-  included) per device, seconds per chunk.
+* ``rows`` / ``hover_rows``: whole contact / hover chunks
+  (:func:`ectskin.twin.field_solve.solve_chunk`, placement included) per device, seconds per
+  chunk.
 * ``build`` (with ``--build``): the cold build of the reproduction's contact fields into a fresh
   cache on a Dask LocalCluster of ``--workers`` processes, per device (one CUDA context per
   worker on a GPU), wall seconds.
@@ -86,9 +87,9 @@ def mom(spec, devices: list[str], repeat: int, n_v: int | None) -> dict:
     return out
 
 
-def rows(spec, devices: list[str], n_rows: int) -> dict:
-    """Seconds per whole contact chunk (placement + solves) on each device."""
-    chunks = [c for c in chunks_of(spec) if c.kind == "contact"]
+def rows(spec, devices: list[str], n_rows: int, kind: str = "contact") -> dict:
+    """Seconds per whole chunk of ``kind`` (placement + solves) on each device."""
+    chunks = [c for c in chunks_of(spec) if c.kind == kind]
     pick = [chunks[k] for k in np.linspace(0, len(chunks) - 1, n_rows).astype(int)]
     out: dict = {"chunks": [c.name for c in pick]}
     ref = None
@@ -142,6 +143,7 @@ def main() -> None:
         "mom_field_mesh": mom(spec, devices, a.repeat, None),
         "mom_default_mesh": mom(fine, devices, a.repeat, a.fine_v),
         "rows": rows(spec, devices, a.rows),
+        "hover_rows": rows(spec, devices, a.rows, "hover"),
     }
     if a.build:
         result["build"] = build(config, [d for d in devices if d != "cpu"], a.workers)
