@@ -3,6 +3,8 @@ specs and cache, the simulation with them, and the count of distinct touch point
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -61,6 +63,25 @@ def test_one_field_per_contact_state_of_the_simulated_body():
         assert s.spacing_mm == QUICK_FIELD.spacing_mm and s.finger.radius_mm == 8.0
     assert len({s.key() for s in specs}) == 8
     assert pfield.contact_field_specs(ReproduceConfig("o", recording=_rec([]))) == []
+
+
+def test_all_states_adds_the_paper_experiments_other_states_built_alike(tmp_path):
+    protocol = Protocol(levels_ml=(0.0, 10.0, 20.0), seed=3)
+    contact = pfield.contact_field_specs(ReproduceConfig(tmp_path, protocol=protocol))
+    keys = [s.key() for s in contact]
+    default = pfield.physics_field_specs(ReproduceConfig(tmp_path, protocol=protocol))
+    assert [s.key() for s in default] == keys
+    both = pfield.physics_field_specs(
+        ReproduceConfig(tmp_path, protocol=protocol, field_states="all"))
+    assert [s.key() for s in both[: len(contact)]] == keys  # the contact fields first, as they are
+    assert len(contact) == 8 and len(both) == 27  # 3 levels on 3 chambers
+    states = [s.inflation_ml for s in both]
+    assert len(set(states)) == 27 and (0.0, 10.0, 20.0) in states
+    for extra in both[len(contact):]:  # the same finger, forces, heights, grid and mesh
+        same = dataclasses.replace(contact[0], inflation_ml=extra.inflation_ml)
+        assert extra.key() == same.key()
+    with pytest.raises(EctskinError, match="field_states"):
+        ReproduceConfig(tmp_path, field_states="some")
 
 
 def test_the_contact_step_builds_the_fields_then_reads_them(tmp_path, monkeypatch):

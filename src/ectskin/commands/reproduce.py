@@ -86,6 +86,14 @@ def add_common_arguments(p: argparse.ArgumentParser, *, default_profile: str) ->
         "field's accuracy bar, about 4x the build time); docs/field.md",
     )
     p.add_argument(
+        "--field-states",
+        choices=("contact", "all"),
+        default="contact",
+        help="the states whose response fields the bound and the inversion read: the contact "
+        "experiment's (default) or every state of the contact run's data (the paper's 10-ml "
+        "states too: the inversion then answers every test frame; 19 more fields to build)",
+    )
+    p.add_argument(
         "--field-cache",
         metavar="DIR",
         default=None,
@@ -160,6 +168,7 @@ def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
         dpi=args.dpi,
         contact_response=args.contact_response,
         field_grid=args.field_grid,
+        field_states=args.field_states,
         field_cache=args.field_cache,
     )
     m = reproduce(config)

@@ -63,6 +63,8 @@ ABLATIONS = {"no_prior": "track_no_prior", "window_1": "track_window_1"}
 RUN_PROFILES = {"touch_robust": "robust"}
 #: epochs of the ablation trainings under the quick profile (the main runs use the profile's)
 QUICK_ABLATION_EPOCHS = 12
+#: the states whose fields the bound and the inversion read (ReproduceConfig.field_states)
+FIELD_STATES = ("contact", "all")
 #: how the contact experiment's touch trials are read (ReproduceConfig.contact_response)
 CONTACT_RESPONSES = ("field", "solve")
 #: the contact experiment read from the fields (ReproduceConfig.contact_protocol): touch trials
@@ -151,6 +153,12 @@ class ReproduceConfig:
         The fields' grid (:data:`ectskin.twin.field_spec.FIELD_GRIDS`): "quick" builds the
         demo's 8 states in minutes and misses the field's accuracy bar near the chambers'
         walls and ends; "fine" meets it on nearly every point at about 4x the build time.
+    field_states : "contact" | "all"
+        The states whose fields the bound and the inversion read: those of the contact
+        experiment (the default: the fields it is simulated from), or every state of the contact
+        run's data (the paper's trials add the 10-ml states; :func:`~ectskin.pipeline.field.
+        physics_field_specs`), so that the inversion answers every test frame, at the build time
+        of the extra fields.
     """
 
     out_dir: Path
@@ -177,6 +185,7 @@ class ReproduceConfig:
     contact_response: str = "field"
     field_cache: Path | None = field(default=None, compare=False)
     field_grid: str = "quick"
+    field_states: str = "contact"
 
     def __post_init__(self) -> None:
         check_type("out_dir", self.out_dir, (str, os.PathLike))
@@ -208,6 +217,7 @@ class ReproduceConfig:
         check_figure_options(self.figure_format, self.dpi)
         check_option("contact_response", self.contact_response, CONTACT_RESPONSES)
         check_option("field_grid", self.field_grid, tuple(FIELD_GRIDS))
+        check_option("field_states", self.field_states, FIELD_STATES)
         if self.field_cache is not None:
             check_type("field_cache", self.field_cache, (str, os.PathLike))
             object.__setattr__(self, "field_cache", Path(self.field_cache))

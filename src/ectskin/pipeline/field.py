@@ -46,11 +46,13 @@ def field_cache_dir(cache_dir: str | os.PathLike | None = None) -> Path:
 
 
 def protocol_field_specs(
-    protocol: Protocol, layout: SensorLayout | None = None, grid: str | FieldGrid = "quick"
+    protocol: Protocol, layout: SensorLayout | None = None, grid: str | FieldGrid = "quick",
+    states=None,
 ) -> list[FieldSpec]:
-    """One field spec per inflation state of ``protocol`` on ``layout`` (default: the paper's)
-    and the default body, as the reproduction and ``ectskin simulate`` simulate them, on
-    ``grid``: a name of :data:`~ectskin.twin.field_spec.FIELD_GRIDS` or a grid."""
+    """One field spec per inflation state of ``protocol`` (or of ``states``) on ``layout``
+    (default: the paper's) and the default body, as the reproduction and ``ectskin simulate``
+    simulate them, on ``grid``: a name of :data:`~ectskin.twin.field_spec.FIELD_GRIDS` or a
+    grid."""
     if not isinstance(protocol, Protocol):
         raise EctskinError(f"protocol must be a Protocol, got {type(protocol).__name__}")
     if not isinstance(grid, FieldGrid):
@@ -64,7 +66,7 @@ def protocol_field_specs(
             force_range_n=protocol.force_range_n,
             height_range_mm=(0.5, max(protocol.hover_max_mm, 1.0)),
         )
-        for state in protocol.states()
+        for state in (protocol.states() if states is None else states)
     ]
 
 
@@ -74,17 +76,35 @@ def contact_field_specs(config) -> list[FieldSpec]:
     return [] if protocol is None else protocol_field_specs(protocol, grid=config.field_grid)
 
 
+def physics_field_specs(config) -> list[FieldSpec]:
+    """The field specs the bound and the inversion read: the contact experiment's
+    (:func:`contact_field_specs`), and with ``config.field_states == "all"`` also those of the
+    paper experiment's states that it lacks (the contact run's data hold both), built alike
+    (the contact protocol's finger, force and height ranges; the same grid)."""
+    specs = contact_field_specs(config)
+    if not specs or config.field_states != "all":
+        return specs
+    have = {s.inflation_ml for s in specs}
+    contact, paper = config.contact_protocol(), config.simulation_protocol()
+    extra = [s for s in paper.states() if tuple(float(x) for x in s) not in have]
+    if not extra:
+        return specs
+    return specs + protocol_field_specs(contact, grid=config.field_grid, states=extra)
+
+
 def contact_fields(
     config,
     cache_dir: str | os.PathLike | None = None,
     *,
     workers: int | None = None,
     progress: bool | None = None,
+    specs: list[FieldSpec] | None = None,
 ) -> dict[tuple[float, ...], ResponseField]:
-    """The response fields of ``config``'s contact experiment, state → field: read from the
-    cache (``cache_dir``, else ``config.field_cache``, else :func:`field_cache_dir`), the
-    missing ones built there on a Dask LocalCluster of ``workers`` (default ``config.workers``)."""
-    specs = contact_field_specs(config)
+    """The response fields of ``config``'s contact experiment (or of ``specs``), state → field:
+    read from the cache (``cache_dir``, else ``config.field_cache``, else
+    :func:`field_cache_dir`), the missing ones built there on a Dask LocalCluster of
+    ``workers`` (default ``config.workers``)."""
+    specs = contact_field_specs(config) if specs is None else specs
     if not specs:
         return {}
     root = field_cache_dir(cache_dir if cache_dir is not None else config.field_cache)

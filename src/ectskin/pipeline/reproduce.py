@@ -53,7 +53,7 @@ from ectskin.pipeline.contact import (
     handling_off,
     n_touch_points,
 )
-from ectskin.pipeline.field import contact_fields
+from ectskin.pipeline.field import contact_fields, physics_field_specs
 from ectskin.pipeline.inversion import inversion_step
 from ectskin.pipeline.metrics import combine_metrics, copy_figures, handling_block
 from ectskin.pipeline.runner import StepRunner
@@ -90,13 +90,14 @@ def _physics_steps(
     contact: dict[str, Any],
 ) -> tuple[dict[str, Any] | None, dict[str, Any] | None]:
     """Steps "bound" and "inversion" on the contact experiment's response fields (those the
-    contact step built, read back from the cache); (None, None) when the contact experiment is
-    not read from fields (a given recording, or ``contact_response="solve"``)."""
+    contact step built, read back from the cache; with ``field_states="all"`` also those of the
+    paper's other states, built here); (None, None) when the contact experiment is not read from
+    fields (a given recording, or ``contact_response="solve"``)."""
     if config.recording is not None or config.contact_response != "field":
         log.info("bound, inversion: skipped (the contact data were not made from response fields)")
         return None, None
     t0 = time.perf_counter()
-    fields = contact_fields(config)
+    fields = contact_fields(config, specs=physics_field_specs(config))  # built where missing
     runner.timings["contact_fields_load"] = time.perf_counter() - t0
     if not fields:
         return None, None
