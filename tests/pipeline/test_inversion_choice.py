@@ -16,23 +16,16 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from test_inversion_step import TEST, VAL, make_world  # tests/pipeline
 
-from ectskin.io import Recording, read_recording, write_recording
+from ectskin.io import Recording, read_recording
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
-from ectskin.pipeline import ReproduceConfig
 from ectskin.pipeline import contact_pick as cp
-from ectskin.pipeline import field as pfield
 from ectskin.pipeline import inversion as pinv
-from ectskin.pipeline.contact import _simulate_contact
 from ectskin.pipeline.metrics import inversion_block
 from ectskin.pipeline.runner import StepRunner
 from ectskin.report.inversion import choice_line
-from ectskin.twin import Protocol
-from ectskin.twin.field_spec import FieldGrid
 
-SMALL_GRID = FieldGrid(spacing_mm=(10.0, 27.5), force_nodes=4, height_nodes=4)
-TEST = ["trial_0001", "trial_0002", "far_0003"]
-VAL = ["trial_0004", "trial_0005"]
 TRAIN = ["trial_0003"]
 NCOL = len(PRED_COLUMNS) + 2 * len(SLOT_COLUMNS)
 #: validation and test frames of the choice (evenly spread): the code path, in seconds
@@ -41,20 +34,8 @@ FRAMES = 50
 
 @pytest.fixture(scope="module")
 def world(tmp_path_factory):
-    """One state (0/0/0 ml) with a field on a 10 × 27.5 mm grid, 2-s trials; ``far_0003`` a copy
-    of trial_0003 at a state without one."""
-    root = tmp_path_factory.mktemp("inversion_choice")
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setitem(pfield.FIELD_GRIDS, "quick", SMALL_GRID)
-        protocol = Protocol(levels_ml=(0.0,), touch_trials=1, duration_s=2.0, touch_dwells=1)
-        config = ReproduceConfig(root / "out", protocol=protocol, workers=1, progress=False,
-                                 field_cache=root / "cache")
-        rec = _simulate_contact(config.contact_protocol(), config, None)
-        fields = pfield.contact_fields(config)
-    far = replace(rec.trial("trial_0003"), name="far_0003", inflation=(20.0, 0.0, 0.0))
-    rec = Recording(rec.layout, list(rec.trials) + [far], rec.frame_rate_hz, meta=rec.meta)
-    write_recording(rec, root / "contact.h5", overwrite=True)
-    return config, fields, root / "contact.h5"
+    """As test_inversion_step's: one state with a field, ``far_0003`` at a state without one."""
+    return make_world(tmp_path_factory.mktemp("inversion_choice"))
 
 
 class Offset(cp.LearnedModel):

@@ -32,11 +32,9 @@ TEST = ["trial_0001", "trial_0002", "far_0003"]
 VAL = ["trial_0004", "trial_0005"]
 
 
-@pytest.fixture(scope="module")
-def world(tmp_path_factory):
+def make_world(root):
     """One state (0/0/0 ml), its field on a 10 × 27.5 mm grid, 2-s trials; ``far_0003`` is a copy
-    of trial_0003 at a state without a field."""
-    root = tmp_path_factory.mktemp("inversion_step")
+    of trial_0003 at a state without a field: (config, fields, the recording's path)."""
     with pytest.MonkeyPatch.context() as mp:
         mp.setitem(pfield.FIELD_GRIDS, "quick", SMALL_GRID)
         protocol = Protocol(levels_ml=(0.0,), touch_trials=1, duration_s=2.0, touch_dwells=1)
@@ -48,6 +46,11 @@ def world(tmp_path_factory):
     rec = Recording(rec.layout, list(rec.trials) + [far], rec.frame_rate_hz, meta=rec.meta)
     write_recording(rec, root / "contact.h5", overwrite=True)
     return config, fields, root / "contact.h5"
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory):
+    return make_world(tmp_path_factory.mktemp("inversion_step"))
 
 
 def _out(tmp_path, config, test=TEST, val=VAL):
