@@ -50,6 +50,11 @@ BENCHMARKS = {
         ["--v-window", "50,54", "--fine", "2,2", "--du", "2,4", "--dv", "2,4", "--nodes", "4",
          "--points", "3", "--workers", "1"],
     ),
+    "bench_batched_solve": (
+        "bench_batched_solve.py",
+        ["--build"],
+        ["--devices", "numpy,cpu", "--rows", "1", "--fine-v", "1", "--repeat", "1"],
+    ),
     "bench_placement": ("bench_placement.py", ["--build"], ["--rows", "1"]),
     "bench_field": (
         "bench_field.py",
