@@ -264,8 +264,9 @@ def _run(
     from distributed import as_completed  # deferred: start-up speed of the package
 
     physics = physics_digest()
+    extra = () if device is None else (device,)
     futures = [
-        client.submit(solve_chunk, job[0], job[2], physics, device, pure=False) for job in todo
+        client.submit(solve_chunk, job[0], job[2], physics, *extra, pure=False) for job in todo
     ]
     jobs = {f.key: job for f, job in zip(futures, todo)}
     try:
@@ -283,7 +284,7 @@ def _run(
 
 def _solve_named(spec: FieldSpec, chunk: Chunk, device: str | None = None) -> np.ndarray:
     try:
-        return solve_chunk(spec, chunk, device=device)
+        return solve_chunk(spec, chunk) if device is None else solve_chunk(spec, chunk, device=device)
     except EctskinError as exc:
         raise EctskinError(f"field chunk {chunk.name}: {exc}") from None
 
