@@ -9,7 +9,7 @@ import pytest
 from threadpoolctl import threadpool_limits
 
 from ectskin._check import EctskinError
-from ectskin.twin.bound import TwinResponse, crb, point_bounds
+from ectskin.twin.bound import TwinResponse, crb, finite_difference_jacobian, point_bounds
 from ectskin.twin.bound_field import (
     StateNuisances,
     crb_many,
@@ -18,6 +18,7 @@ from ectskin.twin.bound_field import (
     field_nuisances,
     reduce,
 )
+from ectskin.twin.bound_modulus import ModulusTable, modulus_column, modulus_table
 from ectskin.twin.field import ResponseField
 from ectskin.twin.field_build import build_field
 from ectskin.twin.field_spec import COARSE_FIELD_MESH, FieldSpec
@@ -151,3 +152,84 @@ def test_the_field_bound_meets_the_direct_bound(built):
             assert got[case]["force_n"][0] == pytest.approx(force, rel=TOLERANCE[case]), case
         # the nuisances cost information: without them the bound would be far too low
         assert got["push"]["position_mm"][0] > 1.5 * got["none"]["position_mm"][0]
+
+
+# ------------------------------------------------------------------ the pulp's modulus
+def test_a_modulus_column_along_the_force_column_has_a_known_bound(layout):
+    """A modulus column exactly k × ∂C/∂F: the force is unresolved with the modulus unknown,
+    and with a prior of standard deviation s its variance grows by exactly k² s² (the estimate
+    absorbs F + k x; Woodbury), the position's not at all."""
+    field, (a, b, c, d) = _linear_field(layout)
+    k, s = 0.3, 0.4
+    u, v = np.linspace(-4, 4, 4), np.linspace(40, 52, 5)
+    forces = np.exp(np.linspace(np.log(0.3), np.log(2.0), 4))
+    table = ModulusTable({"front": (u, v)}, forces,
+                         {"front": np.broadcast_to(k * d, (4, 5, 4, d.size)).copy()}, 0.1)
+    cols = StateNuisances((0.0, 20.0, 0.0), np.zeros((layout.n_pairs, 1)),
+                          np.zeros((layout.n_pairs, 3)), 0.0, 0.0, table)
+    uv, force = [[0.5, 44.0], [-2.7, 50.5]], [0.6, 1.7]
+    got = field_bounds(field, "front", uv, force, columns=cols, nuisances=("modulus",),
+                       prior_sd={"modulus": s})
+    np.testing.assert_allclose(got["modulus"]["force_n"] ** 2,
+                               got["none"]["force_n"] ** 2 + (k * s) ** 2, rtol=1e-6)
+    np.testing.assert_allclose(got["modulus"]["position_mm"], got["none"]["position_mm"],
+                               rtol=1e-6)
+    unknown = field_bounds(field, "front", uv, force, columns=cols, nuisances=("modulus",),
+                           prior_sd={})
+    assert np.all(np.isinf(unknown["modulus"]["force_n"]))
+    assert np.all(np.isfinite(unknown["modulus"]["position_mm"]))
+    with pytest.raises(EctskinError, match="modulus table"):
+        field_bounds(field, "front", uv, force, nuisances=("modulus",),
+                     columns=StateNuisances((0.0, 20.0, 0.0), np.zeros((layout.n_pairs, 1)),
+                                            np.zeros((layout.n_pairs, 3)), 0.0, 0.0))
+
+
+def test_a_nuisance_never_lowers_the_bound():
+    """The Fisher-information argument: one more column (with or without a prior) can only
+    raise every parameter's bound (or leave it), never lower it."""
+    rng = np.random.default_rng(5)
+    J = rng.normal(size=(200, 28, 6))
+    J[:50, :, 5] = 0.9 * J[:50, :, 2] + 0.05 * rng.normal(size=(50, 28))  # nearly collinear
+    s = rng.uniform(0.5, 2.0, (200, 28))
+    for var in (np.inf, 0.16):
+        without, _ = crb_many(J[:, :, :5], s, n_nuisance=2, prior_var=[np.inf] * 4 + [1.0])
+        with_, _ = crb_many(J, s, n_nuisance=3, prior_var=[np.inf] * 4 + [1.0, var])
+        assert np.all(with_ >= without * (1 - 1e-12))
+        assert np.any(with_[:50, 2] > 1.5 * without[:50, 2])  # and the collinear one costs
+
+
+def test_the_modulus_table_meets_direct_solves_off_its_nodes(built):
+    """The table (direct differences at nodes, cubic in u, v, ln F) against
+    ``modulus_column`` at points and forces between its nodes (the column changes quickly with
+    the force: with 4 force nodes instead of 6 it misses by 25-50 % here), and that against
+    ``TwinResponse``'s own modulus column (a sensor built anew with the modulus E0 e^x)."""
+    sensor = built.spec.sensor()
+    table = modulus_table(sensor, built.spec.inflation_ml, {"front": ((-1.0, 3.0), (52.0, 56.0))},
+                          (0.5, 2.0), spacing_mm=1.0)
+    assert table.n_solves == 2 * 25 * 6 and table.forces_n.size == 6
+    uv, force = np.array([[0.7, 54.3], [2.2, 52.6]]), np.array([1.1, 0.7])
+    direct = modulus_column(sensor, built.spec.inflation_ml, "front", uv, force)
+    got = table.column("front", uv, force)
+    err = np.linalg.norm(got - direct, axis=1) / np.linalg.norm(direct, axis=1)
+    assert np.all(err < 0.1), err
+    twin = TwinResponse(sensor, built.spec.inflation_ml)
+    _, J, names = finite_difference_jacobian(twin, "front", uv[0], force_n=1.1,
+                                             nuisances=("modulus",))
+    assert names[-1] == "modulus"
+    np.testing.assert_allclose(J[:, -1], direct[0], rtol=1e-9, atol=1e-12)
+    with pytest.raises(EctskinError, match="force_nodes"):
+        modulus_table(sensor, (0.0, 20.0, 0.0), {"front": ((-1.0, 3.0), (52.0, 56.0))},
+                      (0.5, 2.0), force_nodes=3)
+
+
+def test_the_field_bound_with_the_modulus_meets_the_direct_bound(built):
+    """The field's bound with the modulus table against ``TwinResponse``'s direct bound with
+    the modulus column of finite differences, and never below the bound without it."""
+    cols = field_nuisances(built, finger=False, modulus=True, spacing_mm=1.0)
+    direct = TwinResponse(built.spec.sensor(), built.spec.inflation_ml)
+    for uv in [(0.7, 54.3), (2.2, 52.6)]:
+        ref = point_bounds(direct, "front", uv, force_n=1.0, nuisances=("modulus",))
+        got = field_bounds(built, "front", [uv], 1.0, columns=cols, nuisances=("modulus",))
+        assert got["modulus"]["force_n"][0] == pytest.approx(ref["modulus"][1], rel=0.1)
+        assert got["modulus"]["position_mm"][0] == pytest.approx(ref["modulus"][0], rel=0.1)
+        assert got["modulus"]["force_n"][0] >= got["none"]["force_n"][0]

@@ -29,9 +29,12 @@ EXAMPLES = """\
   ectskin bound limits/ --levels 0,20       # the 8 states of levels 0 and 20 ml per chamber
   ectskin bound limits/ --states "0,10,20" --spacing-mm 5 --mesh default --workers 4
   ectskin bound limits/ --nuisance push --priors none --hover-mm 5 --overwrite
+  ectskin bound limits/ --nuisance push,inflation,finger,modulus   # + the pulp's modulus
   ectskin bound limits/ --scheduler tcp://10.0.0.5:8786
 """
-NUISANCE_NAMES = ("push", "inflation", "finger")  # (twin.bound.NUISANCES: not imported at start-up)
+# (twin.bound.NUISANCE_NAMES and NUISANCES: not imported at start-up)
+NUISANCE_NAMES = ("push", "inflation", "finger", "modulus")
+DEFAULT_NUISANCES = NUISANCE_NAMES[:3]
 N_CHAMBERS = 3  # the paper's body; another body's count would come with its config
 log = logging.getLogger(__name__)
 
@@ -58,15 +61,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--nuisance",
-        default=",".join(NUISANCE_NAMES),
-        help="nuisances, comma-separated, or 'none' (default push,inflation,finger)",
+        default=",".join(DEFAULT_NUISANCES),
+        help="nuisances, comma-separated, or 'none': push, inflation, finger (its radius), "
+        "modulus (ln of its pulp's modulus) (default push,inflation,finger)",
     )
     p.add_argument(
         "--priors",
-        default="inflation=1,finger=1",
+        default="inflation=1,finger=1,modulus=0.4",
         metavar="NAME=SD,...",
-        help="prior standard deviations of nuisances in their units (ml, mm; the push in N); a "
-        "nuisance not named is unknown; 'none' for none (default inflation=1,finger=1)",
+        help="prior standard deviations of nuisances in their units (ml, mm, ln E; the push in "
+        "N); a nuisance not named is unknown; 'none' for none (default "
+        "inflation=1,finger=1,modulus=0.4)",
     )
     p.add_argument(
         "--force-n", type=number(0.05, above=True), default=1.0, help="finger force, N (default 1)"

@@ -86,7 +86,9 @@ class InformationConfig:
     spacing_mm: float = 15.0
     force_n: float = 1.0
     nuisances: tuple[str, ...] = NUISANCES
-    prior_sd: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_PRIOR_SD))
+    prior_sd: dict[str, float] = field(
+        default_factory=lambda: {k: DEFAULT_PRIOR_SD[k] for k in NUISANCES if k in DEFAULT_PRIOR_SD}
+    )
     mesh: str = "coarse"
     separation_mm: float = 5.0
     readout: ReadoutConfig = field(default_factory=ReadoutConfig)

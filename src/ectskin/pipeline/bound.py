@@ -18,7 +18,10 @@
                                             (ectskin.viz.contact.plot_force_sigma)
 
 :func:`bound_step` takes fields already built (the field step's {state: ResponseField}); the
-nuisance columns come from direct solves of each field's own sensor (``field_nuisances``).
+nuisance columns come from direct solves of each field's own sensor (``field_nuisances``):
+``nuisances`` defaults to the hand's push, the inflation and the fingertip's radius
+(:data:`ectskin.twin.bound.NUISANCES`); naming ``"modulus"`` among them adds the pulp's modulus
+(:mod:`ectskin.twin.bound_modulus`: a table of direct solves per state, some 800 solves each).
 :func:`ectskin.pipeline.metrics.bound_block` turns bound.json into metrics.json's ``bound``, and
 :func:`ectskin.pipeline.metrics.force_split_keys` the force split into ``contact``'s keys.
 
@@ -309,8 +312,9 @@ def bound_step(
         """The nuisance columns of every state, solved once for both steps."""
         if "columns" not in cache:
             with threadpool_limits(1):
-                cache["columns"] = (
-                    {s: field_nuisances(f) for s, f in fields.items()} if nuisances else {})
+                modulus = "modulus" in nuisances
+                cache["columns"] = ({s: field_nuisances(f, modulus=modulus)
+                                     for s, f in fields.items()} if nuisances else {})
         return cache["columns"]
 
     def make() -> None:

@@ -68,12 +68,16 @@ FD_STEPS = {
     "push": 0.1,  # N, each of the hand's loads
     "inflation": 0.5,  # ml, each chamber
     "finger": 0.25,  # mm, the fingertip's radius
+    "modulus": 0.1,  # ln of the pulp's modulus (twin.bound_modulus)
 }
-#: nuisances of :class:`TwinResponse`, in the order their columns are appended
-NUISANCES = ("push", "inflation", "finger")
-#: (assumed) prior standard deviations: the inflation known to ±1 ml per chamber, the fingertip's
-#: radius to ±1 mm (adult fingertips); the hand's push has none (unknown)
-DEFAULT_PRIOR_SD: dict[str, float] = {"inflation": 1.0, "finger": 1.0}
+#: nuisances of :class:`TwinResponse`, in the order their columns are appended; by default the
+#: first three (:data:`NUISANCES`), the pulp's modulus on request (docs/bound.md)
+NUISANCE_NAMES = ("push", "inflation", "finger", "modulus")
+NUISANCES = NUISANCE_NAMES[:3]
+#: (assumed) prior SDs: the inflation to ±1 ml per chamber, the fingertip's radius to ±1 mm (adult
+#: fingertips), ln of the pulp's modulus to ln 4 / √12 (twin.bound_modulus); the push: none
+DEFAULT_PRIOR_SD: dict[str, float] = {"inflation": 1.0, "finger": 1.0,
+                                       "modulus": float(np.log(4.0) / np.sqrt(12.0))}
 #: (assumed) how the hand may push: at z = 60, 87.5 and 115 mm (the ends and middle of the distal
 #: half, where :func:`~ectskin.twin.human.hand_push` pushes; its point is unknown too, and loads at
 #: these heights span the bending a push between them makes) a force along x and one along y on
@@ -87,14 +91,8 @@ DEFAULT_PUSH_LOADS = tuple(
 )
 #: a mesh about 4× coarser than the default (readouts within a few %): quick maps
 COARSE = Discretisation(
-    wire_panel_length_mm=5.0,
-    wire_panels_across=1,
-    pad_panels=2,
-    finger_sphere_n=4,
-    finger_shaft_around=8,
-    finger_shaft_along=3,
-    cavity_cell_mm=8.0,
-    cavity_layers=2,
+    wire_panel_length_mm=5.0, wire_panels_across=1, pad_panels=2, finger_sphere_n=4,
+    finger_shaft_around=8, finger_shaft_along=3, cavity_cell_mm=8.0, cavity_layers=2,
 )
 #: force bounds below this (N) count as "force observable" in the maps' summaries
 FORCE_THRESHOLD_N = 0.1
@@ -233,9 +231,10 @@ class TwinResponse:
     Nuisance offsets: ``push`` (n, P): the hand's force (N) of each of the P ``push_loads``
     (point, world direction) (a :class:`~ectskin.twin.mechanics.Handling` load; a Handling holds
     one point, so a row may load one of them); ``inflation`` (n, n_chambers) ml added to
-    ``inflation_ml``; ``finger`` (n, 1) mm added to the fingertip's radius (a sensor with the
-    replaced :class:`~ectskin.twin.sensor.Finger`, sharing the manipulator). Rows that share a
-    point, inflation, finger and push load are solved in one call.
+    ``inflation_ml``; ``finger`` (n, 1) mm added to the fingertip's radius and ``modulus`` (n, 1)
+    to the log of its pulp's modulus (E0 e^x) (a sensor with the replaced
+    :class:`~ectskin.twin.sensor.Finger`, sharing the manipulator). Rows that share a point,
+    inflation, finger and push load are solved in one call.
     """
 
     def __init__(
@@ -247,10 +246,9 @@ class TwinResponse:
         self.sensor = sensor
         self.inflation_ml = sensor.manipulator.check_inflation(inflation_ml)
         self.push_loads = tuple((t, np.asarray(d, dtype=np.float64)) for t, d in push_loads)
-        self.nuisance_sizes = {
-            "push": len(self.push_loads), "inflation": self.inflation_ml.size, "finger": 1
-        }
-        self._fingers: dict[float, SensorModel] = {0.0: sensor}
+        self.nuisance_sizes = {"push": len(self.push_loads), "inflation": self.inflation_ml.size,
+                               "finger": 1, "modulus": 1}
+        self._fingers: dict[tuple[float, float], SensorModel] = {(0.0, 0.0): sensor}
 
     def nuisance_limits(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         check_option("nuisance", name, tuple(self.nuisance_sizes))
@@ -262,14 +260,15 @@ class TwinResponse:
         m = self.nuisance_sizes[name]
         return np.full(m, -np.inf), np.full(m, np.inf)
 
-    def _with_finger(self, offset_mm: float) -> SensorModel:
-        if offset_mm not in self._fingers:
-            s = self.sensor
-            finger = replace(s.finger, radius_mm=s.finger.radius_mm + offset_mm)
-            self._fingers[offset_mm] = SensorModel(
-                s.layout, s.manipulator, s.discretisation, s.eps_r, finger, s.chamber_eps_r
-            )
-        return self._fingers[offset_mm]
+    def _with_finger(self, offset_mm: float, log_modulus: float) -> SensorModel:
+        key = (offset_mm, log_modulus)
+        if key not in self._fingers:
+            s, f = self.sensor, self.sensor.finger
+            finger = replace(f, radius_mm=f.radius_mm + offset_mm,
+                             pulp_modulus_mpa=f.pulp_modulus_mpa * float(np.exp(log_modulus)))
+            self._fingers[key] = SensorModel(
+                s.layout, s.manipulator, s.discretisation, s.eps_r, finger, s.chamber_eps_r)
+        return self._fingers[key]
 
     def readout(self, face, uv, force, height, nuisances=None) -> np.ndarray:
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
@@ -289,7 +288,8 @@ class TwinResponse:
         at = np.where(loaded.any(axis=1), loaded.argmax(axis=1), 0)
         groups: dict[tuple, list[int]] = {}
         for i in range(n):
-            key = (*uv[i], *nuis["inflation"][i], nuis["finger"][i, 0], at[i])
+            key = (*uv[i], *nuis["inflation"][i], nuis["finger"][i, 0], nuis["modulus"][i, 0],
+                   at[i])
             groups.setdefault(key, []).append(i)
         out = np.empty((n, self.sensor.layout.n_pairs))
         for key, rows in groups.items():
@@ -299,8 +299,8 @@ class TwinResponse:
                 point, direction = self.push_loads[p]
                 force_n = push[rows, p][:, None] * direction[None, :]
                 handling = Handling(push=point, push_force_n=force_n)
-            out[rows] = self._with_finger(float(key[-2])).capacitance(
-                self.inflation_ml + np.asarray(key[2:-2]),
+            out[rows] = self._with_finger(float(key[-3]), float(key[-2])).capacitance(
+                self.inflation_ml + np.asarray(key[2:-3]),
                 Touch(face, (float(key[0]), float(key[1]))),
                 force[rows],
                 handling,
@@ -392,6 +392,12 @@ def finite_difference_jacobian(
 
 
 # ---------------------------------------------------------------------------- one point
+def priors_in_use(prior_sd: Mapping[str, float] | None, nuisances: Sequence[str]) -> dict:
+    """The prior SDs (``prior_sd``, else :data:`DEFAULT_PRIOR_SD`) of ``nuisances`` only."""
+    return {k: v for k, v in (DEFAULT_PRIOR_SD if prior_sd is None else prior_sd).items()
+            if k in nuisances}
+
+
 def cases(nuisances: Sequence[str]) -> list[str]:
     """The bound's cases: no nuisance, each alone, and all together (with two or more)."""
     return ["none", *nuisances] + (["all"] if len(nuisances) > 1 else [])
@@ -583,7 +589,7 @@ def bound_maps(
         "settings": {
             "faces": faces, "spacing_mm": spacing_mm, "force_n": force_n, "hover_mm": hover_mm,
             "nuisances": list(nuisances),
-            "prior_sd": dict(DEFAULT_PRIOR_SD if prior_sd is None else prior_sd),
+            "prior_sd": priors_in_use(prior_sd, nuisances),
             "steps": {**FD_STEPS, **(steps or {})}, "rcond": rcond, "null_share": NULL_SHARE,
             "force_threshold_n": force_threshold_n,
             "readout": readout or ReadoutConfig(),

@@ -20,7 +20,11 @@ Nuisance columns, once per state (:func:`state_nuisances`, direct solves of the 
 * ``finger`` (1 column, prior ±1 mm): ∂C/∂R ≈ κ ΔC, the finger's signal ΔC = C − C_untouched
   scaled by one gain κ (1/mm) per state, fitted by least squares to direct finite differences of
   the fingertip's radius at a few points. A larger fingertip couples more to the wires it is
-  near: its signal grows with its size, in the pattern of its signal.
+  near: its signal grows with its size, in the pattern of its signal;
+* ``modulus`` (1 column, prior ln 4 / √12 in ln E; on request): ∂C/∂ln E of the fingertip's
+  pulp, which no gain model fits (:mod:`ectskin.twin.bound_modulus`): direct central differences
+  on a grid of nodes per state (a :class:`~ectskin.twin.bound_modulus.ModulusTable`),
+  interpolated to each point and force.
 
 What each shortcut costs against the direct bound (``TwinResponse`` + ``point_bounds``) is
 measured at points of a small field by ``tests/twin/test_bound_field.py`` (``docs/bound.md``).
@@ -30,7 +34,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -42,6 +46,7 @@ from ectskin.twin.bound import (
     DEFAULT_PUSH_LOADS,
     FD_STEPS,
     FORCE_THRESHOLD_N,
+    NUISANCE_NAMES,
     NUISANCES,
     NULL_SHARE,
     RCOND,
@@ -49,7 +54,9 @@ from ectskin.twin.bound import (
     VERSION,
     TwinResponse,
     cases,
+    priors_in_use,
 )
+from ectskin.twin.bound_modulus import ModulusTable, modulus_table
 from ectskin.twin.field import ResponseField
 from ectskin.twin.mechanics import Handling, Touch
 from ectskin.twin.readout import ReadoutConfig, noise_pf
@@ -138,7 +145,8 @@ class StateNuisances:
 
     ``push`` (n_pairs, n_loads) pF/N and ``inflation`` (n_pairs, n_chambers) pF/ml: derivatives
     of the untouched readout; ``finger_gain`` κ (1/mm): ∂C/∂R ≈ κ (C − C_untouched);
-    ``finger_fit`` the relative residual of that fit, ‖col − κ ΔC‖ / ‖col‖ over its points.
+    ``finger_fit`` the relative residual of that fit, ‖col − κ ΔC‖ / ‖col‖ over its points;
+    ``modulus``: ∂C/∂ln E of the pulp's modulus at nodes of each face (None: not taken).
     """
 
     inflation_ml: tuple[float, ...]
@@ -146,18 +154,26 @@ class StateNuisances:
     inflation: np.ndarray
     finger_gain: float
     finger_fit: float
+    modulus: ModulusTable | None = None
 
     @property
     def sizes(self) -> dict[str, int]:
-        return {"push": self.push.shape[1], "inflation": self.inflation.shape[1], "finger": 1}
+        return {"push": self.push.shape[1], "inflation": self.inflation.shape[1], "finger": 1,
+                **({"modulus": 1} if self.modulus is not None else {})}
 
-    def columns(self, name: str, delta: np.ndarray) -> np.ndarray:
+    def columns(self, name: str, delta: np.ndarray, face: str | None = None, uv=None,
+                force_n=None) -> np.ndarray:
         """(n, n_pairs, k) columns of nuisance ``name`` at points whose finger's signal is
-        ``delta`` (n, n_pairs) pF."""
-        check_option("nuisance", name, NUISANCES)
+        ``delta`` (n, n_pairs) pF; ``modulus`` needs the points too: ``face``, ``uv`` (n, 2) mm
+        and ``force_n`` (n,)."""
+        check_option("nuisance", name, tuple(self.sizes))
         n = delta.shape[0]
         if name == "finger":
             return (self.finger_gain * delta)[:, :, None]
+        if name == "modulus":
+            if self.modulus is None or face is None or uv is None or force_n is None:
+                raise EctskinError("StateNuisances.columns: 'modulus' needs face, uv and force_n")
+            return self.modulus.column(face, uv, force_n)[:, :, None]
         col = self.push if name == "push" else self.inflation
         return np.broadcast_to(col, (n, *col.shape))
 
@@ -167,6 +183,7 @@ class StateNuisances:
             "finger_gain_per_mm": self.finger_gain,
             "finger_fit_residual": self.finger_fit,
             "n_push_loads": self.push.shape[1],
+            **({"modulus": self.modulus.to_dict()} if self.modulus is not None else {}),
         }
 
 
@@ -251,12 +268,22 @@ def default_finger_points(field: ResponseField) -> list[tuple[str, tuple[float, 
 
 
 def field_nuisances(
-    field: ResponseField, *, finger: bool = True, steps: Mapping[str, float] | None = None
+    field: ResponseField, *, finger: bool = True, modulus: bool = False,
+    steps: Mapping[str, float] | None = None, **table: Any,
 ) -> StateNuisances:
-    """:func:`state_nuisances` of the sensor and state ``field`` was built from (its spec)."""
+    """:func:`state_nuisances` of the sensor and state ``field`` was built from (its spec); with
+    ``modulus`` also the pulp modulus's :func:`~ectskin.twin.bound_modulus.modulus_table` over
+    the field's faces and force range (``table``: its ``spacing_mm``, ``force_nodes``; the
+    step is ``steps["modulus"]``, :data:`~ectskin.twin.bound.FD_STEPS`)."""
     points = default_finger_points(field) if finger else ()
-    return state_nuisances(field.spec.sensor(), field.spec.inflation_ml, finger_points=points,
-                           steps=steps)
+    sensor = field.spec.sensor()
+    out = state_nuisances(sensor, field.spec.inflation_ml, finger_points=points, steps=steps)
+    if not modulus:
+        return out
+    step = {**FD_STEPS, **(steps or {})}["modulus"]
+    extents = {face: field.spec.extent(face) for face in field.faces}
+    return replace(out, modulus=modulus_table(sensor, field.spec.inflation_ml, extents,
+                                              field.spec.force_range_n, step=step, **table))
 
 
 # ---------------------------------------------------------------------------- many points
@@ -287,9 +314,12 @@ def field_bounds(
     force = np.broadcast_to(np.asarray(force_n, dtype=np.float64), (n,))
     nuisances = tuple(nuisances)
     for k in nuisances:
-        check_option("nuisance", k, NUISANCES)
+        check_option("nuisance", k, NUISANCE_NAMES)
     if nuisances and columns is None:
         raise EctskinError(f"field_bounds: nuisances {list(nuisances)} need the state's columns")
+    if "modulus" in nuisances and columns is not None and columns.modulus is None:
+        raise EctskinError("field_bounds: the 'modulus' nuisance needs the state's modulus table "
+                           "(field_nuisances(..., modulus=True))")
     prior = DEFAULT_PRIOR_SD if prior_sd is None else prior_sd
     cfg = readout or ReadoutConfig()
     names = cases(nuisances)
@@ -303,7 +333,8 @@ def field_bounds(
         c = field.readout(face, u, v, f)
         J = field.jacobian(face, u, v, f)[:, :, :3]
         sigma = noise_pf(c, cfg)
-        extra = {k: columns.columns(k, c - field.untouched) for k in nuisances} if columns else {}
+        extra = {k: columns.columns(k, c - field.untouched, face, uv[sl], f)
+                 for k in nuisances} if columns else {}
         for case in names:
             active = list(nuisances) if case == "all" else [] if case == "none" else [case]
             Js = np.concatenate([J] + [extra[k] for k in active], axis=2)
@@ -448,13 +479,14 @@ def field_bound_maps(
         "settings": {
             "source": "response field", "faces": faces, "spacing_mm": spacing_mm,
             "force_n": force_n, "hover_mm": None, "nuisances": list(nuisances),
-            "prior_sd": dict(DEFAULT_PRIOR_SD if prior_sd is None else prior_sd), "rcond": rcond,
+            "prior_sd": priors_in_use(prior_sd, nuisances), "rcond": rcond,
             "null_share": NULL_SHARE, "force_threshold_n": force_threshold_n,
             "near_wire_mm": NEAR_WIRE_MM,
             "readout": readout or ReadoutConfig(), "position": "sqrt(var_u + var_v)",
             "columns": {"u, v, force": "ResponseField.jacobian",
                         "push, inflation": "untouched state, once per state",
-                        "finger": "gain x finger's signal, fitted per state"},
+                        "finger": "gain x finger's signal, fitted per state",
+                        "modulus": "direct differences at nodes per state, interpolated"},
         },
         "cases": names,
         "modes": ["contact"],
