@@ -173,6 +173,30 @@ def test_a_state_with_the_wrong_number_of_chambers_is_refused_by_the_twin():
 TINY = InformationConfig(spacing_mm=40.0, states_ml=((10.0, 10.0, 10.0),))
 
 
+def test_the_pulp_modulus_as_a_nuisance_never_lowers_the_bound():
+    # the Fisher argument: one more estimated parameter (with its prior) can only widen the bound
+    from dataclasses import replace
+
+    from ectskin.layout import default_layout
+    from ectskin.twin.bound import DEFAULT_PRIOR_SD
+
+    lay = default_layout()
+    without = information_score(lay, TINY)
+    mod = replace(TINY, nuisances=(*TINY.nuisances, "modulus"),
+                  prior_sd={**TINY.prior_sd, "modulus": DEFAULT_PRIOR_SD["modulus"]})
+    with_mod = information_score(lay, mod)
+    assert with_mod["maps"]["cases"][-1] == "all" and "modulus" in with_mod["maps"]["cases"]
+    worse = False
+    for a, b in zip(without["maps"]["states"], with_mod["maps"]["states"]):
+        for face in a["faces"]:
+            for key in ("force_n", "position_mm"):
+                pa = np.asarray(a["faces"][face]["contact"]["all"][key], dtype=float)
+                pb = np.asarray(b["faces"][face]["contact"]["all"][key], dtype=float)
+                assert np.all(pb >= pa * (1 - 1e-9)), (face, key)
+                worse |= bool(np.any(pb > pa * 1.01))
+    assert worse  # and it costs something somewhere
+
+
 def test_the_score_is_identical_across_runs_and_worker_counts(tmp_path):
     """The paper's layout and one proposal, scored by the bound search serially, twice, and on
     two Dask workers: every number of design.json and information.json the same."""

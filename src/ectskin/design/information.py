@@ -46,6 +46,7 @@ from ectskin.twin.bound import (
     COARSE,
     DEFAULT_PRIOR_SD,
     FORCE_THRESHOLD_N,
+    NUISANCE_NAMES,
     NUISANCES,
     ResponseProvider,
     TwinResponse,
@@ -77,7 +78,8 @@ class InformationConfig:
     states_ml : inflation states (ml per chamber) the maps are made at.
     spacing_mm : the grid's spacing on each face (:func:`~ectskin.twin.bound.skin_grid`).
     force_n : the finger's force at every grid point, N.
-    nuisances : estimated alongside (:data:`~ectskin.twin.bound.NUISANCES`), with ``prior_sd``.
+    nuisances : estimated alongside (:data:`~ectskin.twin.bound.NUISANCES` by default; any of
+        :data:`~ectskin.twin.bound.NUISANCE_NAMES`, the pulp modulus too), with ``prior_sd``.
     mesh : ``coarse`` (:data:`~ectskin.twin.bound.COARSE`, the default) or ``default``.
     separation_mm : two grid points on one face count as distinct beyond this distance.
     """
@@ -118,7 +120,7 @@ class InformationConfig:
             )
         check_option("mesh", self.mesh, tuple(MESHES))
         for k in self.nuisances:
-            check_option("nuisance", k, NUISANCES)
+            check_option("nuisance", k, NUISANCE_NAMES)
 
     def settings(self) -> dict[str, Any]:
         """Everything a finished score depends on (compared on resume)."""
