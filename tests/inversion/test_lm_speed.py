@@ -9,7 +9,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ectskin.inversion import Inversion
-from ectskin.inversion import fit as fit_module
+from ectskin.inversion import lm as lm_module  # the module that calls leastsq
 from ectskin.twin.readout import ReadoutConfig, noise_pf
 
 #: least_squares' status → MINPACK's info (scipy's FROM_MINPACK_TO_COMMON, inverted)
@@ -39,7 +39,7 @@ def test_leastsq_takes_the_steps_of_least_squares_lm(analytic_field, monkeypatch
     inv = Inversion({(0.0,): analytic_field})
     frames = _frames(analytic_field, np.random.default_rng(4))
     got = [inv.fit(y, (0.0,)) for y in frames]
-    monkeypatch.setattr(fit_module, "leastsq", _via_least_squares)
+    monkeypatch.setattr(lm_module, "leastsq", _via_least_squares)
     want = [inv.fit(y, (0.0,)) for y in frames]
     assert [r.n_fingers for r in got] == [1, 1, 2, 1]
     for a, b in zip(got, want):

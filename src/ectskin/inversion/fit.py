@@ -54,22 +54,34 @@ lowest height (docs/inversion.md).
 couples more at every channel alike (∂C/∂R ≈ κ ΔC, :mod:`ectskin.twin.bound_field`), so each
 finger's signal is (1 + a) Δ, a with a Gaussian prior (a penalised fit, a BIC parameter). The
 standard errors carry a as a nuisance: it is nearly confounded with the force (docs/inversion.md).
+
+**The finger's pulp and radius** (``modulus``, ``radius``: tables of ∂C/∂ln E and ∂C/∂ln R per
+state): each pressing finger's signal is Δ + x M_E + r M_R, x = ln(E / E0) and r = ln(R / R0)
+fitted with Gaussian priors (:mod:`ectskin.inversion.finger_nuisance`; the fit itself is
+:func:`ectskin.inversion.lm.fit_fingers`).
 """
 
 from __future__ import annotations
 
 import functools
 import math
-import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from scipy.optimize import leastsq
 from scipy.stats import chi2
 
 from ectskin._check import EctskinError, check_option
-from ectskin.inversion.coupling import RHO_MAX
+from ectskin.inversion.finger_nuisance import MODULUS_PRIOR_SD, RADIUS_PRIOR_SD, finger_columns
+from ectskin.inversion.lm import (  # noqa: F401  (the fit's constants, named here too)
+    BOUND_WEIGHT,
+    LM_CONVERGED,
+    LM_OPTIONS,
+    MAX_NFEV,
+    RHO_START,
+    SCALE_BOUND_SD,
+    fit_fingers,
+)
 from ectskin.inversion.model import MODES, FieldLike, StateModel
 from ectskin.inversion.result import FingerEstimate, Fit, InversionResult, build_result
 from ectskin.inversion.seed import SEED_SEARCH, FingerGuess, seed_starts
@@ -82,31 +94,18 @@ __all__ = ["FingerEstimate", "Inversion", "InversionResult"]
 KINDS = ("absolute", "relative", "difference")
 #: how two fingers' signals combine
 TWO_FINGER_MODELS = ("coupled", "superposition")
-#: the coupling ρ a two-finger fit starts from
-RHO_START = 0.2
 #: the state keys of two fields are the same state when they differ by less than this (ml)
 STATE_TOL_ML = 1e-6
-#: the penalty residual per unit (mm, N, ln mm) a parameter lies outside the field's range
-BOUND_WEIGHT = 1e4
-#: the most residual evaluations of one Levenberg–Marquardt fit
-MAX_NFEV = 50
-#: the optimiser's tolerances (MINPACK's lmder; its scaling by the Jacobian's column norms,
-#: ``diag=None``, is ``least_squares``' ``x_scale="jac"``)
-LM_OPTIONS: dict[str, Any] = {"ftol": 1e-6, "xtol": 1e-6, "gtol": 1e-8}
 #: the finger scale's prior sd that κ ≈ 0.08 /mm (the largest of the twin's states,
 #: :func:`ectskin.twin.bound_field.field_nuisances`) times a fingertip radius ±1.5 mm from the
 #: field's gives (adult fingertips 7–10 mm around the field's 8 mm)
 FINGER_SCALE_SD = 0.12
-#: the scale's range: this many prior sd either side of 1 (a truncated Gaussian prior)
-SCALE_BOUND_SD = 3.0
 #: ``contact_bias``' default: a pressing finger is preferred to a hovering one that fits better
 #: by up to this many times the frame's χ² per degree of freedom (chosen on the validation
 #: trials of the twin's contact experiment among 0, 3, 5 and 10)
 CONTACT_BIAS = 5.0
 #: a hovering finger this close (in ln h) to the field's lowest height is at the range's end
 PINNED_LN_H = 1e-3
-#: lmder's exit codes that mean it stopped on a tolerance (5: the evaluation budget ran out)
-LM_CONVERGED = (1, 2, 3, 4)
 
 
 class Inversion:
@@ -144,6 +143,14 @@ class Inversion:
         signal scaled by its best factor (:meth:`NodeTable.pairs` ``scaled``; two fingers
         screen each other), in place of the second best plain pair; off by default
         (docs/inversion.md).
+    modulus : {state: :class:`~ectskin.twin.bound_modulus.ModulusTable`}: fit each pressing
+        finger's pulp modulus x = ln(E / E0) too, its signal Δ + x ∂C/∂ln E (the table's column
+        at its point and force), with a Gaussian prior of sd ``modulus_prior_sd``
+        (:mod:`ectskin.inversion.finger_nuisance`); a state missing from it, or None, has none.
+    modulus_prior_sd : the prior sd of x (default: the twin's spread of people's pulp, ln 4/√12).
+    radius, radius_prior_sd : the same for the fingertip's radius, r = ln(R / R0), its tables
+        from :func:`~ectskin.inversion.finger_nuisance.radius_table` (default prior: the twin's
+        fingertips, 7-10 mm, ln(10/7)/√12).
     seed_search : how the seeds of :meth:`fit` join a count's starts: "add" (beside the
         coarse search's; the best fit is kept) or "replace" (the count's coarse search is
         skipped where a seed gives it a start; :mod:`ectskin.inversion.seed`).
@@ -174,6 +181,10 @@ class Inversion:
         contact_bias: float = CONTACT_BIAS,
         scaled_pairs: bool = False,
         seed_search: str = "add",
+        modulus: Mapping[tuple[float, ...], Any] | None = None,
+        modulus_prior_sd: float = MODULUS_PRIOR_SD,
+        radius: Mapping[tuple[float, ...], Any] | None = None,
+        radius_prior_sd: float = RADIUS_PRIOR_SD,
     ) -> None:
         if not isinstance(fields, Mapping) or not fields:
             raise EctskinError(
@@ -261,6 +272,11 @@ class Inversion:
                 sm.prior_w[:n_push] = 1.0 / push_prior_sd
             # 1/sd of each finger's scale prior (0: no scale parameter)
             sm.scale_w = 0.0 if finger_scale_sd is None else 1.0 / float(finger_scale_sd)
+            # each pressing finger's pulp modulus ln(E / E0) and radius ln(R / R0) where their
+            # tables are given (finger_nuisance; none: {})
+            sm.finger_columns = finger_columns(
+                {"modulus": (modulus, modulus_prior_sd), "radius": (radius, radius_prior_sd)},
+                state, lambda k, s: _same(_state("finger table key", k), s), n_pairs, sm.faces)
             self._models.append(sm)
             if self.coupled and max_fingers == 2 and sm.pairs is None:
                 raise EctskinError(
@@ -483,93 +499,9 @@ class Inversion:
         r = z - Nw @ beta
         return Fit([], beta, float(r @ r), True)
 
-    @staticmethod
-    def _fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
-                     start: list[tuple[int, int, np.ndarray]], coupled: bool = False) -> Fit:
-        """Levenberg–Marquardt over (x_1, …, x_k, [ρ], [a_1, …, a_k], β) from ``start`` (ρ: two
-        coupled fingers; a: the fingers' scales, with ``m.scale_w``).
+    #: one Levenberg–Marquardt fit from a start (:func:`ectskin.inversion.lm.fit_fingers`)
+    _fit_fingers = staticmethod(fit_fingers)
 
-        The bounds (the field's ranges, ρ in [0, RHO_MAX], a within ``SCALE_BOUND_SD`` prior sd)
-        hold by evaluating the model at the parameters clipped into them and adding a stiff
-        penalty residual ``BOUND_WEIGHT`` × (p − clip(p)): MINPACK's LM (``method="lm"``) takes
-        no bounds, and costs a fraction of the bounded solvers' per iteration. The result is
-        clipped into the ranges.
-        """
-        k = len(start)
-        keys = [(m.faces[fi], MODES[mi]) for fi, mi, _ in start]
-        with_rho = coupled and k == 2
-        nx = 3 * k + int(with_rho)  # the fingers' (and ρ's) parameters
-        nb, n = m.N.shape[1], m.n_pairs
-        sw = m.scale_w
-        ns = k if sw > 0 else 0  # each finger's relative scale a: (1 + a) Δ
-        na = nx + ns  # the bounded parameters
-        Nw = m.N / sigma[:, None]
-        a_max = SCALE_BOUND_SD / sw if ns else 0.0
-        lo = np.concatenate([m.bounds[key][0] for key in keys]
-                            + [np.zeros(int(with_rho)), np.full(ns, -a_max)])
-        hi = np.concatenate([m.bounds[key][1] for key in keys]
-                            + [np.full(int(with_rho), RHO_MAX), np.full(ns, a_max)])
-        # rows: the channels, the range penalties, the scales' and the nuisances' priors; the
-        # Jacobian's constant parts (the nuisance columns, the priors) are set once
-        J = np.zeros((n + na + ns + nb, na + nb))
-        J[:n, na:] = -Nw
-        J[n + na: n + na + ns, nx:na] = sw * np.eye(ns)
-        J[n + na + ns:, na:] = np.diag(m.prior_w)
-        cache: dict[str, Any] = {"p": None}
-        diag = np.arange(na)
-        neg_inv_sigma = (-1.0 / sigma)[:, None]
-
-        def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            if cache["p"] is None or not (cache["p"] == p).all():
-                x = p[:na]
-                xc = np.clip(x, lo, hi)
-                inside = x == xc
-                total = np.zeros(n)
-                for j, key in enumerate(keys):
-                    d, dj = m.signal(key[0], key[1], xc[3 * j: 3 * j + 3])
-                    g = 1.0 + xc[nx + j] if ns else 1.0
-                    total += g * d
-                    J[:n, 3 * j: 3 * j + 3] = (g * dj) * neg_inv_sigma
-                    if ns:
-                        J[:n, nx + j] = d * neg_inv_sigma[:, 0]
-                if with_rho:
-                    c, da, db, drho = m.coupling(keys, [xc[:3], xc[3:6]], float(xc[6]))
-                    total += c
-                    J[:n, 0:3] += da * neg_inv_sigma
-                    J[:n, 3:6] += db * neg_inv_sigma
-                    J[:n, 6] = drho * neg_inv_sigma[:, 0]
-                if not inside.all():  # beyond a range: the model is flat there, the penalty not
-                    J[:n, :na][:, ~inside] = 0.0
-                J[n + diag, diag] = np.where(inside, 0.0, BOUND_WEIGHT)
-                r = np.concatenate([(delta - total) / sigma - Nw @ p[na:], BOUND_WEIGHT * (x - xc),
-                                    sw * xc[nx:], m.prior_w * p[na:]])
-                cache.update(p=p.copy(), r=r, J=J.copy())
-            return cache["r"], cache["J"]
-
-        x0 = np.concatenate([x for _, _, x in start]
-                            + [np.full(int(with_rho), RHO_START), np.zeros(ns)])
-        x0 = np.clip(x0, lo, hi)
-        r0 = evaluate(np.concatenate([x0, np.zeros(nb)]))[0][:n]
-        # the linear parameters (the scales and β) from a linear fit at the start, with their
-        # priors, so that the optimiser begins near its valley
-        A = np.vstack([np.c_[-J[:n, nx:na], Nw], np.diag(np.r_[np.full(ns, sw), m.prior_w])])
-        lin = (np.linalg.lstsq(A, np.r_[r0, np.zeros(ns + nb)], rcond=None)[0] if ns + nb
-               else np.zeros(0))
-        x0[nx:] = np.clip(lin[:ns], -a_max, a_max)
-        beta0 = lin[ns:]
-        with warnings.catch_warnings():  # out of evaluations: `converged` says so
-            warnings.simplefilter("ignore", RuntimeWarning)
-            p, status = leastsq(
-                lambda p: evaluate(p)[0], np.concatenate([x0, beta0]),
-                Dfun=lambda p: evaluate(p)[1], maxfev=MAX_NFEV, **LM_OPTIONS,
-            )
-        p = np.array(p, dtype=np.float64, ndmin=1)
-        p[:na] = np.clip(p[:na], lo, hi)
-        res = evaluate(p)[0]
-        r = np.concatenate([res[:n], res[n + na:]])  # the channels and the priors
-        fingers = [(fi, mi, p[3 * j: 3 * j + 3].copy()) for j, (fi, mi, _) in enumerate(start)]
-        return Fit(fingers, p[na:].copy(), float(r @ r), status in LM_CONVERGED,
-                    rho=float(p[6]) if with_rho else math.nan, scales=p[nx:na].copy())
 
 @functools.lru_cache(maxsize=64)
 def _chi2_gate(dof: int, p: float) -> float:

@@ -116,6 +116,11 @@ class FieldLike(Protocol):
 Signal = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
+#: a pressing finger's nuisance column (:mod:`ectskin.inversion.finger_nuisance`): face, (u, v, F)
+#: → (M (n_pairs,), ∂M/∂(u, v, F) (n_pairs, 3))
+FingerColumn = Callable[[str, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
 def _restricted(signal: Signal, ok: np.ndarray) -> Signal:
     """``signal`` on the channels where ``ok``."""
 
@@ -451,6 +456,10 @@ class StateModel:
         #: 1/sd of the prior on each finger's relative signal scale, 0 for no scale (set by
         #: Inversion: ``finger_scale_sd``)
         self.scale_w = 0.0
+        #: {name: (its column (face, (u, v, F)) -> (M, ∂M/∂(u, v, F)), its prior's 1/sd)} of the
+        #: pressing fingers' nuisances, "modulus" and "radius" (set by Inversion; none: {};
+        #: :mod:`ectskin.inversion.finger_nuisance`)
+        self.finger_columns: dict[str, tuple[FingerColumn, float]] = {}
         spec = field.spec
         self.modes: tuple[str, ...] = ("contact", "hover") if np.size(field.heights_mm) else ("contact",)
         lo_f, hi_f = (float(a) for a in spec.force_range_n)

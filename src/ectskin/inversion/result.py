@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ectskin.inversion.finger_nuisance import finger_column
 from ectskin.inversion.model import MODES, StateModel
 from ectskin.twin.bound import crb
 
@@ -18,7 +19,9 @@ class FingerEstimate:
     (u, v) mm, force N (0 hovering), height mm (0 pressing), and their standard errors (the
     bound at the solution; 0 for the value the mode fixes, inf where unresolved); ``scale``
     1 + a, its signal's fitted relative size, and its standard error (1 and 0 without
-    ``finger_scale_sd``)."""
+    ``finger_scale_sd``); ``modulus_ln`` ln(E / E0) and ``radius_ln`` ln(R / R0), its pulp's
+    modulus and its fingertip's radius against the field's finger, and their standard errors
+    (0 and 0 without ``modulus`` / ``radius``, or hovering)."""
 
     face: str
     contact: bool
@@ -32,6 +35,10 @@ class FingerEstimate:
     height_se_mm: float
     scale: float = 1.0
     scale_se: float = 0.0
+    modulus_ln: float = 0.0
+    modulus_ln_se: float = 0.0
+    radius_ln: float = 0.0
+    radius_ln_se: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -60,7 +67,8 @@ class InversionResult:
 class Fit:
     """One fit of k fingers: their (face index, mode index, (u, v, s)), the nuisance
     coefficients β, its χ² (with the priors' terms), whether the optimiser converged, the
-    coupling ρ and the fingers' relative scales a."""
+    coupling ρ, the fingers' relative scales a and their finger nuisances ({"modulus": ln(E / E0)
+    per finger, "radius": ln(R / R0)}, NaN for a finger without them: hovering)."""
 
     fingers: list[tuple[int, int, np.ndarray]]  # (face index, mode index, x = (u, v, s))
     beta: np.ndarray
@@ -68,11 +76,13 @@ class Fit:
     converged: bool
     rho: float = math.nan  # the two fingers' coupling (coupled two-finger fits)
     scales: np.ndarray = field(default_factory=lambda: np.zeros(0))  # each finger's a
+    finger_nuisances: dict[str, np.ndarray] = field(default_factory=dict)  # name: per finger
 
     @property
     def n_params(self) -> int:
         return (3 * len(self.fingers) + (0 if math.isnan(self.rho) else 1) + self.beta.size
-                + self.scales.size)
+                + self.scales.size
+                + sum(int(np.isfinite(v).sum()) for v in self.finger_nuisances.values()))
 
 
 def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
@@ -93,6 +103,17 @@ def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
             cols.append(g[j] * dj)
             scale_cols.append(d[:, None])
         ns = fit.scales.size
+        extra = [(q, j, float(v[j])) for q, v in fit.finger_nuisances.items()
+                 for j in range(k) if np.isfinite(v[j])]  # the order of the fit's parameters
+        mod_cols, mod_w = [], []
+        for q, j, e in extra:  # x M of each pressing finger: its slopes and its own column
+            fi, _, x = fit.fingers[j]
+            M, dM = finger_column(m, q, m.faces[fi], x)
+            mu = mu + e * M
+            cols[j] = cols[j] + e * dM
+            mod_cols.append(M[:, None])
+            mod_w.append(m.finger_columns[q][1])
+        nm = len(extra)
         if not math.isnan(fit.rho):  # the coupling: its share, slopes and its own column
             keys = [(m.faces[fi], MODES[mi]) for fi, mi, _ in fit.fingers]
             c, da, db, drho = m.coupling(keys, [x for _, _, x in fit.fingers], fit.rho)
@@ -101,10 +122,11 @@ def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
         # the scales are bounded beside the fingers (the same marginal bound as nuisances)
         J = np.concatenate(cols, axis=1)
         n0 = J.shape[1]
-        J = np.concatenate([J] + scale_cols[:ns] + [m.N], axis=1)
-        prior = {n0 + ns + i: float(1.0 / pw**2) for i, pw in enumerate(m.prior_w) if pw > 0}
+        J = np.concatenate([J] + scale_cols[:ns] + mod_cols + [m.N], axis=1)
+        prior = {n0 + ns + nm + i: float(1.0 / pw**2) for i, pw in enumerate(m.prior_w) if pw > 0}
         prior.update({n0 + i: float(1.0 / m.scale_w**2) for i in range(ns)})
-        interest = set(range(3 * k)) | set(range(n0, n0 + ns))
+        prior.update({n0 + ns + i: float(1.0 / mw**2) for i, mw in enumerate(mod_w)})
+        interest = set(range(3 * k)) | set(range(n0, n0 + ns + nm))
         b = crb(J, sigma(m, mu, w), prior_var=prior,
                 nuisance_cols=[c for c in range(J.shape[1]) if c not in interest])
         for j, (fi, mi, x) in enumerate(fit.fingers):
@@ -118,6 +140,8 @@ def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
                 force_se_n=float(se[2]) if contact else 0.0,
                 height_se_mm=0.0 if contact else h * float(se[2]),
                 scale=float(g[j]), scale_se=float(b.std[3 * k + j]) if ns else 0.0,
+                **{f"{q}_ln{end}": v for i, (q, jj, e) in enumerate(extra) if jj == j
+                   for end, v in (("", e), ("_se", float(b.std[3 * k + ns + i])))},
             ))
     return InversionResult(
         n_fingers=k, fingers=tuple(ests), log_likelihood=ll, bic=bics[k],
