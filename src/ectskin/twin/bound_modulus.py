@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+import scipy.sparse.linalg
 from scipy.interpolate import RegularGridInterpolator
 
 from ectskin._check import EctskinError
@@ -120,7 +121,10 @@ class ModulusTable:
         lf = np.log(self.forces_n)
         q = np.c_[np.clip(uv[:, 0], u[0], u[-1]), np.clip(uv[:, 1], v[0], v[-1]),
                   np.clip(np.log(np.maximum(force, 1e-300)), lf[0], lf[-1])]
-        interp = RegularGridInterpolator((u, v, lf), self.values[face], method="cubic")
+        # the cubic spline's system solved exactly (scipy's default iterative solver is off by
+        # up to ~1e-3 relative here)
+        interp = RegularGridInterpolator((u, v, lf), self.values[face], method="cubic",
+                                         solver=scipy.sparse.linalg.spsolve)
         return interp(q)
 
     def to_dict(self) -> dict[str, Any]:
