@@ -40,6 +40,7 @@ from ectskin.twin.bound_modulus import (
     TABLE_FORCE_NODES,
     TABLE_SPACING_MM,
     ModulusTable,
+    log_forces,
     table_nodes,
 )
 from ectskin.twin.mechanics import Touch
@@ -166,15 +167,10 @@ def radius_table(sensor: Any, inflation_ml: Any,
     :func:`~ectskin.twin.bound_modulus.modulus_table` (the same nodes and forces): central
     differences of direct solves with the fingertip's radius R0 e^(±``step``), in a
     :class:`~ectskin.twin.bound_modulus.ModulusTable` (its ``step`` in ln R)."""
-    if not (math.isfinite(spacing_mm) and spacing_mm > 0 and isinstance(force_nodes, int)
-            and force_nodes >= 4 and math.isfinite(step) and step > 0):
-        raise EctskinError(f"radius_table: spacing_mm and step must be > 0 and force_nodes an "
-                           f"integer >= 4, got {spacing_mm!r}, {step!r}, {force_nodes!r}")
-    lo, hi = (float(a) for a in force_range_n)
-    if not 0 < lo < hi < math.inf:
-        raise EctskinError(f"radius_table: force_range_n must be 0 < lo < hi, got "
-                           f"{tuple(force_range_n)!r}")
-    forces = np.exp(np.linspace(math.log(lo), math.log(hi), force_nodes))
+    if not (math.isfinite(spacing_mm) and spacing_mm > 0 and math.isfinite(step) and step > 0):
+        raise EctskinError(f"radius_table: spacing_mm and step must be finite numbers > 0, got "
+                           f"{spacing_mm!r}, {step!r}")
+    forces = log_forces(force_range_n, force_nodes, "radius_table")
     f0 = sensor.finger
     small, big = (sensor.with_fingers(replace(f0, radius_mm=f0.radius_mm * math.exp(s)))
                   for s in (-step, step))

@@ -136,6 +136,19 @@ class ModulusTable:
         }
 
 
+def log_forces(force_range_n, force_nodes: int, who: str) -> np.ndarray:
+    """A table's ``force_nodes`` (>= 4, for cubic interpolation) forces equally spaced in ln F
+    over ``force_range_n`` (lo, hi) N; ``who`` names the caller in the errors."""
+    if not (isinstance(force_nodes, int) and force_nodes >= 4):
+        raise EctskinError(f"{who}: force_nodes must be an integer >= 4 (cubic interpolation), "
+                           f"got {force_nodes!r}")
+    lo, hi = (float(x) for x in force_range_n)
+    if not 0 < lo < hi < math.inf:
+        raise EctskinError(f"{who}: force_range_n must be 0 < lo < hi, got "
+                           f"{tuple(force_range_n)!r}")
+    return np.exp(np.linspace(math.log(lo), math.log(hi), force_nodes))
+
+
 def table_nodes(lo: float, hi: float, spacing_mm: float) -> np.ndarray:
     """At least 4 equally spaced nodes from ``lo`` to ``hi``, about ``spacing_mm`` apart."""
     return np.linspace(lo, hi, max(4, int(round((hi - lo) / spacing_mm)) + 1))
@@ -158,14 +171,7 @@ def modulus_table(
     if not (math.isfinite(spacing_mm) and spacing_mm > 0):
         raise EctskinError(f"modulus_table: spacing_mm must be a finite number > 0, got "
                            f"{spacing_mm!r}")
-    if not (isinstance(force_nodes, int) and force_nodes >= 4):
-        raise EctskinError(f"modulus_table: force_nodes must be an integer >= 4 (cubic "
-                           f"interpolation), got {force_nodes!r}")
-    lo, hi = (float(x) for x in force_range_n)
-    if not 0 < lo < hi < math.inf:
-        raise EctskinError(f"modulus_table: force_range_n must be 0 < lo < hi, got "
-                           f"{tuple(force_range_n)!r}")
-    forces = np.exp(np.linspace(math.log(lo), math.log(hi), force_nodes))
+    forces = log_forces(force_range_n, force_nodes, "modulus_table")
     nodes, values = {}, {}
     for face, ((ulo, uhi), (vlo, vhi)) in extents.items():
         u, v = table_nodes(ulo, uhi, spacing_mm), table_nodes(vlo, vhi, spacing_mm)
