@@ -156,9 +156,9 @@ class ReproduceConfig:
     field_states : "contact" | "all"
         The states whose fields the bound and the inversion read: those of the contact
         experiment (the default: the fields it is simulated from), or every state of the contact
-        run's data (the paper's trials add the 10-ml states; :func:`~ectskin.pipeline.field.
-        physics_field_specs`), so that the inversion answers every test frame, at the build time
-        of the extra fields.
+        run's data (the paper's trials add the 10-ml states;
+        :func:`~ectskin.pipeline.field.physics_field_specs`), so that the inversion answers every
+        test frame, at the build time of the extra fields.
     """
 
     out_dir: Path
