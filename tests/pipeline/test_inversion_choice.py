@@ -4,9 +4,12 @@ validation frames only.
 
 On a tiny contact experiment read from a coarse response field (as test_inversion_step). The
 run's model is a stand-in whose answers are the frames' true fingers moved by a known offset
-(its error is that offset, by construction): with no offset it must be chosen, with a large one
-the candidate of the lowest validation error; scrambling the test labels leaves the choice and
-every validation number as they were.
+(its error is that offset on every frame, by construction): with no offset it must be chosen,
+with a large one the candidate the one-standard-error rule takes; scrambling the test labels
+leaves the choice and every validation number as they were. Just below the inversion's error,
+by less than one paired standard error (known from the offset: the inversion's per-frame errors'
+standard deviation / √n), the inversion is taken instead; by more, the run's model. The
+per-frame errors the rule reads average to ``contact_report``'s ``loc_mm_mean``.
 """
 
 from __future__ import annotations
@@ -19,7 +22,9 @@ import pytest
 from test_inversion_step import TEST, VAL, make_world  # tests/pipeline
 
 from ectskin.io import Recording, read_recording
+from ectskin.layout.geometry import on_skin_distance
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
+from ectskin.learn.tasks.contact import contact_report, point_errors
 from ectskin.pipeline import contact_pick as cp
 from ectskin.pipeline import inversion as pinv
 from ectskin.pipeline.metrics import inversion_block
@@ -85,18 +90,38 @@ def _choice(world, du, scramble=False):
         share_without_field=0.25)
 
 
-def test_the_lowest_validation_error_is_chosen_and_no_test_label_is_read(world):
+def _rule_holds(c):
+    """The choice ``c`` is the simplest of the candidates whose validation error is within their
+    recorded paired standard error of the lowest; returns {name: validation error}."""
+    val = {k: v["val"]["loc_mm_mean"] for k, v in c["candidates"].items()}
+    best = min(val, key=val.get)
+    assert c["best"] == best and c["rule"] == cp.RULE
+    assert c["candidates"][best]["val_se_to_best_mm"] == 0.0
+    within = [k for k in c["simplicity"]
+              if val[k] - val[best] <= c["candidates"][k]["val_se_to_best_mm"]]
+    assert [k for k in c["order"] if c["candidates"][k]["within_one_se"]] == [
+        k for k in c["order"] if k in within]
+    assert c["selected"] == within[0] and c["candidates"][within[0]]["selected"]
+    return val
+
+
+def test_the_rule_chooses_on_validation_frames_and_no_test_label_is_read(world):
     exact = _choice(world, 0.0)
     assert exact["order"] == ["contactnet", "ridge", "knn", "inversion", "hybrid"]
+    assert exact["simplicity"] == ["ridge", "knn", "inversion", "contactnet", "hybrid"]
     assert exact["candidates"]["contactnet"]["val"]["loc_mm_mean"] == pytest.approx(0, abs=1e-5)
     assert exact["selected"] == "contactnet" and exact["candidates"]["contactnet"]["selected"]
+    _rule_holds(exact)
     # moved further than the inversion misses (on this coarse field, by centimetres)
     du = 1.5 * exact["candidates"]["inversion"]["val"]["loc_mm_mean"] + 5.0
     far = _choice(world, du)
-    val = {k: v["val"]["loc_mm_mean"] for k, v in far["candidates"].items()}
-    assert val["contactnet"] > val["inversion"]
-    assert far["selected"] == min(val, key=val.get) != "contactnet"
-    assert far["why"].startswith(f"the lowest {cp.METRIC}: {val[far['selected']]:.3f}")
+    val = _rule_holds(far)
+    assert val["contactnet"] > val["inversion"] and far["selected"] != "contactnet"
+    if far["selected"] == far["best"]:
+        assert far["why"].startswith(
+            f"the lowest {cp.METRIC}: {far['best']} {val[far['best']]:.3f}")
+    else:
+        assert far["why"].startswith("the simplest candidate within one paired standard error")
     scrambled = _choice(world, du, scramble=True)
     assert (scrambled["selected"], scrambled["why"]) == (far["selected"], far["why"])
     timing = {"ms_per_frame_median", "ms_per_frame_mean"}
@@ -113,6 +138,75 @@ def test_the_lowest_validation_error_is_chosen_and_no_test_label_is_read(world):
                "learned model"}
     assert far["answers"]["field_states"] == {"model": far["selected"],
                                               "share_of_test_frames": 0.75}
+
+
+def test_a_model_better_by_less_than_one_paired_se_gives_way_to_the_inversion(world):
+    config, fields, path = world
+    rec = read_recording(path)
+    from ectskin.inversion import Inversion
+
+    val = pinv._dataset(rec, VAL)
+    rows = pinv._frames(val, False, FRAMES)
+    arrays, _ = pinv.invert_rows(Inversion(fields, config.contact_protocol().readout), rec, val,
+                                 rows)
+    errs = point_errors(val.take(rows), pinv.prediction_columns(arrays, val.faces,
+                                                                val.face_extent))
+    inv = float(errs.mean())
+    # the stand-in errs by exactly du on every frame, so its paired difference to the inversion
+    # has the inversion's own spread: SE = sd(inversion's errors) / √n whatever du is
+    se = float(errs.std(ddof=1) / np.sqrt(errs.size))
+    assert se > 0.05
+    near = _choice(world, inv - 0.5 * se)
+    val_near = _rule_holds(near)
+    assert val_near["inversion"] == pytest.approx(inv, rel=1e-12)  # the same frames, the same fit
+    assert near["best"] == "contactnet"
+    assert val_near["contactnet"] == pytest.approx(inv - 0.5 * se, abs=1e-6)
+    assert near["candidates"]["inversion"]["val_se_to_best_mm"] == pytest.approx(se, rel=1e-6)
+    assert near["candidates"]["inversion"]["within_one_se"] is True
+    assert near["selected"] == "inversion"
+    assert near["why"].startswith("the simplest candidate within one paired standard error")
+    beyond = _choice(world, inv - 2.0 * se)
+    _rule_holds(beyond)
+    assert beyond["best"] == "contactnet" and beyond["selected"] == "contactnet"
+    assert beyond["candidates"]["inversion"]["val_se_to_best_mm"] == pytest.approx(se, rel=1e-6)
+    assert beyond["candidates"]["inversion"]["within_one_se"] is False
+
+
+def test_per_frame_errors_average_to_the_reports_point_error(world):
+    config, fields, path = world
+    rec = read_recording(path)
+    from ectskin.inversion import Inversion
+
+    data = pinv._dataset(rec, TEST[:2] + VAL)
+    rows = pinv._frames(data, False, 40)
+    sub = data.take(rows)
+    arrays, _ = pinv.invert_rows(Inversion(fields, config.contact_protocol().readout), rec, data,
+                                 rows)
+    rng = np.random.default_rng(3)
+    guess = np.zeros((sub.n_samples, NCOL))  # faces flipped at random, some outside the data's
+    a = len(PRED_COLUMNS) + SLOT_COLUMNS.index("face")
+    guess[:, a] = rng.integers(-1, len(sub.faces) + 1, sub.n_samples)
+    guess[:, a + 1] = rng.uniform(-40, 40, sub.n_samples)  # u_mm, v_mm follow the face
+    guess[:, a + 2] = rng.uniform(-60, 60, sub.n_samples)
+    single = np.flatnonzero(sub.count == 1)
+    assert single.size >= 10 and len(sub.faces) == 2 and (sub.count != 1).any()
+    f = guess[single, a]  # the guess crosses faces, and names faces the data lack
+    assert (np.clip(f, 0, 1) != sub.face[single, 0]).any() and ((f < 0) | (f > 1)).any()
+    width, thickness = sub.body_mm
+    for pred in (pinv.prediction_columns(arrays, sub.faces, sub.face_extent), guess):
+        errs = point_errors(sub, pred)
+        assert errs.mean() == contact_report(sub, pred, with_maps=False)["loc_mm_mean"]
+        numbers, frame_errors = cp.scored(sub, pred)  # what the choice reads
+        np.testing.assert_array_equal(frame_errors, errs)
+        assert numbers["loc_mm_mean"] == errs.mean()
+        # frame by frame, in row order: the distance over the skin, the face clipped into range
+        by_hand = [on_skin_distance(
+            sub.faces[sub.face[i, 0]], sub.uv[i, 0],
+            sub.faces[int(np.clip(pred[i, a], 0, len(sub.faces) - 1))],
+            pred[i, [a + 1, a + 2]], width, thickness) for i in single]
+        np.testing.assert_allclose(errs, by_hand, rtol=1e-12)
+    with pytest.raises(Exception, match="pred must have shape"):
+        point_errors(sub, guess[:-1])
 
 
 def test_the_step_reports_the_choice_in_its_metrics_and_metrics_json(world, tmp_path,
@@ -137,8 +231,11 @@ def test_the_step_reports_the_choice_in_its_metrics_and_metrics_json(world, tmp_
     for key in ("selected", "why", "metric", "order", "candidates", "n_val_frames",
                 "n_test_frames", "answers", "baselines_fit_s", "seconds"):
         assert key in c, key
+    assert c["rule"] == cp.RULE and c["best"] in c["order"]
+    assert sorted(c["simplicity"]) == sorted(c["order"])
     for name in c["order"]:
-        assert {"kind", "val", "test", "selected"} <= set(c["candidates"][name])
+        assert {"kind", "val", "test", "selected", "val_se_to_best_mm",
+                "within_one_se"} <= set(c["candidates"][name])
         assert c["candidates"][name]["test"]["n_frames"] == m["n_frames"] == 60
     # the inversion's candidate is the step's own inversion of its test frames
     assert c["candidates"]["inversion"]["test"]["loc_mm_mean"] == pytest.approx(m["loc_mm_mean"])
@@ -149,9 +246,11 @@ def test_the_step_reports_the_choice_in_its_metrics_and_metrics_json(world, tmp_
     assert inversion_block(m, None, None)["choice"] == c
     line = choice_line(inversion_block(m, None, None))
     assert line is not None and "validation frames" in line and "ContactNet" in line
+    assert "one-standard-error rule" in line
     assert choice_line({"choice": None}) is None
     settings = json.loads((out / "reproduce.json").read_text())["steps"]["inversion"]["settings"]
     assert settings["choice"] is True and settings["choice_frames"] == cp.CHOICE_FRAMES
+    assert settings["choice_rule"] == cp.RULE  # a cached choice by another rule is made again
 
 
 def _row(count, slots):

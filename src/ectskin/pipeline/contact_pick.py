@@ -18,11 +18,18 @@ the run's name  the contact run's own model (``runs/contact``: ContactNet, ``con
 ==============  ==========================================================================
 
 **Selection is on validation frames only**: those of the run's validation trials in states with
-a field, spread as the step spreads the test frames, at most :data:`CHOICE_FRAMES`; the lowest
-mean point error over the skin of the frames with one finger wins (ties: the earlier in the
-order above, the run's model first). Every candidate's test numbers are then those on the
-step's test frames. The run's model and its baselines are candidates, so the selected model
-never has a higher validation error than they have.
+a field, spread as the step spreads the test frames, at most :data:`CHOICE_FRAMES`, by the
+mean point error over the skin of the frames with one finger and the **one-standard-error
+rule** (:data:`RULE`; Breiman et al., *CART*; Hastie et al., *ESL* §7.10): of the candidates
+whose mean is within one standard error of the lowest, the simplest
+(:data:`SIMPLICITY`) is chosen. The standard error is that of the *paired* difference between
+a candidate's and the lowest one's per-frame errors on the same frames
+(:func:`~ectskin.learn.tasks.contact.point_errors`): sd of the differences / √n
+(:func:`paired_se`). A difference the frames' sampling could make does not buy the more complex
+model; the paired error is the one that counts, since every candidate answers the same frames
+and their errors move together (a hard frame is hard for all). Every candidate's test numbers
+are then those on the step's test frames. The run's model and its baselines are candidates, so
+the selected model's validation error exceeds theirs by at most one paired standard error.
 
 The choice covers the frames of states with a response field only: a frame of a state without
 one can only be answered by the learned model (``answers`` says which share of the test frames
@@ -48,12 +55,13 @@ from ectskin.learn.contact_classical import fit_contact_classical
 from ectskin.learn.data.contact import MAX_FINGERS, ContactData, contact_dataset
 from ectskin.learn.evaluate import calibration, read_run
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
-from ectskin.learn.tasks.contact import contact_report
+from ectskin.learn.tasks.contact import contact_report, point_errors
 
 log = logging.getLogger(__name__)
 
-__all__ = ["BASELINES", "CHOICE_FRAMES", "METRIC", "LearnedModel", "choose", "load_learned",
-           "score", "seeds_from_predictions"]
+__all__ = ["BASELINES", "CHOICE_FRAMES", "LEARNED", "METRIC", "RULE", "SIMPLICITY",
+           "LearnedModel", "choose", "load_learned", "one_se_choice", "paired_se", "score",
+           "scored", "seeds_from_predictions"]
 
 #: validation frames (at most, evenly spread over all frames of the field states' validation
 #: trials, as the test frames) that choose
@@ -63,6 +71,21 @@ BASELINES = ("ridge", "knn")
 #: the inversion's two candidates, after the run's model and its baselines in the tie order
 INVERSIONS = ("inversion", "hybrid")
 METRIC = "validation point error, mm (mean over the skin, frames with one finger)"
+#: the rule that chooses (metrics.json's ``inversion.choice.rule``; :func:`one_se_choice`)
+RULE = "one standard error (paired)"
+#: the rule where a candidate's per-frame errors are missing: the lowest mean
+PLAIN_RULE = "lowest mean"
+#: stands for the run's own model in :data:`SIMPLICITY`, whatever the run names it (a candidate
+#: not named there takes this place)
+LEARNED = "learned"
+#: the candidates from the simplest: the one-standard-error rule takes the first of those within
+#: one standard error of the lowest. The classical baselines first (``ridge``, a linear map of
+#: the readout, then ``knn``, the training frames themselves: a closed-form fit, no field, no
+#: iteration); then the training-free ``inversion`` (nothing fit to the recording: the physics
+#: field and a fit per frame); then the run's model (trained on the recording's frames: its
+#: weights, epochs, seed and normaliser); then the ``hybrid``, which needs both the trained model
+#: and the inversion.
+SIMPLICITY = ("ridge", "knn", "inversion", LEARNED, "hybrid")
 #: the metrics kept per candidate and split
 SCORE_KEYS = ("loc_mm_mean", "loc_mm_median", "loc_mm_p90", "face_accuracy", "force_mae_n",
               "count_accuracy", "contact_accuracy", "hover_detect_mm", "n_single_contact_frames")
@@ -171,31 +194,112 @@ def score(data: ContactData, pred: np.ndarray, seconds: np.ndarray | None = None
           ) -> dict[str, Any]:
     """:data:`SCORE_KEYS` of ``pred`` on ``data`` (every row), with the median time per frame
     (ms) where ``seconds`` are given."""
+    return scored(data, pred, seconds)[0]
+
+
+def scored(data: ContactData, pred: np.ndarray, seconds: np.ndarray | None = None
+           ) -> tuple[dict[str, Any], np.ndarray]:
+    """(:func:`score`, the per-frame point errors of the frames with one finger in row order,
+    :func:`~ectskin.learn.tasks.contact.point_errors`: their mean is ``loc_mm_mean``)."""
     report = contact_report(data, pred, with_maps=False) if data.n_samples else {}
     out: dict[str, Any] = {k: report.get(k) for k in SCORE_KEYS}
     out["n_frames"] = int(data.n_samples)
     if seconds is not None and len(seconds):
         out["ms_per_frame_median"] = float(np.median(seconds) * 1e3)
         out["ms_per_frame_mean"] = float(np.mean(seconds) * 1e3)
-    return out
+    return out, (point_errors(data, pred) if data.n_samples else np.zeros(0))
 
 
-def choose(errors: Mapping[str, float], order: Sequence[str]) -> tuple[str, str]:
-    """The candidate of ``order`` with the lowest finite validation error (ties: the earlier in
-    ``order``); (name, the reason in words)."""
+def paired_se(errors: np.ndarray, reference: np.ndarray) -> float | None:
+    """The standard error of the mean of the paired differences ``errors − reference`` (the same
+    frames in the same order): their sample standard deviation (divisor n − 1) / √n; None with
+    fewer than two frames."""
+    a, b = np.asarray(errors, dtype=np.float64), np.asarray(reference, dtype=np.float64)
+    if a.shape != b.shape or a.ndim != 1:
+        raise EctskinError(f"paired_se: errors and reference must be two 1-D arrays of one "
+                           f"length (the same frames), got shapes {a.shape} and {b.shape}")
+    if a.size < 2:
+        return None
+    return float(np.std(a - b, ddof=1) / math.sqrt(a.size))
+
+
+def _simplicity(name: str, order: Sequence[str]) -> tuple[int, int]:
+    slot = SIMPLICITY.index(name) if name in SIMPLICITY else SIMPLICITY.index(LEARNED)
+    return slot, list(order).index(name)
+
+
+def one_se_choice(errors: Mapping[str, float | None], order: Sequence[str],
+                  per_frame: Mapping[str, np.ndarray | None] | None = None) -> dict[str, Any]:
+    """The one-standard-error rule (module docstring) over the candidates ``order``, from their
+    mean validation errors ``errors`` and their per-frame errors ``per_frame`` (the same frames
+    for every candidate; their mean must be ``errors``'): {``selected``, ``why``, ``rule``,
+    ``best`` (the lowest finite mean; ties: the earlier in ``order``), ``se`` ({name: the standard
+    error of its paired difference to the best, 0 for the best, None where it has no per-frame
+    errors or fewer than two frames}), ``within`` ({name: whether its mean exceeds the best's by
+    at most that}), ``simplicity`` (``order`` from the simplest, :data:`SIMPLICITY`)}.
+
+    Where the best has no per-frame errors (None, or ``per_frame`` None) the lowest mean is
+    chosen (``rule`` :data:`PLAIN_RULE`); a candidate without them is chosen only as the best."""
     if not order:
         raise EctskinError("contact choice: no candidates")
-    finite = [(float(errors[k]), i, k) for i, k in enumerate(order)
-              if errors.get(k) is not None and math.isfinite(errors[k])]
+    simplest = sorted(order, key=lambda k: _simplicity(k, order))
+    out: dict[str, Any] = {"rule": RULE, "best": None, "se": {k: None for k in order},
+                           "within": {k: None for k in order}, "simplicity": simplest}
+    finite = sorted((float(e), i, k) for i, k in enumerate(order)
+                    if (e := errors.get(k)) is not None and math.isfinite(e))
     if not finite:
-        return order[0], ("no validation frame with one finger to compare on: the first of "
-                          f"{', '.join(order)}")
-    finite.sort()
-    best, _, name = finite[0]
-    why = f"the lowest {METRIC}: {best:.3f}"
-    if len(finite) > 1:
-        why += f" (next {finite[1][2]} {finite[1][0]:.3f})"
-    return name, why
+        return {**out, "selected": order[0], "rule": PLAIN_RULE,
+                "why": f"no validation frame with one finger to compare on: the first of "
+                       f"{', '.join(order)}"}
+    low, _, best = finite[0]
+    frames = {k: np.asarray(v, dtype=np.float64) for k, v in (per_frame or {}).items()
+              if v is not None}
+    for k, v in frames.items():
+        mean = float(v.mean()) if v.ndim == 1 and v.size else math.nan
+        given = math.nan if errors.get(k) is None else float(errors[k] or 0.0)
+        if v.ndim != 1 or not (math.isclose(mean, given, rel_tol=1e-9, abs_tol=1e-12)
+                               or math.isnan(mean) and math.isnan(given)):
+            raise EctskinError(f"contact choice: the per-frame errors of {k!r} (mean {mean:.6g} "
+                               f"over {v.size} frames, shape {v.shape}) do not average to its "
+                               f"validation error {given:.6g}")
+    out["best"] = best
+    if best not in frames:
+        why = f"the lowest {METRIC}: {best} {low:.3f}"
+        if len(finite) > 1:
+            why += f" (next {finite[1][2]} {finite[1][0]:.3f}; no per-frame errors to rule on)"
+        return {**out, "selected": best, "rule": PLAIN_RULE, "why": why}
+    ref = frames[best]
+    for err, _, k in finite:
+        if k not in frames:
+            continue
+        if frames[k].shape != ref.shape:
+            raise EctskinError(f"contact choice: {k!r} has per-frame errors of {frames[k].size} "
+                               f"frames, the best ({best!r}) of {ref.size}: not the same frames")
+        se = 0.0 if k == best else paired_se(frames[k], ref)
+        out["se"][k] = se
+        out["within"][k] = k == best or (se is not None and err - low <= se)
+    chosen = min((k for k in order if out["within"][k]), key=lambda k: _simplicity(k, order))
+    means = {k: e for e, _, k in finite}
+    rivals = [f"{k} +{means[k] - low:.4f} (SE {out['se'][k]:.4f})" for k in simplest
+              if k != best and out["se"][k] is not None
+              and _simplicity(k, order) < _simplicity(best, order)]
+    if chosen == best:
+        why = (f"the lowest {METRIC}: {best} {low:.3f}; no simpler candidate within one paired "
+               f"standard error of it" + (f" ({', '.join(rivals)})" if rivals else ""))
+    else:
+        why = (f"the simplest candidate within one paired standard error of the lowest {METRIC}, "
+               f"{best}'s {low:.3f}: {chosen} {means[chosen]:.3f}, "
+               f"+{means[chosen] - low:.4f} (SE {out['se'][chosen]:.4f})")
+    return {**out, "selected": chosen, "why": why}
+
+
+def choose(errors: Mapping[str, float | None], order: Sequence[str],
+           per_frame: Mapping[str, np.ndarray | None] | None = None) -> tuple[str, str]:
+    """(the candidate of ``order`` the one-standard-error rule chooses, the reason in words):
+    :func:`one_se_choice`; without ``per_frame``, the lowest finite validation error (ties: the
+    earlier in ``order``)."""
+    c = one_se_choice(errors, order, per_frame)
+    return c["selected"], c["why"]
 
 
 def contact_choice(
@@ -223,8 +327,11 @@ def contact_choice(
     t0 = time.perf_counter()
     models = fit_baselines(learned, train_trials, seed)
     t_fit = time.perf_counter() - t0
-    order = [learned.name, *[b for b in BASELINES if b in models], *INVERSIONS]
+    # a run whose own model is a baseline (``--model knn``) answers as that baseline does
+    order = [learned.name, *[b for b in BASELINES if b in models and b != learned.name],
+             *INVERSIONS]
     splits: dict[str, dict[str, dict[str, Any]]] = {k: {} for k in order}
+    per_frame: dict[str, np.ndarray] = {}  # the validation frames' point errors
     n_frames = {}
     for split, data, rows in (("val", val, val_rows), ("test", test, test_rows)):
         if data is None or not len(rows):
@@ -233,28 +340,37 @@ def contact_choice(
         n_frames[split] = int(len(rows))
         sub, own_windows = data.take(rows), learned.windows(data, rows)
         pred = learned.predict(own_windows)
-        splits[learned.name][split] = score(sub, pred)
+        preds: dict[str, tuple[np.ndarray, np.ndarray | None]] = {learned.name: (pred, None)}
         for name, model in models.items():  # they read the window's last frame
-            splits[name][split] = score(sub, model.predict(own_windows.x))
-        own = inversion_test if split == "test" else invert(data, rows, None)
-        splits["inversion"][split] = score(sub, *own)
-        splits["hybrid"][split] = score(sub, *invert(data, rows,
-                                                     seeds_from_predictions(pred, data.faces)))
+            if name in splits and name != learned.name:
+                preds[name] = (np.asarray(model.predict(own_windows.x)), None)
+        preds["inversion"] = inversion_test if split == "test" else invert(data, rows, None)
+        preds["hybrid"] = invert(data, rows, seeds_from_predictions(pred, data.faces))
+        for name, (p, seconds) in preds.items():
+            splits[name][split], frame_errors = scored(sub, p, seconds)
+            if split == "val":
+                per_frame[name] = frame_errors
     errors = {k: (v.get("val") or {}).get("loc_mm_mean") for k, v in splits.items()}
-    selected, why = choose({k: (math.nan if e is None else float(e)) for k, e in errors.items()},
-                           order)
-    kinds = {learned.name: "the contact run's model", "knn": "the contact run's baseline",
-             "ridge": "the contact run's baseline", "inversion": "training-free inversion",
-             "hybrid": f"inversion seeded with {learned.name}'s answer"}
+    rule = one_se_choice({k: (math.nan if e is None else float(e)) for k, e in errors.items()},
+                         order, per_frame)
+    selected, why = rule["selected"], rule["why"]
+    kinds = {"knn": "the contact run's baseline", "ridge": "the contact run's baseline",
+             "inversion": "training-free inversion",
+             "hybrid": f"inversion seeded with {learned.name}'s answer",
+             learned.name: "the contact run's model"}
     share = share_without_field or 0.0
     log.info("contact choice on %d validation frames: %s (%s)", n_frames["val"], selected, why)
     return {
         "selected": selected,
         "why": why,
         "metric": METRIC,
+        "rule": rule["rule"],
+        "best": rule["best"],
+        "simplicity": rule["simplicity"],
         "order": order,
         "candidates": {k: {"kind": kinds[k], "val": splits[k].get("val"),
-                           "test": splits[k].get("test"), "selected": k == selected}
+                           "test": splits[k].get("test"), "val_se_to_best_mm": rule["se"][k],
+                           "within_one_se": rule["within"][k], "selected": k == selected}
                        for k in order},
         "n_val_frames": n_frames["val"],
         "n_test_frames": n_frames["test"],

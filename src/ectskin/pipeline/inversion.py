@@ -51,7 +51,8 @@ The contact model of the states with a field (``choice``, as the reproduction ru
 the contact run's model, its k-NN and ridge baselines, the inversion and the hybrid (the
 inversion seeded with the run's model's answer for the frame) are scored on up to
 :data:`~ectskin.pipeline.contact_pick.CHOICE_FRAMES` frames of the *validation* trials in states
-with a field, spread as the test frames; the lowest mean point error is chosen, and every
+with a field, spread as the test frames; the one-standard-error rule chooses (the simplest
+candidate whose mean point error is within one paired standard error of the lowest), and every
 candidate is scored on the test frames too (:mod:`ectskin.pipeline.contact_pick`; the result's
 ``choice``). A frame of a state without a field can only be answered by the learned model.
 
@@ -81,7 +82,7 @@ from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
 from ectskin.learn.tasks.contact import contact_report, slot_points
 from ectskin.pipeline.bound import state_key
 from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
-from ectskin.pipeline.contact_pick import CHOICE_FRAMES, contact_choice, load_learned
+from ectskin.pipeline.contact_pick import CHOICE_FRAMES, RULE, contact_choice, load_learned
 from ectskin.pipeline.metrics import beside
 from ectskin.pipeline.runner import StepRunner, digest
 from ectskin.pipeline.steps import run_settings
@@ -434,7 +435,8 @@ def inversion_step(
         "two_finger_frames": two_finger_frames,
     }
     if choice:  # the run's model and its baselines' seed are candidates' settings too
-        settings.update(choice=True, choice_frames=CHOICE_FRAMES, seed=config.seed,
+        settings.update(choice=True, choice_frames=CHOICE_FRAMES, choice_rule=RULE,
+                        seed=config.seed,
                         seed_search=SEED_SEARCH[0],
                         run=digest(run_settings(config, CONTACT_RUN, dict(data_settings))))
 

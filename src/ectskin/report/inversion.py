@@ -124,9 +124,10 @@ def _choice_name(key: Any) -> str:
 
 def choice_line(inv: Mapping[str, Any]) -> str | None:
     """One sentence on the contact model chosen for the states with a field (metrics.json's
-    ``inversion.choice``): which, on how many validation frames, every candidate's validation
-    point error, the chosen one's test error, and who answers the states without a field;
-    None without a choice."""
+    ``inversion.choice``): which, on how many validation frames and by which rule (the
+    one-standard-error rule: the lowest validation error when the chosen one is not it), every
+    candidate's validation point error, the chosen one's test error, and who answers the states
+    without a field; None without a choice."""
     c = inv.get("choice")
     if not isinstance(c, Mapping) or not c.get("selected"):
         return None
@@ -139,8 +140,14 @@ def choice_line(inv: Mapping[str, Any]) -> str | None:
     others = ", ".join(f"{_choice_name(k)} {_mm(err(k, 'val'))}" for k in cands if k != chosen)
     ans = (c.get("answers") or {}).get("states_without_field") or {}
     share = ans.get("share_of_test_frames")
+    best = c.get("best")
+    rule = ("by the one-standard-error rule on the mean point error (the simplest candidate "
+            "within one paired standard error of the lowest"
+            + (f", {_choice_name(best)}'s" if best and best != chosen else "") + ")"
+            if c.get("rule") == "one standard error (paired)"  # pipeline.contact_pick.RULE
+            else "by the mean point error")
     text = (f"Contact model of the states with a field, chosen on {c.get('n_val_frames')} "
-            f"validation frames by the mean point error: {_choice_name(chosen)}, "
+            f"validation frames {rule}: {_choice_name(chosen)}, "
             f"{_mm(err(chosen, 'val'))} ({others}); {_mm(err(chosen, 'test'))} on the test "
             "frames (the hybrid is the inversion seeded with the learned model's guess).")
     if isinstance(share, int | float) and share > 0:

@@ -462,6 +462,32 @@ def slot_points(test: ContactData, pred: np.ndarray) -> tuple[np.ndarray, ...]:
     return t_face, p_face, p_uv, true_pts, pred_pts
 
 
+def point_errors(data: ContactData, pred: np.ndarray) -> np.ndarray:
+    """(n,) mm, per frame of ``data`` with one finger on the skin (``data.count == 1``, in row
+    order): the distance over the skin between the true point and the point of ``pred``'s first
+    finger slot (prediction columns, :meth:`ectskin.learn.tasks.contact.ContactTask.predict`; a
+    predicted face outside the data's is taken as the nearest of them). Their mean is
+    ``contact_report(data, pred)["loc_mm_mean"]``."""
+    pred = np.asarray(pred, dtype=np.float64)
+    ncol = len(PRED_COLUMNS) + MAX_FINGERS * len(SLOT_COLUMNS)
+    if pred.shape != (data.n_samples, ncol):
+        raise EctskinError(f"point_errors: pred must have shape ({data.n_samples}, {ncol}) (one "
+                           f"row per sample of data), got {pred.shape}")
+    width, thickness = data.body_mm
+    faces = list(data.faces)
+    t_face, p_face, p_uv, _, _ = slot_points(data, pred)
+    single = data.count == 1
+    out = np.empty(int(single.sum()))
+    tf, pf = t_face[single, 0], np.clip(p_face[single, 0], 0, len(faces) - 1)
+    tuv, puv = data.uv[single, 0], p_uv[single, 0]
+    for a in range(len(faces)):
+        for b in range(len(faces)):
+            m = (tf == a) & (pf == b)
+            if m.any():
+                out[m] = on_skin_distance(faces[a], tuv[m], faces[b], puv[m], width, thickness)
+    return out
+
+
 def contact_report(
     test: ContactData, pred: np.ndarray, *, with_maps: bool = True
 ) -> dict[str, Any]:
@@ -472,16 +498,7 @@ def contact_report(
     n = test.n_samples
     t_face, p_face, p_uv, true_pts, pred_pts = slot_points(test, pred)
     single = test.count == 1
-    over_skin = np.empty(int(single.sum()))
-    tf, pf = t_face[single, 0], np.clip(p_face[single, 0], 0, len(faces) - 1)
-    tuv, puv = test.uv[single, 0], p_uv[single, 0]
-    for a in range(len(faces)):
-        for b in range(len(faces)):
-            m = (tf == a) & (pf == b)
-            if m.any():
-                over_skin[m] = on_skin_distance(
-                    faces[a], tuv[m], faces[b], puv[m], width, thickness
-                )
+    over_skin = point_errors(test, pred)
     state_names = [_state_name(s) for s in test.states]
     loc = localisation_metrics(
         true_pts[single, 0],
