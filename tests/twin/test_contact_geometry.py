@@ -224,18 +224,23 @@ def test_only_the_samples_that_weigh_are_solved_and_nothing_changes(sensor, monk
     import ectskin.twin.finger as finger
 
     deformed = [0]
-    deform = sensor.manipulator.deform
+    surface_map = sensor.manipulator.surface_map  # (deform's too)
 
-    def counting(surface, uv, *a, **kw):
-        deformed[0] += np.asarray(uv).size // 2
-        return deform(surface, uv, *a, **kw)
+    def counting(*loads, **kw):
+        mapped = surface_map(*loads, **kw)
+
+        def deform(uv, *a, **k):
+            deformed[0] += np.asarray(uv).size // 2
+            return mapped(uv, *a, **k)
+
+        return deform
 
     cases = [(p, t, FORCES, None) for p in STATES[:2] for t in POINTS[:5]]
     cases += [(STATES[0], Touch("front", (19.5, 3.0)), FORCES, None)]  # a corner of the face
     cases += [(STATES[0], t, np.zeros(4), np.array([0.5, 2.0, 6.0, 15.0])) for t in POINTS[:3]]
     both = (Touch("front", (5.0, 40.0)), Touch("front", (-12.0, 75.0)))
     cases += [(STATES[0], both, np.array([[1.0, 2.0], [2.0, 0.5]]), None)]
-    monkeypatch.setattr(sensor.manipulator, "deform", counting)
+    monkeypatch.setattr(sensor.manipulator, "surface_map", counting)
     fast = [sensor.fingertips(p, t, f, heights_mm=h) for p, t, f, h in cases]
     work, deformed[0] = deformed[0], 0
     monkeypatch.setattr(finger, "_PRUNE_MARGIN_MM", math.inf)

@@ -121,27 +121,65 @@ def _panel_frames(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out
 
 
+#: :func:`_integral` evaluates this many pairs at a time (its temporaries stay in the cache)
+_CHUNK = 8192
+
+
 def _integral(rel0: np.ndarray, frames: np.ndarray) -> np.ndarray:
     """The polygon formula for M pairs: ``rel0`` (M, 3) = panel centre − point, ``frames``
-    (M, 23) the rows of :func:`_panel_frames` for each pair's panel.
+    (M, 23) the rows of :func:`_panel_frames` for each pair's panel (:func:`_integral_columns`
+    of their columns, :data:`_CHUNK` pairs at a time: each pair's arithmetic is its own, so
+    the numbers are the same)."""
+    m = rel0.shape[0]
+    if m <= _CHUNK:
+        return _integral_columns(rel0.T, frames.T)
+    out = np.empty(m)
+    for s in range(0, m, _CHUNK):
+        out[s : s + _CHUNK] = _integral_columns(rel0[s : s + _CHUNK].T, frames[s : s + _CHUNK].T)
+    return out
 
-    See :func:`potential_integral`. Everything is (M,) arithmetic on the projections of ``rel0``
+
+def pair_integrals(
+    points: np.ndarray, ip: np.ndarray, centres: np.ndarray, frames_t: np.ndarray, jp: np.ndarray
+) -> np.ndarray:
+    """(M,) ``∫_panel dA' / |p − r'|`` of point ``points[ip[k]]`` over panel ``jp[k]`` (centres
+    (N, 3), ``frames_t`` (23, N): :func:`_panel_frames` of the panels, transposed and
+    contiguous): :func:`_integral` of the pairs, gathered :data:`_CHUNK` pairs at a time into
+    contiguous columns (the same numbers as gathering all the pairs' rows first)."""
+    pts, cen = np.ascontiguousarray(points.T), np.ascontiguousarray(centres.T)  # (3, ·)
+    m = ip.size
+    out = np.empty(m)
+    for s in range(0, m, _CHUNK):
+        i, j = ip[s : s + _CHUNK], jp[s : s + _CHUNK]
+        rel = cen.take(j, axis=1) - pts.take(i, axis=1)
+        out[s : s + _CHUNK] = _integral_columns(rel, frames_t.take(j, axis=1))
+    return out
+
+
+def _integral_columns(rel: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """:func:`_integral` of the columns: ``rel`` (3, M) and ``f`` (23, M) (contiguous rows are
+    the fastest: each is read several times).
+
+    See :func:`potential_integral`. Everything is (M,) arithmetic on the projections of ``rel``
     onto the panel frame, one edge at a time; ``ln((R+ + l+)/(R− + l−))`` is evaluated as
     ``asinh(l+/R0) − asinh(l−/R0)`` (since R = √(R0² + l²)), which has no cancellation for
     either sign of l.
     """
-    f = frames
-    # rel0·(û, v̂, m_u, m_v, n̂), (M, 5)
-    proj = np.einsum("mj,mkj->mk", rel0, f[:, :15].reshape(-1, 5, 3))
-    du, dv, dmu, dmv = proj[:, 0], proj[:, 1], proj[:, 2], proj[:, 3]
-    h = np.abs(proj[:, 4])  # height of the point above the panel plane
+    rx, ry, rz = rel[0], rel[1], rel[2]
+    # rel0·(û, v̂, m_u, m_v, n̂)
+    du = rx * f[0] + ry * f[1] + rz * f[2]
+    dv = rx * f[3] + ry * f[4] + rz * f[5]
+    dmu = rx * f[6] + ry * f[7] + rz * f[8]
+    dmv = rx * f[9] + ry * f[10] + rz * f[11]
+    h = np.abs(rx * f[12] + ry * f[13] + rz * f[14])  # height of the point above the panel plane
     hh = h * h
     # R at corner k: |rel0 + c_k|² = |rel0|² + 2 rel0·c_k + |c_k|², rel0·c_k = ±|u|/2 du ± |v|/2 dv
-    rel_sq = np.einsum("mj,mj->m", rel0, rel0)
-    ab = f[:, 19] * du + f[:, 20] * dv
-    a_b = f[:, 19] * du - f[:, 20] * dv
-    e0 = rel_sq + f[:, 21]
-    e1 = rel_sq + f[:, 22]
+    rel_sq = rx * rx + ry * ry + rz * rz
+    half_u, half_v = f[19], f[20]
+    ab = half_u * du + half_v * dv
+    a_b = half_u * du - half_v * dv
+    e0 = rel_sq + f[21]
+    e1 = rel_sq + f[22]
     r = (
         np.sqrt(np.maximum(e0 - 2.0 * ab, 0.0)),
         np.sqrt(np.maximum(e1 + 2.0 * a_b, 0.0)),
@@ -149,10 +187,10 @@ def _integral(rel0: np.ndarray, frames: np.ndarray) -> np.ndarray:
         np.sqrt(np.maximum(e1 - 2.0 * a_b, 0.0)),
     )
     # edge k: t_k = (rel0 + c_k)·m_k, l−_k = (rel0 + c_k)·s_k, l+_k = l−_k + edge length
-    t_all = (dmu + f[:, 15], dmv + f[:, 16], f[:, 15] - dmu, f[:, 16] - dmv)
-    lm_all = (du + f[:, 17], dv + f[:, 18], f[:, 17] - du, f[:, 18] - dv)
-    edge = (2.0 * f[:, 19], 2.0 * f[:, 20])
-    total = np.zeros(rel0.shape[0])
+    t_all = (dmu + f[15], dmv + f[16], f[15] - dmu, f[16] - dmv)
+    lm_all = (du + f[17], dv + f[18], f[17] - du, f[18] - dv)
+    edge = (2.0 * half_u, 2.0 * half_v)
+    total = np.zeros(rx.shape[0])
     for k in range(4):
         t = t_all[k]
         lm = lm_all[k]
@@ -222,9 +260,9 @@ def potential_matrix(
         P = np.divide(1.0, dist, out=dist)
     P *= 2.0 * scale
     # near field: exact (1/A_j) ∫ dA'/|r_i − r'| both ways, then symmetrised
-    frames = _panel_frames(panels.u, panels.v)
+    frames = np.ascontiguousarray(_panel_frames(panels.u, panels.v).T)  # (23, N)
     both_i, both_j = np.concatenate([ii, jj]), np.concatenate([jj, ii])
-    one_way = _integral(c[both_j] - c[both_i], frames[both_j]) / areas[both_j]
+    one_way = pair_integrals(c, both_i, c, frames, both_j) / areas.take(both_j)
     m = ii.size
     sym = (one_way[:m] + one_way[m:]) * scale
     P[ii, jj] = sym

@@ -248,9 +248,8 @@ def hover_fingertips(
         n_t = len(idx)
         zeros = np.zeros(n_t)
 
-        def deform(rest, surface=surface, zeros=zeros):  # (T, k, 2) -> (T, k, 3), untouched
-            return manipulator.deform(surface, rest, inflation_ml, None, zeros)
-
+        # (T, k, 2) -> (T, k, 3) on the untouched body, one frame per touch
+        deform = manipulator.surface_map(surface, inflation_ml, None, zeros)
         pts = deform(uv[:, None])[:, 0]  # (T, 3)
         frame = manipulator.face_frame(surface, uv, inflation_ml)[0]  # (T, 3, 3)
         depth, cover, target = _pad(finger, np.zeros(1), np.zeros(1, dtype=bool))
@@ -339,14 +338,12 @@ def _placement(m: Manipulator, fg: Finger, one: Touch, inflation_ml, touch, forc
     """(point (F, 3), axis (F, 3), pad depth (F,), cover (F,), rest height less the cover (F,))
     of ``one``'s fingertip in contact (``contact`` (F,) True) or above the skin."""
     uv = np.asarray([one.uv_mm])
-    pts = m.deform(one.surface, uv, inflation_ml, touch, forces, handling)[:, 0]  # (F, 3)
+    # rest points (F, k, 2) or (k, 2) -> the skin (F, k, 3) under these loads
+    deform = m.surface_map(one.surface, inflation_ml, touch, forces, handling)
+    pts = deform(uv)[:, 0]  # (F, 3)
     frame = m.face_frame(one.surface, uv, inflation_ml, touch, forces, handling)[:, 0]
     depth, cover, target = _pad(fg, force_one, contact)
     nrm = frame[..., 2]
-
-    def deform(rest):
-        return m.deform(one.surface, rest, inflation_ml, touch, forces, handling)
-
     skin, valid = _skin_at(
         m, one.surface, deform, np.asarray(one.uv_mm), target, pts, frame, fg.radius_mm, depth
     )
@@ -399,14 +396,18 @@ def _skin_at(
     valid = np.ones((n_f, n_m), dtype=bool)
     offset = target
     inv = np.broadcast_to(np.eye(2), (n_f, n_m, 2, 2))
+    # the lower surface's depth at each sample's (wanted) lateral distance, for the pruning
+    lower = None
+    if radius is not None and depth is not None:
+        lower = _lower_depth(_length(target), radius, depth)
     for step in range(_PLACE_STEPS):
         fresh = step < _JACOBIAN_STEPS  # a new Jacobian, or the last one (chord steps)
         x = deform(uv0 + offset)
         lat = _along(x - pts[:, None], e12[:, None])  # (F, m, 2)
-        if radius is not None and depth is not None:
+        if radius is not None and depth is not None and lower is not None:
             keep = valid & _worth_solving(
                 m, surface, uv0 + offset, x - pts[:, None], lat, target, frame[..., 2],
-                radius, depth, valid,
+                radius, depth, valid, lower,
             )
             if keep.sum(axis=1).max() < target.shape[1]:
                 # each frame's kept samples first (in order), padded with its first (invalid)
@@ -418,6 +419,7 @@ def _skin_at(
                 target, offset, lat = (
                     np.take_along_axis(a, idx, axis=1) for a in (target, offset, lat)
                 )
+                lower = np.take_along_axis(lower, idx[..., 0], axis=1)
                 if not fresh:
                     inv = np.take_along_axis(inv, idx[..., None], axis=1)
         if fresh:
@@ -444,12 +446,13 @@ def _skin_at(
 
 def _worth_solving(
     m: Manipulator, surface: str, uv_guess, rel0, lat0, target, axis, radius: float, depth,
-    valid,
+    valid, lower: np.ndarray | None = None,
 ) -> np.ndarray:
     """(F, m) the samples whose need (:func:`rest_height`) may come within
     :data:`_PRUNE_MARGIN_MM` of the largest, judged from the current guess (``rel0`` (F, m, 3)
     the deformed guess relative to the point, ``lat0`` its lateral offset, ``target`` the
-    wanted; ``valid`` (F, m) the samples that count).
+    wanted; ``valid`` (F, m) the samples that count; ``lower``: the lower surface's depth at
+    |``target``| (:func:`_lower_depth`), if the caller has it).
 
     Solved, a sample lies at lateral distance |target| (its lower-surface depth is known now)
     and its rise along the axis differs from the guess's by at most :data:`_SLOPE_BOUND` times
@@ -457,7 +460,7 @@ def _worth_solving(
     Samples that may leave the face (whose solve is clipped to its edge, nearer the axis) are
     always solved."""
     up = _along(rel0, axis[:, None, None])[..., 0]
-    d = _lower_depth(_length(target), radius, depth)
+    d = _lower_depth(_length(target), radius, depth) if lower is None else lower
     miss = _SLOPE_BOUND * _length(target - lat0)
     low = np.where(valid, up + d - miss, -np.inf)
     best = np.maximum((radius - depth), low.max(axis=1))  # (F,)
@@ -491,8 +494,8 @@ def _on_face(m: Manipulator, surface: str, uv: np.ndarray) -> np.ndarray:
     c = m.config
     half = (c.width_mm if surface in ("front", "back") else c.thickness_mm) / 2
     out = uv.copy()
-    out[..., 0] = np.clip(out[..., 0], -half, half)
-    out[..., 1] = np.clip(out[..., 1], 0.0, c.length_mm)
+    out[..., 0] = np.minimum(np.maximum(out[..., 0], -half), half)  # (np.clip's, quicker)
+    out[..., 1] = np.minimum(np.maximum(out[..., 1], 0.0), c.length_mm)
     return out
 
 

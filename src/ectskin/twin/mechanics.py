@@ -59,9 +59,10 @@ from ectskin._check import EctskinError
 from ectskin.twin.mechanics_tables import (
     POSE_FRAMES_KEPT,
     POSES_KEPT,
+    RowLookup,
+    axis_table,
     bredt_torsion,
     invert_pull_in,
-    kept_arrays,
     pose_key,
     pull_in_table,
     rect_torsion,
@@ -69,6 +70,7 @@ from ectskin.twin.mechanics_tables import (
 )
 from ectskin.twin.rod import PointLoad
 from ectskin.twin.rod import solve as solve_rod
+from ectskin.twin.surface_map import SurfaceMap
 
 SIDE = {"front": 1.0, "back": -1.0}
 #: rows (values of φ) of the face's arc-length table (:meth:`Manipulator._face_pull_in`)
@@ -217,8 +219,9 @@ class Manipulator:
         # per inflation state (by its bytes), the last few: the bulge heights (a root per
         # chamber) and the pull-in's arc-length table (a placement maps a state a dozen times)
         self._heights: dict[bytes, np.ndarray] = {}
-        self._arcs: dict[bytes, np.ndarray] = {}
+        self._arcs: dict[bytes, tuple[np.ndarray, RowLookup | None]] = {}
         self._rests: dict[tuple, tuple[np.ndarray, ...]] = {}  # deform(keep_rest=True)
+        self._dimple_k: dict[tuple, float] = {}  # per state and v: the dimple's stiffness
 
     # ------------------------------------------------------------------ inflation
     def check_inflation(self, inflation_ml) -> np.ndarray:
@@ -309,19 +312,30 @@ class Manipulator:
         shortens. S depends on x only through φ(x): it is tabulated over φ and interpolated.
         ``phi``: φ(x), if the caller has it.
         """
+        return self._pull_in(x, z, self._arc_table(heights), phi)
+
+    def _arc_table(self, heights: np.ndarray) -> tuple[np.ndarray, RowLookup | None] | None:
+        """:meth:`_face_pull_in`'s table of the bulge ``heights`` (kept for the last few
+        states); None where nothing pulls in."""
         kappa = self.config.face_axial_inextensibility
         if kappa == 0 or not np.any(heights):
-            return np.zeros(np.shape(x))
+            return None
         zg = self._zgrid
         key = np.asarray(heights, dtype=np.float64).tobytes()
-        mixed = self._arcs.get(key)
-        if mixed is None:
+        table = self._arcs.get(key)
+        if table is None:
             slope = np.gradient(np.tensordot(heights, self._chamber_window_z(zg), axes=1), zg)
-            mixed = pull_in_table(slope, zg, kappa, _PULL_IN_PHIS)
-            remember(self._arcs, key, mixed)
+            table = pull_in_table(slope, zg, kappa, _PULL_IN_PHIS)
+            remember(self._arcs, key, table)
+        return table
+
+    def _pull_in(self, x, z, table, phi=None) -> np.ndarray:
+        """:meth:`_face_pull_in` by its :meth:`_arc_table` ``table``."""
+        if table is None:
+            return np.zeros(np.shape(x))
         zz = np.ravel(z).astype(np.float64)
         phi = np.ravel(self._window_x(x) if phi is None else phi)
-        return (zz - invert_pull_in(zz, phi, mixed, zg)).reshape(np.shape(x))
+        return (zz - invert_pull_in(zz, phi, table, self._zgrid)).reshape(np.shape(x))
 
     def bulge_mm(self, x, z, heights) -> np.ndarray:
         """Outward bulge b(x, z) = Σ_k h_k φ(x) ψ_k(z) of a front/back face point (mm)."""
@@ -443,9 +457,13 @@ class Manipulator:
     def dimple_depth_mm(self, force_n, touch: Touch, inflation_ml) -> np.ndarray:
         """Indentation depth under the finger, F / k_d with k_d rising with local pressure."""
         c = self.config
-        pk = self.pressure_kpa(inflation_ml)
-        local = float(np.tensordot(pk, self._chamber_window_z(np.array([touch.uv_mm[1]])), axes=1)[0])
-        k = c.dimple_stiffness_n_per_mm * (1.0 + c.dimple_stiffening_per_kpa * local)
+        key = (self.check_inflation(inflation_ml).tobytes(), touch.uv_mm[1])
+        k = self._dimple_k.get(key)  # (a placement dents the same point a dozen times)
+        if k is None:
+            pk = self.pressure_kpa(inflation_ml)
+            local = float(np.tensordot(pk, self._chamber_window_z(np.array([touch.uv_mm[1]])), axes=1)[0])
+            k = c.dimple_stiffness_n_per_mm * (1.0 + c.dimple_stiffening_per_kpa * local)
+            remember(self._dimple_k, key, k, kept=64)
         return np.asarray(force_n, dtype=np.float64) / k
 
     # ------------------------------------------------------------------ surface map
@@ -478,60 +496,44 @@ class Manipulator:
         -------
         (F, n, 3) deformed positions in mm (F = 1 for a scalar force).
         """
-        c = self.config
+        return self.surface_map(surface, inflation_ml, touch, force_n, handling)(uv_mm, keep_rest)
+
+    def surface_map(
+        self, surface: str, inflation_ml, touch: Touch | tuple[Touch, ...] | None = None,
+        force_n=0.0, handling: Handling | None = None,
+    ) -> SurfaceMap:
+        """:meth:`deform` of ``surface`` under these loads as a function of the points (a
+        :class:`~ectskin.twin.surface_map.SurfaceMap`), the same numbers: what does not depend
+        on the points found once, for points mapped many times (a placement's skin samples)."""
         p = self.check_inflation(inflation_ml)
         touches, forces = touch_loads(force_n, touch)
-        n_f = forces.shape[0]
-        uv = np.asarray(uv_mm, dtype=np.float64)
-        per_frame = uv.ndim == 3  # (F, n, 2): x, z below are (F, n), else (n,)
-        if per_frame and (uv.shape[0] != n_f or uv.shape[2] != 2):
-            raise EctskinError(
-                f"deform: per-frame points must be (F, n, 2) with F = {n_f} frames, got shape "
-                f"{uv.shape}"
-            )
-        if not per_frame:
-            uv = uv.reshape(-1, 2)
-        n_pts = uv.shape[-2]
-        if keep_rest and not per_frame:
-            key = (surface, uv.shape, uv.tobytes(), p.tobytes())
-            x, z, offset, zq = kept_arrays(self._rests, key, lambda: self._rest_part(surface, uv, p))
-        else:
-            x, z, offset, zq = self._rest_part(surface, uv, p)
-        if surface in SIDE:
-            offset = np.broadcast_to(offset, (n_f, n_pts)).copy()
-            for k, t in enumerate(touches):  # each finger's dimple on this face
-                if t.surface != surface:
-                    continue
-                depth = self.dimple_depth_mm(forces[:, k], t, p)  # (F,)
-                r2 = (x - t.uv_mm[0]) ** 2 + (z - t.uv_mm[1]) ** 2
-                bump = np.exp(-r2 / (2 * c.dimple_sigma_mm**2))
-                offset -= depth[:, None] * (bump if per_frame else bump[None, :])
-            yprime = SIDE[surface] * offset
-            xs = np.broadcast_to(x, yprime.shape)
-        else:
-            x0 = c.width_mm / 2 * (1.0 if surface == "right" else -1.0)
-            yprime = np.broadcast_to(uv[..., 0], (n_f, n_pts))
-            xs = np.full(yprime.shape, x0)
+        if surface not in SIDE and surface not in ("right", "left"):
+            raise EctskinError(f"unknown surface {surface!r}: expected front, back, right or left")
+        dents = [(t.uv_mm, self.dimple_depth_mm(forces[:, k], t, p))
+                 for k, t in enumerate(touches) if t.surface == surface and surface in SIDE]
         zs, r, rot = self.pose(force_n, touch, p, handling)
-        # the axis and the section frame at each point's stretched axial position (per frame):
-        # one table per frame and grid point of the axis and the frame's first two columns (the
-        # third meets a zero), (F n_z, 9), interpolated linearly
-        j = np.clip(np.searchsorted(zs, zq) - 1, 0, zs.size - 2)
-        w = np.broadcast_to((zq - zs[j]) / (zs[j + 1] - zs[j]), xs.shape)[..., None]
-        table = np.concatenate([r, rot[..., 0], rot[..., 1]], axis=-1).reshape(-1, 9)
-        at = np.broadcast_to(j + (np.arange(n_f) * zs.size)[:, None], xs.shape)  # (F, n)
-        a = (1 - w) * table[at] + w * table[at + 1]  # (F, n, 9)
-        return a[..., :3] + (a[..., 3:6] * xs[..., None] + a[..., 6:9] * yprime[..., None])
+        return SurfaceMap(self, surface, SIDE.get(surface), p, forces.shape[0], dents,
+                          self._state_tables(surface, p), zs, axis_table(r, rot))
 
-    def _rest_part(self, surface: str, uv: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, ...]:
+    def _state_tables(self, surface: str, p: np.ndarray) -> tuple[np.ndarray, Any]:
+        """(bulge heights, :meth:`_arc_table`) of state ``p`` on a face (nothing on the sides)."""
+        if surface not in SIDE:
+            return np.empty(0), None
+        heights = self.bulge_height_mm(p)
+        return heights, self._arc_table(heights)
+
+    def _rest_part(
+        self, surface: str, uv: np.ndarray, p: np.ndarray, state: tuple[np.ndarray, Any]
+    ) -> tuple[np.ndarray, ...]:
         """(x, z, offset, zq): the state's part of :meth:`deform` for rest points ``uv``: section
-        offset, pulled-in z, bulge offset (x and offset empty on the sides), stretched z."""
+        offset, pulled-in z, bulge offset (x and offset empty on the sides), stretched z;
+        ``state``: :meth:`_state_tables` of ``p``."""
         c = self.config
         if surface in SIDE:
-            heights = self.bulge_height_mm(p)
+            heights, table = state
             x = uv[..., 0]
             phi = self._window_x(x)
-            z = uv[..., 1] - self._face_pull_in(x, uv[..., 1], heights, phi)
+            z = uv[..., 1] - self._pull_in(x, uv[..., 1], table, phi)
             # the bulge (bulge_mm), (n,) or (F, n)
             offset = c.thickness_mm / 2 + phi * np.tensordot(heights, self._chamber_window_z(z), axes=1)
         elif surface in ("right", "left"):

@@ -111,7 +111,7 @@ def integrate(s: np.ndarray, kappa: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 def _at(s: np.ndarray, values: np.ndarray, s_q: float) -> np.ndarray:
     """Linear interpolation of (F, N, ...) values along the rod at one arc position."""
-    j = int(np.clip(np.searchsorted(s, s_q) - 1, 0, s.size - 2))
+    j = min(max(int(np.searchsorted(s, s_q)) - 1, 0), s.size - 2)  # (np.clip's, quicker)
     w = (s_q - s[j]) / (s[j + 1] - s[j])
     return (1.0 - w) * values[:, j] + w * values[:, j + 1]
 
