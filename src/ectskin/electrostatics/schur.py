@@ -40,9 +40,9 @@ from ectskin._check import EctskinError, check_array
 from ectskin.electrostatics.mom import (
     EPS0_PF_PER_MM,
     NEAR_FACTOR,
-    _integral,
     _panel_frames,
     _positive,
+    pair_integrals,
     potential_matrix,
 )
 from ectskin.electrostatics.panels import Panels
@@ -91,15 +91,14 @@ def _block(
     # near pairs: P¹_ij (col panel j's exact potential at row centre i) + P¹_ji (row panel i's
     # at col centre j)
     if ii.size:
-        # the columns' frames once per column where they have more near pairs than columns
-        # (a row-wise computation: the same numbers either way)
-        if ii.size > cols.n_panels:
-            col_frames = _panel_frames(cols.u, cols.v)[jj]
-        else:
-            col_frames = _panel_frames(cols.u[jj], cols.v[jj])
-        near_ij = _integral(cb[jj] - ca[ii], col_frames) / cols.areas[jj]
-        fr = _panel_frames(rows.u[ii], rows.v[ii]) if row_frames is None else row_frames[ii]
-        P[ii, jj] = near_ij + _integral(ca[ii] - cb[jj], fr) / rows.areas[ii]
+        # every panel's frame once, transposed: the pairs gathered into contiguous columns
+        # (:func:`~.mom.pair_integrals`, as the potential matrix does)
+        cft = np.ascontiguousarray(_panel_frames(cols.u, cols.v).T)
+        rft = np.ascontiguousarray(
+            (_panel_frames(rows.u, rows.v) if row_frames is None else row_frames).T
+        )
+        near_ij = pair_integrals(ca, ii, cb, cft, jj) / cols.areas[jj]
+        P[ii, jj] = near_ij + pair_integrals(cb, jj, ca, rft, ii) / rows.areas[ii]
     P *= 0.5 / (4.0 * np.pi * EPS0_PF_PER_MM * eps_r)
     return P
 
