@@ -29,8 +29,6 @@ the sensor, the state and the shape), so a field is the same whichever worker so
 from __future__ import annotations
 
 import contextlib
-import ctypes
-import ctypes.util
 import logging
 import weakref
 from collections.abc import Iterator
@@ -40,6 +38,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ectskin._check import EctskinError
+from ectskin._malloc import keep_freed_memory
 from ectskin.electrostatics import EPS0_PF_PER_MM, Panels
 from ectskin.electrostatics.batched import readout_batch
 from ectskin.electrostatics.batched_schur import schur_batch
@@ -78,26 +77,17 @@ def chunks_of(spec: FieldSpec) -> list[Chunk]:
 
 _SENSORS: dict[str, SensorModel] = {}  # per worker process: the sensor of a spec, by key
 
-#: glibc's malloc, per process: memory freed is kept (below these sizes, bytes) instead of being
-#: handed back to the system and faulted in again by the next node's arrays of the same sizes
-#: (every node solve allocates and frees the same few-hundred-kB arrays: by default glibc trims
-#: them off the heap's top and maps the larger ones afresh each time, which cost a hover row
-#: about 15 % of its time and a potential matrix up to half; 2-core machine, glibc 2.36)
-_MALLOC_KEEP = {-1: 256 << 20, -3: 16 << 20}  # M_TRIM_THRESHOLD, M_MMAP_THRESHOLD
+#: whether this process has set ectskin._malloc's thresholds (once per process)
 _MALLOC_SET: list[bool] = []
 
 
-def keep_freed_memory() -> bool:
-    """Set :data:`_MALLOC_KEEP` in this process (once); False where there is no glibc (the
-    solves are the same numbers either way: only where their arrays live changes)."""
+def _keep_freed_memory_once() -> bool:
+    """:func:`ectskin._malloc.keep_freed_memory` in this process, once: a process that solves
+    nodes without having been started by the CLI or a local cluster (which set it already), e.g.
+    an in-process build (``workers=0``), keeps the freed arrays of one node for the next instead
+    of faulting them in again (the same numbers either way)."""
     if not _MALLOC_SET:
-        ok = False
-        try:
-            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-            ok = all(libc.mallopt(k, v) == 1 for k, v in _MALLOC_KEEP.items())
-        except (OSError, AttributeError):
-            pass
-        _MALLOC_SET.append(ok)
+        _MALLOC_SET.append(keep_freed_memory())
     return _MALLOC_SET[0]
 
 
@@ -116,7 +106,7 @@ def solve_chunk(
             f"{physics_digest()[:12]} here, {physics[:12]} there); install the same ectskin on "
             "the workers"
         )
-    keep_freed_memory()
+    _keep_freed_memory_once()
     key = spec.key()
     sensor = _SENSORS.get(key)
     if sensor is None:
