@@ -94,6 +94,15 @@ def add_common_arguments(p: argparse.ArgumentParser, *, default_profile: str) ->
         "states too: the inversion then answers every test frame; 19 more fields to build)",
     )
     p.add_argument(
+        "--bound-push-columns",
+        choices=("untouched", "finger"),
+        default="untouched",
+        help="the bound's columns of the hand's push: from the untouched state (default, "
+        "seconds) or from a table of direct solves with the finger pressing (about 2 min a "
+        "state on one core; beyond the wire ends the default's bound is several times too "
+        "low); docs/bound.md",
+    )
+    p.add_argument(
         "--field-cache",
         metavar="DIR",
         default=None,
@@ -169,6 +178,7 @@ def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
         contact_response=args.contact_response,
         field_grid=args.field_grid,
         field_states=args.field_states,
+        bound_push_columns=args.bound_push_columns,
         field_cache=args.field_cache,
     )
     m = reproduce(config)

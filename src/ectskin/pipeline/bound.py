@@ -21,7 +21,10 @@
 nuisance columns come from direct solves of each field's own sensor (``field_nuisances``):
 ``nuisances`` defaults to the hand's push, the inflation and the fingertip's radius
 (:data:`ectskin.twin.bound.NUISANCES`); naming ``"modulus"`` among them adds the pulp's modulus
-(:mod:`ectskin.twin.bound_modulus`: a table of direct solves per state, some 800 solves each).
+(:mod:`ectskin.twin.bound_modulus`: a table of direct solves per state, some 5 000 solves each);
+``push_columns="finger"`` takes the push's columns with the finger pressing
+(:mod:`ectskin.twin.bound_push`: a table of direct solves per state) instead of the untouched
+state's, which make the bound beyond the wire ends several times too low.
 :func:`ectskin.pipeline.metrics.bound_block` turns bound.json into metrics.json's ``bound``, and
 :func:`ectskin.pipeline.metrics.force_split_keys` the force split into ``contact``'s keys.
 
@@ -52,6 +55,7 @@ from ectskin.pipeline.steps import run_settings
 from ectskin.twin.bound import FORCE_THRESHOLD_N, NUISANCES, cases
 from ectskin.twin.bound_field import (
     MAP_SPACING_MM,
+    PUSH_COLUMNS,
     StateNuisances,
     field_bound_maps,
     field_bounds,
@@ -280,10 +284,15 @@ def bound_step(
     spacing_mm: float = MAP_SPACING_MM,
     force_n: float = 1.0,
     case: str = HEADLINE_CASE,
+    push_columns: str = "untouched",
 ) -> dict[str, Any]:
     """Steps "bound": OUT_DIR/bound/ (module docstring) from ``fields`` ({inflation: field}),
     and, with ``data`` and a trained contact run, "force_observable"; returns bound.json, with
     the force split (the step's file, not stored in bound.json) under ``force_split``.
+
+    ``push_columns``: the push's columns from the untouched state ("untouched") or from a table
+    of direct solves with the finger pressing ("finger": ``field_nuisances``, some 30 000
+    solves a state on 5-mm nodes over both faces).
 
     ``data``: (contact.h5, its settings) of the contact step, whose test trials
     (runs/contact/split.json) are bounded frame by frame; None: the maps alone. The error map
@@ -293,16 +302,19 @@ def bound_step(
         raise EctskinError("bound_step: no response fields given")
     fields = {tuple(float(x) for x in s): f for s, f in fields.items()}
     check_option("case", case, cases(tuple(nuisances)))
+    check_option("push_columns", push_columns, PUSH_COLUMNS)
     out_dir = runner.out / BOUND_DIR
     run_dir = runner.out / "runs" / CONTACT_RUN
     test: list[str] = []
     if data is not None and (run_dir / "split.json").is_file():
         test = list(read_json(run_dir / "split.json", "contact run split").get("test") or [])
-    settings = {
+    settings: dict[str, Any] = {
         "fields": {state_key(s): f.key for s, f in fields.items()},
         "nuisances": list(nuisances), "prior_sd": dict(prior_sd or {}), "case": case,
         "spacing_mm": spacing_mm, "force_n": force_n,
         "data": digest(dict(data[1])) if data is not None else None, "test_trials": test,
+        # named only when not the default, so that the steps cached before keep their key
+        **({"push_columns": push_columns} if push_columns != "untouched" else {}),
         **config.figure_settings,
     }
 
@@ -313,7 +325,8 @@ def bound_step(
         if "columns" not in cache:
             with threadpool_limits(1):
                 modulus = "modulus" in nuisances
-                cache["columns"] = ({s: field_nuisances(f, modulus=modulus)
+                cache["columns"] = ({s: field_nuisances(f, modulus=modulus,
+                                                        push_columns=push_columns)
                                      for s, f in fields.items()} if nuisances else {})
         return cache["columns"]
 
@@ -353,9 +366,9 @@ def bound_step(
     if data is not None and test and trained:
         force_file = run_dir / FORCE_FILE
         force_figure = run_dir / figure_file("force_sigma", config.figure_format)
-        force_settings = {
-            **{k: settings[k] for k in ("fields", "nuisances", "prior_sd", "case", "data",
-                                        "test_trials")},
+        shared = ("fields", "nuisances", "prior_sd", "case", "data", "test_trials", "push_columns")
+        force_settings: dict[str, Any] = {
+            **{k: settings[k] for k in shared if k in settings},
             "run": digest(run_settings(config, CONTACT_RUN, dict(data[1]))),
             "baselines": config.baselines, "seed": config.seed, **config.figure_settings,
         }

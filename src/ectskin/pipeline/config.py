@@ -65,6 +65,9 @@ RUN_PROFILES = {"touch_robust": "robust"}
 QUICK_ABLATION_EPOCHS = 12
 #: the states whose fields the bound and the inversion read (ReproduceConfig.field_states)
 FIELD_STATES = ("contact", "all")
+#: where the bound's push columns come from (ReproduceConfig.bound_push_columns; the same as
+#: ectskin.twin.bound_field.PUSH_COLUMNS, which tests/pipeline/test_bound_push_option.py checks)
+BOUND_PUSH_COLUMNS = ("untouched", "finger")
 #: how the contact experiment's touch trials are read (ReproduceConfig.contact_response)
 CONTACT_RESPONSES = ("field", "solve")
 #: the contact experiment read from the fields (ReproduceConfig.contact_protocol): touch trials
@@ -159,6 +162,12 @@ class ReproduceConfig:
         run's data (the paper's trials add the 10-ml states;
         :func:`~ectskin.pipeline.field.physics_field_specs`), so that the inversion answers every
         test frame, at the build time of the extra fields.
+    bound_push_columns : "untouched" | "finger"
+        Where the bound's push columns come from
+        (:data:`ectskin.twin.bound_field.PUSH_COLUMNS`): the untouched state once per state (the
+        default, seconds), or a table of direct solves with the finger pressing per state (about
+        30 000 solves a state), without which the bound beyond the wire ends with the hand's
+        push unknown is several times too low (docs/bound.md).
     """
 
     out_dir: Path
@@ -186,6 +195,7 @@ class ReproduceConfig:
     field_cache: Path | None = field(default=None, compare=False)
     field_grid: str = "quick"
     field_states: str = "contact"
+    bound_push_columns: str = "untouched"
 
     def __post_init__(self) -> None:
         check_type("out_dir", self.out_dir, (str, os.PathLike))
@@ -218,6 +228,7 @@ class ReproduceConfig:
         check_option("contact_response", self.contact_response, CONTACT_RESPONSES)
         check_option("field_grid", self.field_grid, tuple(FIELD_GRIDS))
         check_option("field_states", self.field_states, FIELD_STATES)
+        check_option("bound_push_columns", self.bound_push_columns, BOUND_PUSH_COLUMNS)
         if self.field_cache is not None:
             check_type("field_cache", self.field_cache, (str, os.PathLike))
             object.__setattr__(self, "field_cache", Path(self.field_cache))

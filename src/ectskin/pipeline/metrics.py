@@ -357,7 +357,7 @@ def bound_block(bound: Mapping[str, Any], contact: Mapping[str, Any] | None) -> 
         "test": {**(test.get("pooled") or {}), "states_without_field": test.get("states_without_field")},
         "settings": {k: settings.get(k) for k in (
             "source", "faces", "spacing_mm", "force_n", "nuisances", "prior_sd",
-            "force_threshold_n", "near_wire_mm", "position")},
+            "force_threshold_n", "near_wire_mm", "position", "push_columns")},
         "nuisance_columns": bound.get("nuisance_columns"),
         "timing_s": (bound.get("timing") or {}).get("total_s"),
     }

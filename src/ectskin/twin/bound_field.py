@@ -11,9 +11,14 @@ eigenvalues, inf where unresolved).
 Nuisance columns, once per state (:func:`state_nuisances`, direct solves of the twin):
 
 * ``push`` (9 columns, no prior): ∂C/∂(each hand load of ``DEFAULT_PUSH_LOADS``) of the
-  *untouched* state. The hand bends the whole body; the finger rides on it, so the finger's own
-  signal changes little with the push and the column is taken once per state instead of at
-  every point;
+  *untouched* state (``push_columns="untouched"``, the default): the hand bends the whole body,
+  the finger rides on it, and the finger's own signal is taken not to change with the push, so
+  the columns are taken once per state instead of at every point. Beyond the wire ends that
+  makes the bound with the push unknown several times too low (force and push are nearly
+  collinear there, and the finger's share of the push's column decides it); with
+  ``push_columns="finger"`` the columns are taken with the finger pressing, by direct central
+  differences on a grid of nodes per state (a :class:`~ectskin.twin.bound_push.PushTable`),
+  interpolated to each point and force;
 * ``inflation`` (one column per chamber, prior ±1 ml): ∂C/∂p_k of the untouched state, once per
   state. It leaves out how the finger's signal changes with the bulge under it, which is large
   only over the inflated chamber itself;
@@ -57,6 +62,7 @@ from ectskin.twin.bound import (
     priors_in_use,
 )
 from ectskin.twin.bound_modulus import ModulusTable, modulus_table
+from ectskin.twin.bound_push import PushTable, push_table
 from ectskin.twin.field import ResponseField
 from ectskin.twin.mechanics import Handling, Touch
 from ectskin.twin.readout import ReadoutConfig, noise_pf
@@ -68,6 +74,9 @@ BATCH = 4096
 MAP_SPACING_MM = 5.0
 #: a map cell whose centre lies within this distance (mm) of a wire counts as "near the wires"
 NEAR_WIRE_MM = 5.0
+#: where the push's columns come from (module docstring): the untouched state, once per state,
+#: or a table of direct solves with the finger pressing
+PUSH_COLUMNS = ("untouched", "finger")
 
 
 # ---------------------------------------------------------------------------- the batched bound
@@ -146,7 +155,9 @@ class StateNuisances:
     ``push`` (n_pairs, n_loads) pF/N and ``inflation`` (n_pairs, n_chambers) pF/ml: derivatives
     of the untouched readout; ``finger_gain`` κ (1/mm): ∂C/∂R ≈ κ (C − C_untouched);
     ``finger_fit`` the relative residual of that fit, ‖col − κ ΔC‖ / ‖col‖ over its points;
-    ``modulus``: ∂C/∂ln E of the pulp's modulus at nodes of each face (None: not taken).
+    ``modulus``: ∂C/∂ln E of the pulp's modulus at nodes of each face (None: not taken);
+    ``push_table``: the push's columns with the finger pressing at nodes of each face, used
+    instead of ``push`` where given (None: the untouched ``push``).
     """
 
     inflation_ml: tuple[float, ...]
@@ -155,25 +166,34 @@ class StateNuisances:
     finger_gain: float
     finger_fit: float
     modulus: ModulusTable | None = None
+    push_table: PushTable | None = None
 
     @property
     def sizes(self) -> dict[str, int]:
         return {"push": self.push.shape[1], "inflation": self.inflation.shape[1], "finger": 1,
                 **({"modulus": 1} if self.modulus is not None else {})}
 
+    @property
+    def push_columns(self) -> str:
+        """Where the push's columns come from: "untouched" or "finger" (:data:`PUSH_COLUMNS`)."""
+        return "untouched" if self.push_table is None else "finger"
+
     def columns(self, name: str, delta: np.ndarray, face: str | None = None, uv=None,
                 force_n=None) -> np.ndarray:
         """(n, n_pairs, k) columns of nuisance ``name`` at points whose finger's signal is
-        ``delta`` (n, n_pairs) pF; ``modulus`` needs the points too: ``face``, ``uv`` (n, 2) mm
-        and ``force_n`` (n,)."""
+        ``delta`` (n, n_pairs) pF; ``modulus``, and ``push`` from a table, need the points too:
+        ``face``, ``uv`` (n, 2) mm and ``force_n`` (n,)."""
         check_option("nuisance", name, tuple(self.sizes))
         n = delta.shape[0]
         if name == "finger":
             return (self.finger_gain * delta)[:, :, None]
-        if name == "modulus":
-            if self.modulus is None or face is None or uv is None or force_n is None:
-                raise EctskinError("StateNuisances.columns: 'modulus' needs face, uv and force_n")
-            return self.modulus.column(face, uv, force_n)[:, :, None]
+        table = self.modulus if name == "modulus" else self.push_table if name == "push" else None
+        if table is not None or name == "modulus":
+            if table is None or face is None or uv is None or force_n is None:
+                raise EctskinError(f"StateNuisances.columns: {name!r} needs its table, face, uv "
+                                   "and force_n")
+            col = table.column(face, uv, force_n)
+            return col[:, :, None] if col.ndim == 2 else col
         col = self.push if name == "push" else self.inflation
         return np.broadcast_to(col, (n, *col.shape))
 
@@ -183,7 +203,9 @@ class StateNuisances:
             "finger_gain_per_mm": self.finger_gain,
             "finger_fit_residual": self.finger_fit,
             "n_push_loads": self.push.shape[1],
+            "push_columns": self.push_columns,
             **({"modulus": self.modulus.to_dict()} if self.modulus is not None else {}),
+            **({"push_table": self.push_table.to_dict()} if self.push_table is not None else {}),
         }
 
 
@@ -269,21 +291,31 @@ def default_finger_points(field: ResponseField) -> list[tuple[str, tuple[float, 
 
 def field_nuisances(
     field: ResponseField, *, finger: bool = True, modulus: bool = False,
+    push_columns: str = "untouched", push_options: Mapping[str, Any] | None = None,
     steps: Mapping[str, float] | None = None, **table: Any,
 ) -> StateNuisances:
     """:func:`state_nuisances` of the sensor and state ``field`` was built from (its spec); with
     ``modulus`` also the pulp modulus's :func:`~ectskin.twin.bound_modulus.modulus_table` over
     the field's faces and force range (``table``: its ``spacing_mm``, ``force_nodes``; the
-    step is ``steps["modulus"]``, :data:`~ectskin.twin.bound.FD_STEPS`)."""
+    step is ``steps["modulus"]``, :data:`~ectskin.twin.bound.FD_STEPS`); with ``push_columns``
+    "finger" also the push's :func:`~ectskin.twin.bound_push.push_table` over the same
+    (``push_options``: its ``spacing_mm``, ``force_nodes``, ``scheme``; the step
+    ``steps["push"]``), whose columns then replace the untouched state's."""
+    check_option("push_columns", push_columns, PUSH_COLUMNS)
     points = default_finger_points(field) if finger else ()
     sensor = field.spec.sensor()
     out = state_nuisances(sensor, field.spec.inflation_ml, finger_points=points, steps=steps)
-    if not modulus:
-        return out
-    step = {**FD_STEPS, **(steps or {})}["modulus"]
+    step = {**FD_STEPS, **(steps or {})}
     extents = {face: field.spec.extent(face) for face in field.faces}
-    return replace(out, modulus=modulus_table(sensor, field.spec.inflation_ml, extents,
-                                              field.spec.force_range_n, step=step, **table))
+    if modulus:
+        out = replace(out, modulus=modulus_table(sensor, field.spec.inflation_ml, extents,
+                                                 field.spec.force_range_n,
+                                                 step=step["modulus"], **table))
+    if push_columns == "finger":
+        out = replace(out, push_table=push_table(sensor, field.spec.inflation_ml, extents,
+                                                 field.spec.force_range_n, step=step["push"],
+                                                 **(push_options or {})))
+    return out
 
 
 # ---------------------------------------------------------------------------- many points
@@ -428,6 +460,11 @@ def field_bound_maps(
         for f in faces
     }
     near: list[np.ndarray] = []
+    used = {columns[s].push_columns for s in fields if s in columns} if columns else set()
+    if len(used) > 1:
+        raise EctskinError(f"field_bound_maps: the states' push columns differ ({sorted(used)}); "
+                           "take them alike for every state")
+    push_from = used.pop() if used and nuisances else None
     for inflation, field in fields.items():
         if tuple(field.spec.inflation_ml) != tuple(float(x) for x in inflation):
             raise EctskinError(
@@ -483,8 +520,12 @@ def field_bound_maps(
             "null_share": NULL_SHARE, "force_threshold_n": force_threshold_n,
             "near_wire_mm": NEAR_WIRE_MM,
             "readout": readout or ReadoutConfig(), "position": "sqrt(var_u + var_v)",
+            "push_columns": push_from,
             "columns": {"u, v, force": "ResponseField.jacobian",
-                        "push, inflation": "untouched state, once per state",
+                        "push": ("direct differences with the finger on, at nodes per state, "
+                                 "interpolated" if push_from == "finger"
+                                 else "untouched state, once per state"),
+                        "inflation": "untouched state, once per state",
                         "finger": "gain x finger's signal, fitted per state",
                         "modulus": "direct differences at nodes per state, interpolated"},
         },
