@@ -124,6 +124,12 @@ def _field_of(fields: Mapping[tuple[float, ...], Any], state: Sequence[float]) -
     return None
 
 
+def _point_se(se_uv) -> float:
+    """√(σ_u² + σ_v²) of a fitted finger, +inf where the fit gave none (it sorts last)."""
+    v = float(np.hypot(*np.asarray(se_uv, dtype=np.float64)))
+    return v if np.isfinite(v) else np.inf
+
+
 def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
                        extent: Mapping[str, Any]) -> np.ndarray:
     """The inversion's answers (:func:`ectskin.inversion.results_to_arrays`, F frames) as
@@ -132,7 +138,9 @@ def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
 
     ``count``: the fitted fingers that press; ``p_contact``: 1 when one does; ``p_hover``: 1
     when none presses and one hovers at most ``HOVER_MAX_MM`` high. The pressing fingers take
-    the slots in the fitted order, then the hovering ones, the lowest first; a frame where none
+    the slots first, the best-located first (the least point standard error: a two-finger fit's
+    phantom, where the readouts hardly tell a point, must not stand for the finger on the
+    skin), then the hovering ones, the lowest first; a frame where none
     presses gives slot 0 the point of the lowest hovering finger (the nearest to touching),
     or, with no finger at all, the middle of the first face (an answer is needed wherever a
     finger is on the skin, and that one is charged its full error).
@@ -147,7 +155,10 @@ def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
     face_of = {f: i for i, f in enumerate(faces)}
     for i in range(n):
         fitted = [k for k in range(S) if arrays["face"][i, k]]
-        pressing = [k for k in fitted if arrays["contact"][i, k]]
+        # the best-located press first: a two-finger fit's phantom (a finger where the readouts
+        # hardly tell its point, beyond the wire ends) never stands for the finger on the skin
+        pressing = sorted((k for k in fitted if arrays["contact"][i, k]),
+                          key=lambda k: _point_se(arrays["uv_se_mm"][i, k]))
         hovering = sorted((k for k in fitted if not arrays["contact"][i, k]),
                           key=lambda k: arrays["height_mm"][i, k])  # the lowest first
         pred[i, 0] = len(pressing)
