@@ -26,7 +26,7 @@ points, or once per state on a grid of nodes over each face's extent and forces
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -112,20 +112,8 @@ class ModulusTable:
 
     def column(self, face: str, uv, force_n) -> np.ndarray:
         """(n, n_pairs) ∂C/∂ln E at the points ``uv`` (n, 2) of ``face`` and forces (n,)."""
-        if face not in self.values:
-            raise EctskinError(f"ModulusTable: no nodes on face {face!r} (faces "
-                               f"{sorted(self.values)})")
-        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        force = np.broadcast_to(np.asarray(force_n, dtype=np.float64), (uv.shape[0],))
-        u, v = self.nodes[face]
-        lf = np.log(self.forces_n)
-        q = np.c_[np.clip(uv[:, 0], u[0], u[-1]), np.clip(uv[:, 1], v[0], v[-1]),
-                  np.clip(np.log(np.maximum(force, 1e-300)), lf[0], lf[-1])]
-        # the cubic spline's system solved exactly (scipy's default iterative solver is off by
-        # up to ~1e-3 relative here)
-        interp = RegularGridInterpolator((u, v, lf), self.values[face], method="cubic",
-                                         solver=scipy.sparse.linalg.spsolve)
-        return interp(q)
+        return interpolate_table(self.nodes, self.forces_n, self.values, face, uv, force_n,
+                                 "ModulusTable")
 
     def to_dict(self) -> dict[str, Any]:
         """A summary for JSON: the grid and the solves (not the values)."""
@@ -154,6 +142,48 @@ def table_nodes(lo: float, hi: float, spacing_mm: float) -> np.ndarray:
     return np.linspace(lo, hi, max(4, int(round((hi - lo) / spacing_mm)) + 1))
 
 
+def interpolate_table(nodes: Mapping[str, tuple[np.ndarray, np.ndarray]], forces_n: np.ndarray,
+                      values: Mapping[str, np.ndarray], face: str, uv, force_n,
+                      who: str) -> np.ndarray:
+    """(n, ...) a table's ``values`` ({face: (nu, nv, nf, ...)} at its ``nodes`` {face: (u, v)}
+    and ``forces_n``) at the points ``uv`` (n, 2) of ``face`` and forces (n,): a cubic spline
+    in (u, v, ln F), points and forces beyond the nodes moved to the nearest node plane."""
+    if face not in values:
+        raise EctskinError(f"{who}: no nodes on face {face!r} (faces {sorted(values)})")
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    force = np.broadcast_to(np.asarray(force_n, dtype=np.float64), (uv.shape[0],))
+    u, v = nodes[face]
+    lf = np.log(forces_n)
+    q = np.c_[np.clip(uv[:, 0], u[0], u[-1]), np.clip(uv[:, 1], v[0], v[-1]),
+              np.clip(np.log(np.maximum(force, 1e-300)), lf[0], lf[-1])]
+    vals = values[face]
+    # the cubic spline's system solved exactly (scipy's default iterative solver is off by up
+    # to ~1e-3 relative here)
+    interp = RegularGridInterpolator((u, v, lf), vals.reshape(*vals.shape[:3], -1),
+                                     method="cubic", solver=scipy.sparse.linalg.spsolve)
+    return interp(q).reshape(len(q), *vals.shape[3:])
+
+
+def tabulate(
+    extents: Mapping[str, tuple[tuple[float, float], tuple[float, float]]], spacing_mm: float,
+    forces: np.ndarray, who: str, column: Callable[[str, np.ndarray, np.ndarray], np.ndarray],
+) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], dict[str, np.ndarray]]:
+    """(nodes, values) of a table: ``column(face, points (m, 2), forces (m,))`` -> (m, ...) at
+    the nodes of each face's extent ({face: ((u_lo, u_hi), (v_lo, v_hi)) mm},
+    :func:`table_nodes` at ``spacing_mm``) times ``forces``; values {face: (nu, nv, nf, ...)}."""
+    if not (math.isfinite(spacing_mm) and spacing_mm > 0):
+        raise EctskinError(f"{who}: spacing_mm must be a finite number > 0, got {spacing_mm!r}")
+    nodes, values = {}, {}
+    for face, ((ulo, uhi), (vlo, vhi)) in extents.items():
+        u, v = table_nodes(ulo, uhi, spacing_mm), table_nodes(vlo, vhi, spacing_mm)
+        U, V = np.meshgrid(u, v, indexing="ij")
+        pts = np.repeat(np.c_[U.ravel(), V.ravel()], forces.size, axis=0)
+        col = column(face, pts, np.tile(forces, U.size))
+        nodes[face] = (u, v)
+        values[face] = col.reshape(u.size, v.size, forces.size, *col.shape[1:])
+    return nodes, values
+
+
 def modulus_table(
     sensor: SensorModel,
     inflation_ml,
@@ -168,16 +198,9 @@ def modulus_table(
     the nodes of each face's extent ({face: ((u_lo, u_hi), (v_lo, v_hi)) mm}, :func:`table_nodes`
     at ``spacing_mm``) and ``force_nodes`` (>= 4) forces equally spaced in ln F over
     ``force_range_n`` (lo, hi) N. Costs 2 readouts per node, in 2 calls per point (u, v)."""
-    if not (math.isfinite(spacing_mm) and spacing_mm > 0):
-        raise EctskinError(f"modulus_table: spacing_mm must be a finite number > 0, got "
-                           f"{spacing_mm!r}")
     forces = log_forces(force_range_n, force_nodes, "modulus_table")
-    nodes, values = {}, {}
-    for face, ((ulo, uhi), (vlo, vhi)) in extents.items():
-        u, v = table_nodes(ulo, uhi, spacing_mm), table_nodes(vlo, vhi, spacing_mm)
-        U, V = np.meshgrid(u, v, indexing="ij")
-        pts = np.repeat(np.c_[U.ravel(), V.ravel()], forces.size, axis=0)
-        col = modulus_column(sensor, inflation_ml, face, pts, np.tile(forces, U.size), step=step)
-        nodes[face] = (u, v)
-        values[face] = col.reshape(u.size, v.size, forces.size, -1)
+    nodes, values = tabulate(
+        extents, spacing_mm, forces, "modulus_table",
+        lambda face, pts, f: modulus_column(sensor, inflation_ml, face, pts, f, step=step),
+    )
     return ModulusTable(nodes, forces, values, step)

@@ -39,12 +39,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.sparse.linalg
-from scipy.interpolate import RegularGridInterpolator
 
 from ectskin._check import EctskinError, check_option
 from ectskin.twin.bound import DEFAULT_PUSH_LOADS, FD_STEPS
-from ectskin.twin.bound_modulus import log_forces, table_nodes
+from ectskin.twin.bound_modulus import interpolate_table, log_forces, tabulate
 from ectskin.twin.mechanics import Handling, Touch
 from ectskin.twin.sensor import SensorModel
 
@@ -154,20 +152,8 @@ class PushTable:
     def column(self, face: str, uv, force_n) -> np.ndarray:
         """(n, n_pairs, n_loads) the push's columns at the points ``uv`` (n, 2) of ``face`` and
         forces (n,)."""
-        if face not in self.values:
-            raise EctskinError(f"PushTable: no nodes on face {face!r} (faces "
-                               f"{sorted(self.values)})")
-        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        force = np.broadcast_to(np.asarray(force_n, dtype=np.float64), (uv.shape[0],))
-        u, v = self.nodes[face]
-        lf = np.log(self.forces_n)
-        q = np.c_[np.clip(uv[:, 0], u[0], u[-1]), np.clip(uv[:, 1], v[0], v[-1]),
-                  np.clip(np.log(np.maximum(force, 1e-300)), lf[0], lf[-1])]
-        vals = self.values[face]
-        # the cubic spline's system solved exactly (as ModulusTable.column)
-        interp = RegularGridInterpolator((u, v, lf), vals.reshape(*vals.shape[:3], -1),
-                                         method="cubic", solver=scipy.sparse.linalg.spsolve)
-        return interp(q).reshape(len(q), *vals.shape[3:])
+        return interpolate_table(self.nodes, self.forces_n, self.values, face, uv, force_n,
+                                 "PushTable")
 
     def to_dict(self) -> dict[str, Any]:
         """A summary for JSON: the grid and the solves (not the values)."""
@@ -195,19 +181,12 @@ def push_table(
     :func:`~ectskin.twin.bound_modulus.table_nodes` at ``spacing_mm``) and ``force_nodes``
     (>= 4) forces equally spaced in ln F over ``force_range_n`` (lo, hi) N. Costs 18 readouts
     per node with the 9 default loads (central; 10 forward), in 6 calls (7) per point (u, v)."""
-    if not (math.isfinite(spacing_mm) and spacing_mm > 0):
-        raise EctskinError(f"push_table: spacing_mm must be a finite number > 0, got "
-                           f"{spacing_mm!r}")
     if not push_loads:
         raise EctskinError("push_table: no push loads given")
     forces = log_forces(force_range_n, force_nodes, "push_table")
-    nodes, values = {}, {}
-    for face, ((ulo, uhi), (vlo, vhi)) in extents.items():
-        u, v = table_nodes(ulo, uhi, spacing_mm), table_nodes(vlo, vhi, spacing_mm)
-        U, V = np.meshgrid(u, v, indexing="ij")
-        pts = np.repeat(np.c_[U.ravel(), V.ravel()], forces.size, axis=0)
-        col = push_columns(sensor, inflation_ml, face, pts, np.tile(forces, U.size),
-                           push_loads=push_loads, step=step, scheme=scheme)
-        nodes[face] = (u, v)
-        values[face] = col.reshape(u.size, v.size, forces.size, *col.shape[1:])
+    nodes, values = tabulate(
+        extents, spacing_mm, forces, "push_table",
+        lambda face, pts, f: push_columns(sensor, inflation_ml, face, pts, f,
+                                          push_loads=push_loads, step=step, scheme=scheme),
+    )
     return PushTable(nodes, forces, values, step, scheme)
