@@ -105,6 +105,11 @@ def test_the_step_scores_the_test_frames_as_a_hand_computation(world, tmp_path):
     assert m["loc_mm_median"] == pytest.approx(np.median(loc), rel=1e-6)
     assert m["force_mae_n"] == pytest.approx(force.mean(), rel=1e-6)
     assert m["count_accuracy"] == pytest.approx(count.mean(), rel=1e-12)
+    # the same frames split by another finger above the skin: the parts make up the whole
+    split = [m["by_other_finger"][p] for p in ("alone", "other_hovering", "other_above")]
+    assert sum(p["n_frames"] for p in split) == loc.size
+    assert sum(p["loc_mm_mean"] * p["n_frames"] for p in split if p["n_frames"]) == (
+        pytest.approx(loc.sum(), rel=1e-6))
     # one state with a field: its numbers are the overall ones; the other state is counted only
     assert list(m["per_state"]) == ["0/0/0 ml"]
     s = m["per_state"]["0/0/0 ml"]
@@ -236,6 +241,7 @@ def test_the_metrics_block_sets_contactnet_and_the_bound_beside_each_state():
     inv = {
         "loc_mm_mean": 1.0, "force_mae_n": 0.2, "count_accuracy": 0.9, "n_frames": 50,
         "multi": {"count_accuracy_by_true": {"0": 1.0, "1": 0.8, "2": None}},
+        "by_other_finger": {"alone": {"loc_mm_mean": 0.7, "n_frames": 3}},
         "force_observable": {"share": 0.25, "force_mae_n": 0.05, "threshold_n": 0.1},
         "timing": {"ms_per_frame_median": 4.0, "ms_per_frame_p95": 9.0, "total_s": 1.0},
         "per_state": {"0/0/0 ml": {"loc_mm_mean": 0.5, "n_single_contact_frames": 3},
@@ -260,6 +266,7 @@ def test_the_metrics_block_sets_contactnet_and_the_bound_beside_each_state():
     assert b["contact_loc_mm_mean"] == pytest.approx((2.0 * 30 + 6.0 * 10) / 40)
     assert b["baseline_loc_mm_mean"] == {"knn": pytest.approx(5.0), "ridge": None}
     assert b["count_accuracy_by_true"]["1"] == 0.8 and b["force_mae_n_observable"] == 0.05
+    assert b["by_other_finger"]["alone"]["loc_mm_mean"] == 0.7
     assert (b["bound_loc_mm_mean"], b["bound_force_n_mean"]) == (0.1, 0.3)
     s = b["per_state"]["0/0/0 ml"]
     assert (s["contact_loc_mm_mean"], s["bound_loc_mm_mean"], s["bound_force_n_mean"]) == (

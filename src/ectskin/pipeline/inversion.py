@@ -247,7 +247,9 @@ def invert_rows(inv: Inversion, rec: Recording, data: ContactData, rows: np.ndar
 def score(data: ContactData, arrays: Mapping[str, np.ndarray], seconds: np.ndarray
           ) -> dict[str, Any]:
     """The inversion's contact metrics on ``data`` (all its rows inverted, in order): those of
-    :func:`~ectskin.learn.tasks.contact.contact_report`, per state (:data:`STATE_KEYS` with
+    :func:`~ectskin.learn.tasks.contact.contact_report` (with ``by_other_finger``: the point
+    error with no other finger above the skin, one hovering near, one higher), per state
+    (:data:`STATE_KEYS` with
     ``n_frames``), the force MAE where the fitted force's standard error is below
     :data:`FORCE_OBSERVABLE_N`, and the time per frame."""
     pred = prediction_columns(arrays, data.faces, data.face_extent)
@@ -255,7 +257,8 @@ def score(data: ContactData, arrays: Mapping[str, np.ndarray], seconds: np.ndarr
     out: dict[str, Any] = {k: report.get(k) for k in (
         "loc_mm_mean", "loc_mm_median", "loc_mm_p90", "face_accuracy", "force_mae_n",
         "force_rel", "hover_detect_mm", "contact_accuracy", "count_accuracy",
-        "n_single_contact_frames", "per_face", "force", "hover", "multi", "sigma_mm_median")}
+        "n_single_contact_frames", "per_face", "force", "hover", "multi", "sigma_mm_median",
+        "by_other_finger")}
     per_state = {}
     for s, state in enumerate(data.states):
         rows = np.flatnonzero(data.state == s)

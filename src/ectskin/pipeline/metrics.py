@@ -434,6 +434,7 @@ def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
     return {
         **{k: inv.get(k) for k in INVERSION_KEYS},
         "count_accuracy_by_true": (inv.get("multi") or {}).get("count_accuracy_by_true"),
+        "by_other_finger": inv.get("by_other_finger"),
         "two_finger": {k: v for k, v in (inv.get("two_finger") or {}).items()
                        if k != "count_accuracy_by_trial"} or None,
         "force_mae_n_observable": fo.get("force_mae_n"),
