@@ -122,3 +122,34 @@ def test_the_report_gives_the_two_finger_frames_scored_apart():
     text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
     assert "Two fingers on the skin: 400 test frames of 3 trial(s)" in text
     assert "counted two on 85.00 %" in text and "4.50 mm" in text and "(median 3.00 mm)" in text
+
+
+def test_the_point_error_without_another_finger_above_the_skin_has_its_own_row():
+    m = _metrics()
+    table = lambda metrics: next(  # noqa: E731
+        t for h, t in _tables(inversion_sections(metrics)).items() if h[0] == "metric")
+    assert not any(r[0].startswith("Contact point: mean error, no other") for r in table(m))
+    m["inversion"]["alone"] = {"loc_mm_mean": 0.75, "n_frames": 30, "contact_loc_mm_mean": 2.5,
+                               "baseline_loc_mm_mean": {"knn": 4.0, "ridge": None}}
+    row = next(r for r in table(m) if r[0].startswith("Contact point: mean error, no other"))
+    assert row[1:] == ("0.75 mm", "2.50 mm", "k-NN 4.00 mm", "—")
+
+
+def test_the_alone_split_weighs_each_model_over_the_inversions_states():
+    from ectskin.pipeline.metrics import alone_beside
+
+    part = lambda per_state: {"by_other_finger": {"alone": {"per_state": per_state}}}  # noqa: E731
+    inv = {"by_other_finger": {"alone": {"loc_mm_mean": 0.8, "n_frames": 40, "per_state": {
+        "0/0/0 ml": {"loc_mm_mean": 0.5, "n_frames": 30},
+        "20/0/0 ml": {"loc_mm_mean": 1.7, "n_frames": 10},
+        "0/20/0 ml": {"loc_mm_mean": None, "n_frames": 0}}}}}
+    contact = {**part({"0/0/0 ml": {"loc_mm_mean": 2.0, "n_frames": 300},
+                       "20/0/0 ml": {"loc_mm_mean": 6.0, "n_frames": 100},
+                       "10/10/10 ml": {"loc_mm_mean": 100.0, "n_frames": 100}}),
+               "baselines": {"knn": part({"0/0/0 ml": {"loc_mm_mean": 4.0, "n_frames": 300}})}}
+    out = alone_beside(contact, inv)
+    assert out["states"] == ["0/0/0 ml", "20/0/0 ml"]  # a state without such a frame is left out
+    assert out["contact_loc_mm_mean"] == 3.0  # (2 · 300 + 6 · 100) / 400: not 10/10/10 ml
+    assert out["baseline_loc_mm_mean"] == {"knn": None}  # it lacks 20/0/0 ml
+    assert (out["loc_mm_mean"], out["n_frames"]) == (0.8, 40)
+    assert alone_beside(contact, {}) is None

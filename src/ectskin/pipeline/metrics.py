@@ -405,6 +405,29 @@ def beside(contact: Mapping[str, Any] | None, inversion: Mapping[str, Any]) -> d
     }
 
 
+def alone_beside(contact: Mapping[str, Any] | None, inversion: Mapping[str, Any]
+                 ) -> dict[str, Any] | None:
+    """The one-finger point error with no other finger above the skin (``by_other_finger``'s
+    ``alone``): the inversion's, and ContactNet's (``contact``) and each baseline's over the
+    states in which the inversion scored such a frame (:func:`same_states`); None without the
+    inversion's split."""
+    part = (inversion.get("by_other_finger") or {}).get("alone")
+    if not part:
+        return None
+    states = [s for s, v in (part.get("per_state") or {}).items() if (v.get("n_frames") or 0)]
+
+    def alone(block: Mapping[str, Any] | None) -> Mapping[str, Any]:
+        return ((block or {}).get("by_other_finger") or {}).get("alone") or {}
+
+    c = contact or {}
+    return {
+        "loc_mm_mean": part.get("loc_mm_mean"), "n_frames": part.get("n_frames"),
+        "contact_loc_mm_mean": same_states(alone(c).get("per_state"), states),
+        "baseline_loc_mm_mean": {b: same_states(alone(v).get("per_state"), states)
+                                 for b, v in (c.get("baselines") or {}).items()},
+        "states": states,
+    }
+
 def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
                     bound: Mapping[str, Any] | None) -> dict[str, Any]:
     """metrics.json's ``inversion`` from the inversion step's metrics (``docs/reproduce.md``):
@@ -435,6 +458,7 @@ def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
         **{k: inv.get(k) for k in INVERSION_KEYS},
         "count_accuracy_by_true": (inv.get("multi") or {}).get("count_accuracy_by_true"),
         "by_other_finger": inv.get("by_other_finger"),
+        "alone": alone_beside(contact, inv),
         "two_finger": {k: v for k, v in (inv.get("two_finger") or {}).items()
                        if k != "count_accuracy_by_trial"} or None,
         "force_mae_n_observable": fo.get("force_mae_n"),

@@ -63,6 +63,13 @@ def inversion_table(metrics: Mapping[str, Any]) -> tuple[tuple[str, ...], list[t
         ("Contact point: mean error", _mm(inv.get("loc_mm_mean")),
          _mm(inv.get("contact_loc_mm_mean")), _best(inv.get("baseline_loc_mm_mean") or {}),
          _mm(inv.get("bound_loc_mm_mean"))),
+    ]
+    alone = inv.get("alone")
+    if alone and alone.get("n_frames"):
+        rows.append(("Contact point: mean error, no other finger above the skin",
+                     _mm(alone.get("loc_mm_mean")), _mm(alone.get("contact_loc_mm_mean")),
+                     _best(alone.get("baseline_loc_mm_mean") or {}), DASH))
+    rows += [
         ("Force: mean absolute error", _n(inv.get("force_mae_n")), _n(c.get("force_mae_n")),
          _best_of(base, "force_mae_n", _n, True), _n(inv.get("bound_force_n_mean"))),
         ("Finger count (0, 1, 2) right", _pct(inv.get("count_accuracy")),
