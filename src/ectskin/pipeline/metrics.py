@@ -428,6 +428,7 @@ def alone_beside(contact: Mapping[str, Any] | None, inversion: Mapping[str, Any]
         "states": states,
     }
 
+
 def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
                     bound: Mapping[str, Any] | None) -> dict[str, Any]:
     """metrics.json's ``inversion`` from the inversion step's metrics (``docs/reproduce.md``):
