@@ -103,12 +103,14 @@ def test_scatter_over_noisy_direct_solves_is_near_the_bound(small_spec, small_fi
 
 def test_counts_on_twin_frames(small_spec, small_field, sensor, inv):
     """No finger on the untouched state, one on a direct solve, two on the superposition of two
-    direct solves' signals (the model's two fingers), all with the readout's noise."""
+    direct solves' signals (the model's two fingers, their fingertips 18.6 mm apart: closer than
+    two radii they would overlap, and the fit does not answer so), all with the readout's
+    noise."""
     st = small_spec.inflation_ml
     rng = np.random.default_rng(2)
     c_u = small_field.untouched
-    a = sensor.capacitance(st, Touch("front", (-4.6, 44.3)), [1.0])[0]
-    b = sensor.capacitance(st, Touch("front", (5.2, 55.7)), [1.4])[0]
+    a = sensor.capacitance(st, Touch("front", (-5.5, 42.5)), [1.0])[0]
+    b = sensor.capacitance(st, Touch("front", (5.5, 57.5)), [1.4])[0]
 
     def noisy(c):
         return readout(c[None], np.zeros(1), rng, NO_DRIFT, np.zeros(c.size))[0]
@@ -118,7 +120,7 @@ def test_counts_on_twin_frames(small_spec, small_field, sensor, inv):
     two = inv.fit(noisy(a + b - c_u), st)
     assert two.n_fingers == 2, two.bic_by_count
     got = sorted((g.u_mm, g.v_mm) for g in two.fingers)
-    np.testing.assert_allclose(got, [(-4.6, 44.3), (5.2, 55.7)], atol=0.5)
+    np.testing.assert_allclose(got, [(-5.5, 42.5), (5.5, 57.5)], atol=0.5)
 
 
 def test_the_push_basis_spans_a_push_it_was_not_built_from(small_spec, small_field, sensor):

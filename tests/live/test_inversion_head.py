@@ -169,7 +169,8 @@ def test_a_warm_start_gives_the_cold_answer_and_skips_the_coarse_search(fields, 
     inv = Inversion({REST: field}, NOISE)
     rng = np.random.default_rng(5)
     one = [frame(field, [p], rng) for p in slide(8)]
-    two_pts = [[(-5.0 + 0.3 * t, 43.0, 1.2, 0.0), (5.0, 57.0 - 0.3 * t, 0.9, 0.0)] for t in range(6)]
+    # two fingertips at least 17 mm apart (closer than two radii they would overlap)
+    two_pts = [[(-5.5 + 0.3 * t, 42.0, 1.2, 0.0), (5.5, 58.0 - 0.3 * t, 0.9, 0.0)] for t in range(6)]
     two = [frame(field, p, rng) for p in two_pts]
     searched = []
     table = type(inv.model(REST).table)

@@ -160,6 +160,11 @@ class Inversion:
         far leave χ² above its upper ``gate_p`` quantile (χ² with n − 3k − m degrees of freedom
         for k fingers): the frame is not explained within the noise. 0 tries every count and
         every start.
+    min_separation_mm : two fingers on one face whose fingertips' centres would lie closer than
+        this (their lateral distance and the difference of their heights above the skin) are
+        not an answer: fingertips are solids and cannot overlap, and such a pair, a finger split
+        in two, is how a fit explains one finger larger or softer than the field's. None
+        (default): twice the fields' fingertip radius; 0: no such rule.
     """
 
     def __init__(
@@ -185,6 +190,7 @@ class Inversion:
         modulus_prior_sd: float = MODULUS_PRIOR_SD,
         radius: Mapping[tuple[float, ...], Any] | None = None,
         radius_prior_sd: float = RADIUS_PRIOR_SD,
+        min_separation_mm: float | None = None,
     ) -> None:
         if not isinstance(fields, Mapping) or not fields:
             raise EctskinError(
@@ -215,6 +221,15 @@ class Inversion:
                 f"got {two_fingers!r}"
             )
         self.coupled = two_fingers == "coupled"
+        if min_separation_mm is None:
+            radii = [getattr(getattr(getattr(f, "spec", None), "finger", None), "radius_mm", None)
+                     for f in fields.values()]
+            known = [float(r) for r in radii if r is not None]
+            min_separation_mm = 2.0 * min(known) if known and len(known) == len(radii) else 0.0
+        if not (isinstance(min_separation_mm, int | float) and 0 <= min_separation_mm < math.inf):
+            raise EctskinError(f"Inversion: min_separation_mm must be a number >= 0 (mm) or None, "
+                               f"got {min_separation_mm!r}")
+        self.min_separation_mm = float(min_separation_mm)
         self.starts = starts
         self.gate_p = float(gate_p)
         self.push_prior_sd = push_prior_sd
@@ -397,6 +412,8 @@ class Inversion:
                     if passed[j]:
                         break
         fits += [None] * (self.max_fingers + 1 - len(fits))
+        if len(fits) > 2 and fits[2] is not None and self._overlap(m, fits[2]):
+            fits[2] = None  # one finger split in two: not a configuration of two fingertips
         const = -float(np.sum(np.log(sigma))) - 0.5 * n * math.log(2 * math.pi)
         lls = [-math.inf if f is None else const - 0.5 * f.chi2 for f in fits]
         bics = [math.inf if f is None else f.n_params * math.log(n) - 2 * ll
@@ -411,6 +428,17 @@ class Inversion:
             lls[best_k] = const - 0.5 * chosen.chi2
             bics[best_k] = chosen.n_params * math.log(n) - 2 * lls[best_k]
         return build_result(m, chosen, w, lls[best_k], bics, self._sigma)
+
+    def _overlap(self, m: StateModel, fit: Fit) -> bool:
+        """Whether the two fingers of ``fit`` lie on one face with their fingertips' centres
+        closer than ``min_separation_mm`` (their lateral distance and the difference of their
+        heights above the skin: 0 pressing, h hovering)."""
+        (fa, ma, xa), (fb, mb, xb) = fit.fingers
+        if fa != fb or self.min_separation_mm <= 0:
+            return False
+        ha = math.exp(xa[2]) if MODES[ma] == "hover" else 0.0
+        hb = math.exp(xb[2]) if MODES[mb] == "hover" else 0.0
+        return math.hypot(xa[0] - xb[0], xa[1] - xb[1], ha - hb) < self.min_separation_mm
 
     @staticmethod
     def _warm_start(m: StateModel, warm: InversionResult | None
