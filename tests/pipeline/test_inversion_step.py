@@ -278,3 +278,46 @@ def test_the_metrics_block_sets_contactnet_and_the_bound_beside_each_state():
     two = {"count_accuracy": 0.75, "n_trials": 2, "count_accuracy_by_trial": {"a": 1.0, "b": 0.5}}
     assert inversion_block({**inv, "two_finger": two}, None, None)["two_finger"] == {
         "count_accuracy": 0.75, "n_trials": 2}
+
+
+def test_the_two_finger_model_reaches_every_fit_and_the_settings(world, tmp_path, monkeypatch):
+    config, fields, path = world
+    config = _out(tmp_path, config)
+    seen = []
+    real = pinv.Inversion
+
+    def spy(*a, **k):
+        seen.append(k.get("two_fingers"))
+        return real(*a, **k)
+
+    monkeypatch.setattr(pinv, "Inversion", spy)
+    runner = StepRunner(config.out_dir, force=False)
+    m = pinv.inversion_step(runner, config, fields, (path, {"x": 1}), push="auto",
+                            max_frames=20, two_fingers="coupled")
+    assert len(seen) == 3 and set(seen) == {"coupled"}  # the push's two and the step's own
+    field = next(iter(fields.values()))
+    assert m["settings"]["two_fingers"] == "coupled"
+    assert m["settings"]["min_separation_mm"] == 2 * field.spec.finger.radius_mm
+    # a step made with one model is not reused for the other
+    with pytest.raises(EctskinError, match="would overwrite.*two_fingers"):
+        pinv.inversion_step(StepRunner(config.out_dir, force=False), config, fields,
+                            (path, {"x": 1}), push="auto", max_frames=20)
+    with pytest.raises(EctskinError, match="two_fingers"):
+        pinv.inversion_step(runner, config, fields, (path, {"x": 1}), two_fingers="joined")
+
+
+def test_the_reproduction_fits_two_fingers_as_coupled_conductors(tmp_path, monkeypatch):
+    import importlib
+
+    rep = importlib.import_module("ectskin.pipeline.reproduce")
+    got = {}
+    monkeypatch.setattr(rep, "contact_fields", lambda config, specs: {(0.0, 0.0, 0.0): object()})
+    monkeypatch.setattr(rep, "physics_field_specs", lambda config: [])
+    monkeypatch.setattr(rep, "bound_step", lambda *a, **k: {})
+    monkeypatch.setattr(rep, "inversion_step", lambda *a, **k: got.update(k) or {})
+
+    class Runner:
+        timings: dict = {}
+
+    rep._physics_steps(Runner(), ReproduceConfig(tmp_path), (tmp_path, {}), {})
+    assert got["two_fingers"] == "coupled" and got["press_check"] and got["choice"]

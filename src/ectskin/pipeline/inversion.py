@@ -73,6 +73,7 @@ import numpy as np
 from ectskin._check import EctskinError, check_option
 from ectskin._files import read_json, to_jsonable, write_json_atomic
 from ectskin.inversion import Inversion, fit_frames, push_basis, results_to_arrays
+from ectskin.inversion.fit import TWO_FINGER_MODELS
 from ectskin.inversion.seed import SEED_SEARCH
 from ectskin.io import Recording, read_recording
 from ectskin.io.calibration import is_no_contact
@@ -393,6 +394,7 @@ def inversion_step(
     press_check: bool = False,
     two_finger_frames: int | None = MAX_TWO_FINGER_FRAMES,
     choice: bool = False,
+    two_fingers: str = "superposition",
 ) -> dict[str, Any]:
     """Step "inversion": OUT_DIR/inversion/metrics.json (module docstring); returns it.
 
@@ -412,6 +414,8 @@ def inversion_step(
     ``choice``: also choose the contact model of the field states among the contact run's model
     (runs/contact), its k-NN and ridge baselines, the inversion and the hybrid on validation
     frames (:mod:`ectskin.pipeline.contact_pick`); the result's ``choice``.
+    ``two_fingers``: the fit's two-finger model, "superposition" or "coupled"
+    (:class:`~ectskin.inversion.Inversion`).
     """
     if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
         raise EctskinError(f"inversion_step: max_frames must be an integer >= 1 or None, got "
@@ -425,6 +429,7 @@ def inversion_step(
         raise EctskinError("inversion_step: no response fields given")
     check_option("push", push, PUSH_CHOICES)
     check_option("untouched", untouched, UNTOUCHED_CHOICES)
+    check_option("two_fingers", two_fingers, TWO_FINGER_MODELS)
     for name, flag in (("press_check", press_check), ("choice", choice)):
         if not isinstance(flag, bool):
             raise EctskinError(f"inversion_step: {name} must be True or False, got {flag!r}")
@@ -447,6 +452,8 @@ def inversion_step(
         "window": 1, "force_observable_n": FORCE_OBSERVABLE_N, "max_frames": max_frames,
         "finger_scale_sd": finger_scale_sd, "untouched": untouched, "press_check": press_check,
         "two_finger_frames": two_finger_frames,
+        # named only when not the default, so that the steps cached before keep their key
+        **({"two_fingers": two_fingers} if two_fingers != "superposition" else {}),
     }
     if choice:  # the run's model and its baselines' seed are candidates' settings too
         settings.update(choice=True, choice_frames=CHOICE_FRAMES, choice_rule=RULE,
@@ -467,7 +474,7 @@ def inversion_step(
                 t = rec.trial(name)
                 without[state_key(t.inflation)] = without.get(state_key(t.inflation), 0) + t.n_frames
         base = untouched_readouts(rec, fields, test) if untouched == "auto" else {}
-        options: dict[str, Any] = {"press_check": press_check,
+        options: dict[str, Any] = {"press_check": press_check, "two_fingers": two_fingers,
                                    "untouched": {s: b["pF"] for s, b in base.items()} or None}
         cols: dict[Any, np.ndarray] | None = None
         push_pick: dict[str, Any] = {"use": push == "on", "why": f"push={push!r}"}
@@ -516,6 +523,7 @@ def inversion_step(
             settings={"window": 1, "kind": "absolute", "noise": to_jsonable(noise),
                       "push": push, "max_fingers": inv.max_fingers,
                       "finger_scale_sd": finger_scale_sd, "press_check": press_check,
+                      "two_fingers": two_fingers, "min_separation_mm": inv.min_separation_mm,
                       "untouched": {"source": untouched,
                                     "trials": {state_key(st): b["trials"]
                                                for st, b in base.items()}},

@@ -85,6 +85,13 @@ def reproduce(config: ReproduceConfig) -> dict[str, Any]:
         return _run(config, n_threads)
 
 
+#: the inversion's two-finger model in the reproduction: the coupled conductors (two grounded
+#: fingers screen each other: a finger hovering 10 mm over another's press leaves 0.65-0.85 of
+#: its signal, twin/field_response.py), with fingertips kept two radii apart (Inversion's
+#: ``min_separation_mm``); BENCHMARKS.md has both models on seeds 0-2
+REPRODUCTION_TWO_FINGERS = "coupled"
+
+
 def _physics_steps(
     runner: StepRunner, config: ReproduceConfig, found: tuple[Path, dict[str, Any]],
     contact: dict[str, Any],
@@ -106,7 +113,8 @@ def _physics_steps(
     # validation trials of the contact experiment (docs/inversion.md); so is the contact model
     # of the states with a field (choice: the run's model, its baselines, inversion, hybrid)
     inversion = inversion_step(runner, config, fields, found, contact, untouched="auto",
-                               finger_scale_sd=FINGER_SCALE_SD, press_check=True, choice=True)
+                               finger_scale_sd=FINGER_SCALE_SD, press_check=True, choice=True,
+                               two_fingers=REPRODUCTION_TWO_FINGERS)
     return bound, inversion
 
 
