@@ -84,6 +84,10 @@ def test_test_points_are_the_single_finger_frames(layout):
     np.testing.assert_array_equal(got_f, force[keep, 0])
     assert len(pts[STATES[1]]["front"][1]) == 4
     assert state_key((0.0, 20.0, 0.0)) == "0/20/0 ml"  # as contact metrics' per_state names
+    # alone: trial b's one-finger frames have its other finger 5 mm above the skin
+    alone = frame_points(rec, ["a", "b", "c"], alone=True)
+    assert STATES[1] not in alone
+    np.testing.assert_array_equal(alone[STATES[0]]["front"][0], uv[keep, 0])
 
 
 def test_bound_step_writes_the_maps_and_the_test_frames_bound(layout, fields, tmp_path):
@@ -113,6 +117,9 @@ def test_bound_step_writes_the_maps_and_the_test_frames_bound(layout, fields, tm
     assert got["force_n_mean"] == pytest.approx(float(np.mean(ref["force_n"])), rel=1e-9)
     assert out["test"]["states_without_field"] == {"10/10/10 ml": 7}
     assert out["test"]["per_state"]["20/0/20 ml"]["n_points"] == 4
+    # without another finger above the skin: trial a's frames only
+    assert out["test_alone"]["per_state"]["0/20/0 ml"] == got
+    assert "20/0/20 ml" not in out["test_alone"]["per_state"]
     # the maps: both states, both faces, the cell centres of 4-mm cells over the window
     assert [s["inflation_ml"] for s in out["states"]] == [list(s) for s in STATES]
     assert out["states"][0]["faces"]["back"]["u_mm"] == [-2.0, 2.0]
@@ -127,6 +134,7 @@ def test_bound_step_writes_the_maps_and_the_test_frames_bound(layout, fields, tm
     st = b["per_state"]["0/20/0 ml"]
     assert st["contact_loc_mm_mean"] == 3.5 and st["baseline_loc_mm_mean"] == {"knn": 5.0}
     assert st["test"]["loc_mm_mean"] == got["loc_mm_mean"]
+    assert b["test_alone"] == out["test_alone"]["pooled"]
     head = out["summary"]["contact"]["all"]
     assert b["case"] == "all" and b["loc_mm_mean"] == head["loc_mm_mean"]
     assert b["force_n_mean"] == head["force_n_mean"]

@@ -130,9 +130,13 @@ def test_the_point_error_without_another_finger_above_the_skin_has_its_own_row()
         t for h, t in _tables(inversion_sections(metrics)).items() if h[0] == "metric")
     assert not any(r[0].startswith("Contact point: mean error, no other") for r in table(m))
     m["inversion"]["alone"] = {"loc_mm_mean": 0.75, "n_frames": 30, "contact_loc_mm_mean": 2.5,
-                               "baseline_loc_mm_mean": {"knn": 4.0, "ridge": None}}
+                               "baseline_loc_mm_mean": {"knn": 4.0, "ridge": None},
+                               "bound_loc_mm_mean": 0.5}
     row = next(r for r in table(m) if r[0].startswith("Contact point: mean error, no other"))
-    assert row[1:] == ("0.75 mm", "2.50 mm", "k-NN 4.00 mm", "—")
+    assert row[1:] == ("0.75 mm", "2.50 mm", "k-NN 4.00 mm", "0.50 mm")
+    del m["inversion"]["alone"]["bound_loc_mm_mean"]  # a bound step made before the split
+    row = next(r for r in table(m) if r[0].startswith("Contact point: mean error, no other"))
+    assert row[-1] == "—"
 
 
 def test_the_alone_split_weighs_each_model_over_the_inversions_states():
@@ -152,4 +156,7 @@ def test_the_alone_split_weighs_each_model_over_the_inversions_states():
     assert out["contact_loc_mm_mean"] == 3.0  # (2 · 300 + 6 · 100) / 400: not 10/10/10 ml
     assert out["baseline_loc_mm_mean"] == {"knn": None}  # it lacks 20/0/0 ml
     assert (out["loc_mm_mean"], out["n_frames"]) == (0.8, 40)
+    assert out["bound_loc_mm_mean"] is None  # no bound given
+    bound = {"test_alone": {"loc_mm_mean": 0.4}}
+    assert alone_beside(contact, inv, bound)["bound_loc_mm_mean"] == 0.4
     assert alone_beside(contact, {}) is None

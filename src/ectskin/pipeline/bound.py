@@ -84,9 +84,13 @@ def state_key(inflation: Sequence[float]) -> str:
     return "/".join(f"{float(v):g}" for v in inflation) + " ml"
 
 
-def frame_points(rec: Recording, trials: Sequence[str]) -> dict[tuple[float, ...], dict[str, Any]]:
+def frame_points(rec: Recording, trials: Sequence[str], *, alone: bool = False
+                 ) -> dict[tuple[float, ...], dict[str, Any]]:
     """{state: {face: (uv (n, 2) mm, force (n,) N)}} of the frames of ``trials`` with exactly
-    one finger on the skin (the frames the contact metrics' single-finger errors are over)."""
+    one finger on the skin (the frames the contact metrics' single-finger errors are over);
+    ``alone``: only those with no other finger above the skin (``by_other_finger``'s
+    ``alone``)."""
+    from ectskin.learn.data.contact import other_finger_height
     out: dict[tuple[float, ...], dict[str, Any]] = {}
     for name in trials:
         t = rec.trial(name)
@@ -94,6 +98,8 @@ def frame_points(rec: Recording, trials: Sequence[str]) -> dict[tuple[float, ...
         if n_on is None or t.finger_uv_mm is None:
             continue
         single = n_on == 1
+        if alone:
+            single &= ~np.isfinite(other_finger_height(t))
         for k in range(t.n_fingers):
             f = t.finger(k)
             if f.contact is None or f.uv_mm is None or f.surface is None:
@@ -340,9 +346,10 @@ def bound_step(
                                     force_n=force_n, nuisances=nuisances, prior_sd=prior_sd)
             t_maps = time.perf_counter() - t0 - t_cols
             if data is not None and test:
-                pts = frame_points(read_recording(data[0]), test)
-                maps["test"] = frame_bounds(fields, columns, pts, case=case,
-                                            nuisances=nuisances, prior_sd=prior_sd)
+                rec = read_recording(data[0])
+                for key, alone in (("test", False), ("test_alone", True)):
+                    maps[key] = frame_bounds(fields, columns, frame_points(rec, test, alone=alone),
+                                             case=case, nuisances=nuisances, prior_sd=prior_sd)
         maps["headline_case"] = case
         maps["timing"].update(columns_s=t_cols, maps_s=t_maps,
                               total_s=time.perf_counter() - t0)

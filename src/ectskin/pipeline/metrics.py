@@ -355,6 +355,7 @@ def bound_block(bound: Mapping[str, Any], contact: Mapping[str, Any] | None) -> 
         "per_state": per_state,
         "cases": {c: {k: v.get(k) for k in BOUND_KEYS} for c, v in top.items()},
         "test": {**(test.get("pooled") or {}), "states_without_field": test.get("states_without_field")},
+        "test_alone": (bound.get("test_alone") or {}).get("pooled"),
         "settings": {k: settings.get(k) for k in (
             "source", "faces", "spacing_mm", "force_n", "nuisances", "prior_sd",
             "force_threshold_n", "near_wire_mm", "position", "push_columns")},
@@ -405,12 +406,13 @@ def beside(contact: Mapping[str, Any] | None, inversion: Mapping[str, Any]) -> d
     }
 
 
-def alone_beside(contact: Mapping[str, Any] | None, inversion: Mapping[str, Any]
-                 ) -> dict[str, Any] | None:
+def alone_beside(contact: Mapping[str, Any] | None, inversion: Mapping[str, Any],
+                 bound: Mapping[str, Any] | None = None) -> dict[str, Any] | None:
     """The one-finger point error with no other finger above the skin (``by_other_finger``'s
     ``alone``): the inversion's, and ContactNet's (``contact``) and each baseline's over the
-    states in which the inversion scored such a frame (:func:`same_states`); None without the
-    inversion's split."""
+    states in which the inversion scored such a frame (:func:`same_states`), and the bound at
+    the test frames without another finger (metrics.json's ``bound.test_alone``, ``bound``);
+    None without the inversion's split."""
     part = (inversion.get("by_other_finger") or {}).get("alone")
     if not part:
         return None
@@ -425,6 +427,7 @@ def alone_beside(contact: Mapping[str, Any] | None, inversion: Mapping[str, Any]
         "contact_loc_mm_mean": same_states(alone(c).get("per_state"), states),
         "baseline_loc_mm_mean": {b: same_states(alone(v).get("per_state"), states)
                                  for b, v in (c.get("baselines") or {}).items()},
+        "bound_loc_mm_mean": ((bound or {}).get("test_alone") or {}).get("loc_mm_mean"),
         "states": states,
     }
 
@@ -459,7 +462,7 @@ def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
         **{k: inv.get(k) for k in INVERSION_KEYS},
         "count_accuracy_by_true": (inv.get("multi") or {}).get("count_accuracy_by_true"),
         "by_other_finger": inv.get("by_other_finger"),
-        "alone": alone_beside(contact, inv),
+        "alone": alone_beside(contact, inv, bound),
         "two_finger": {k: v for k, v in (inv.get("two_finger") or {}).items()
                        if k != "count_accuracy_by_trial"} or None,
         "force_mae_n_observable": fo.get("force_mae_n"),

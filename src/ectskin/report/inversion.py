@@ -68,7 +68,8 @@ def inversion_table(metrics: Mapping[str, Any]) -> tuple[tuple[str, ...], list[t
     if alone and alone.get("n_frames"):
         rows.append(("Contact point: mean error, no other finger above the skin",
                      _mm(alone.get("loc_mm_mean")), _mm(alone.get("contact_loc_mm_mean")),
-                     _best(alone.get("baseline_loc_mm_mean") or {}), DASH))
+                     _best(alone.get("baseline_loc_mm_mean") or {}),
+                     _mm(alone.get("bound_loc_mm_mean"))))
     rows += [
         ("Force: mean absolute error", _n(inv.get("force_mae_n")), _n(c.get("force_mae_n")),
          _best_of(base, "force_mae_n", _n, True), _n(inv.get("bound_force_n_mean"))),

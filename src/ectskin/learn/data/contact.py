@@ -156,6 +156,15 @@ def _fingers(t: Trial, faces: list[str]) -> list[tuple[np.ndarray, np.ndarray, n
     return out
 
 
+def other_finger_height(t: Trial) -> np.ndarray:
+    """(n_frames,) the lowest height above the skin (mm) of ``t``'s fingers that are over it but
+    not on it, NaN where there is none (every finger on the skin, or away, or no heights)."""
+    if t.finger_height_mm is None or not t.n_fingers:
+        return np.full(t.n_frames, np.nan)
+    on_skin = t.finger_height_mm == 0 if t.contact is None else t.contact
+    return np.fmin.reduce(np.where(on_skin, np.nan, t.finger_height_mm), axis=1)
+
+
 def contact_dataset(
     rec: Recording,
     *,
@@ -228,11 +237,9 @@ def contact_dataset(
             )
         # the lowest finger's height (NaN where every finger is away)
         height = np.full(n, np.nan)
-        other = np.full(n, np.nan)
         if t.finger_height_mm is not None and t.n_fingers:
             height = np.fmin.reduce(t.finger_height_mm, axis=1)
-            on_skin = t.finger_height_mm == 0 if t.contact is None else t.contact
-            other = np.fmin.reduce(np.where(on_skin, np.nan, t.finger_height_mm), axis=1)
+        other = other_finger_height(t)
         hover = (count == 0) & np.isfinite(height) & (height <= hover_max_mm)
         cols["x"].append(np.ascontiguousarray(x))
         cols["count"].append(count)
