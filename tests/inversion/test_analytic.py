@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from ectskin._check import EctskinError
-from ectskin.inversion import Inversion, fit_frames, results_to_arrays
+from ectskin.inversion import FingerGuess, Inversion, fit_frames, results_to_arrays
 from ectskin.twin.bound import crb
 from ectskin.twin.readout import ReadoutConfig, noise_pf, readout
 
@@ -191,6 +191,30 @@ def test_a_window_of_frames_is_averaged(inv, analytic_field):
     res, _ = fit_frames(inv, frames, STATE, window=4)
     assert res[-1].fingers[0].u_mm == pytest.approx(win.fingers[0].u_mm, abs=1e-9)
     assert res[0].fingers[0].u_se_mm == pytest.approx(one.fingers[0].u_se_mm, rel=0.05)
+
+
+def test_frames_fitted_in_worker_processes_are_the_same(inv, analytic_field, monkeypatch):
+    """fit_frames on 2 processes, 5 frames per job: the same arrays as in this process, bit for
+    bit, with a window reaching over the jobs' borders, per-frame states and seeds (a job that
+    lost its place, or a window cut at a job's start, changes the frames after a border)."""
+    import ectskin.inversion.frames as frames_mod
+
+    monkeypatch.setattr(frames_mod, "FRAMES_PER_JOB", 5)
+    pts = [(1.2, 18.4, 1.1, 0.0), (-7.5, 30.2, 0.0, 1.7), (6.0, 15.0, 0.7, 0.0)]
+    y = np.concatenate([noisy(analytic_field.readout("front", *p), 6, 20 + k)
+                        for k, p in enumerate(pts)])
+    states = np.zeros((y.shape[0], 1))
+    guess = FingerGuess("front", 0.0, 30.0, force_n=1.0)
+    seeds = [[] if f % 4 else [[guess]] for f in range(y.shape[0])]
+    for kw in ({"window": 3}, {"seeds": seeds}):
+        one, _ = fit_frames(inv, y, states, **kw)
+        two, sec = fit_frames(inv, y, states, workers=2, **kw)
+        a, b = results_to_arrays(one), results_to_arrays(two)
+        assert sec.shape == (y.shape[0],) and np.all(sec > 0)
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    with pytest.raises(EctskinError, match="workers"):
+        fit_frames(inv, y, states, workers=0)
 
 
 def test_relative_and_difference_readouts_give_the_same_fit(inv, analytic_field):

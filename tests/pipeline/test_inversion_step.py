@@ -156,10 +156,10 @@ def test_the_push_is_chosen_on_the_validation_frames(world, tmp_path, monkeypatc
     seen = []
     real = pinv.invert_rows
 
-    def spy(inv, rec, data, rows):
+    def spy(inv, rec, data, rows, seeds=None, workers=1):
         seen.append((set(np.asarray(data.group_names)[np.unique(data.group[rows])]),
                      inv.model((0.0, 0.0, 0.0)).N.shape[1]))
-        return real(inv, rec, data, rows)
+        return real(inv, rec, data, rows, seeds, workers)
 
     monkeypatch.setattr(pinv, "invert_rows", spy)
     m = pinv.inversion_step(StepRunner(config.out_dir, False), config, fields, (path, {}),

@@ -20,10 +20,17 @@ from ectskin._check import EctskinError
 from ectskin.inversion.fit import Inversion, InversionResult
 from ectskin.inversion.model import FieldLike
 from ectskin.io.recording import Recording
+from ectskin.twin.pool import run_in_workers
 from ectskin.twin.readout import ReadoutConfig
 
 #: finger slots of the arrays (the inversion fits at most two fingers)
 SLOTS = 2
+#: frames per job when :func:`fit_frames` runs on several worker processes: enough to keep a
+#: job's overhead (its results sent back) small against its fits (5-30 ms each), few enough
+#: that the workers finish together
+FRAMES_PER_JOB = 64
+
+_WORK: dict[str, Any] = {}  # a worker's frames and inversion (set once per worker process)
 
 
 def fit_frames(
@@ -35,6 +42,7 @@ def fit_frames(
     kind: str = "absolute",
     reference: Any = None,
     seeds: Sequence[Any] | None = None,
+    workers: int = 1,
 ) -> tuple[list[InversionResult], np.ndarray]:
     """Invert every frame of ``readouts`` (n_frames, n_pairs), or of every trial of a
     :class:`~ectskin.io.recording.Recording` (each at its trial's inflation, windows within a
@@ -46,14 +54,16 @@ def fit_frames(
     divided by √(frames averaged). ``kind`` and ``reference`` as :meth:`Inversion.fit`;
     ``seeds``: one entry per frame, that frame's ``seeds`` of :meth:`Inversion.fit` (None: none;
     arrays only). BLAS runs on one thread meanwhile (the products are tiny; threads only add
-    overhead).
+    overhead). ``workers`` > 1: the frames are fitted in that many processes
+    (:func:`ectskin.twin.pool.run_in_workers`), :data:`FRAMES_PER_JOB` at a time; every fit
+    depends on its own frames alone, so the results are the same as on one.
     """
     if isinstance(readouts, Recording):
         if states is not None or seeds is not None:
             raise EctskinError("fit_frames: a recording's trials carry their states; give no "
                                "states or seeds")
         parts = [fit_frames(inversion, t.capacitance, t.inflation, window=window, kind=kind,
-                            reference=reference) for t in readouts.trials]
+                            reference=reference, workers=workers) for t in readouts.trials]
         return ([r for res, _ in parts for r in res],
                 np.concatenate([sec for _, sec in parts]) if parts else np.zeros(0))
     if states is None:
@@ -76,15 +86,37 @@ def fit_frames(
     if seeds is not None and len(seeds) != n:
         raise EctskinError(f"fit_frames: seeds must hold one entry per frame ({n}), got "
                            f"{len(seeds)}")
-    results, seconds = [], np.empty(n)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise EctskinError(f"fit_frames: workers must be an integer >= 1, got {workers!r}")
+    work = (inversion, y, s, window, kind, reference, seeds)
+    spans = [(lo, min(lo + FRAMES_PER_JOB, n)) for lo in range(0, n, FRAMES_PER_JOB)]
+    if workers == 1 or len(spans) < 2:
+        return _fit_span(work, 0, n)
+    parts = list(run_in_workers(_run_span, spans, workers=min(workers, len(spans)),
+                                init=_set_work, initargs=(work,)))
+    return [r for res, _ in parts for r in res], np.concatenate([sec for _, sec in parts])
+
+
+def _fit_span(work: tuple, lo: int, hi: int) -> tuple[list[InversionResult], np.ndarray]:
+    """Frames ``lo`` .. ``hi`` − 1 of :func:`fit_frames`' arguments ``work``, one by one."""
+    inversion, y, s, window, kind, reference, seeds = work
+    results, seconds = [], np.empty(hi - lo)
     with threadpool_limits(limits=1):  # the products are tiny: BLAS threads only cost
-        for f in range(n):
+        for f in range(lo, hi):
             t0 = time.perf_counter()
             results.append(inversion.fit(y[max(0, f - window + 1): f + 1], s[f], kind=kind,
                                          reference=reference,
                                          seeds=None if seeds is None else seeds[f]))
-            seconds[f] = time.perf_counter() - t0
+            seconds[f - lo] = time.perf_counter() - t0
     return results, seconds
+
+
+def _set_work(work: tuple) -> None:
+    _WORK["work"] = work
+
+
+def _run_span(span: tuple[int, int]) -> tuple[list[InversionResult], np.ndarray]:
+    return _fit_span(_WORK["work"], *span)
 
 
 def results_to_arrays(results: Sequence[InversionResult]) -> dict[str, np.ndarray]:

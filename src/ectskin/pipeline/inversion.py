@@ -63,6 +63,7 @@ candidate is scored on the test frames too (:mod:`ectskin.pipeline.contact_pick`
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -222,10 +223,12 @@ def _frames(data: ContactData, single_only: bool, limit: int | None) -> np.ndarr
 
 
 def invert_rows(inv: Inversion, rec: Recording, data: ContactData, rows: np.ndarray,
-                seeds: Sequence[Any] | None = None) -> tuple[dict[str, np.ndarray], np.ndarray]:
+                seeds: Sequence[Any] | None = None, workers: int = 1
+                ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Invert the frames ``rows`` of ``data`` (samples of ``rec``'s trials, window 1): the
     arrays of :func:`ectskin.inversion.results_to_arrays` and each frame's seconds; ``seeds``:
-    per row, the ``seeds`` of :meth:`ectskin.inversion.Inversion.fit` (the hybrid)."""
+    per row, the ``seeds`` of :meth:`ectskin.inversion.Inversion.fit` (the hybrid);
+    ``workers``: processes fitting them (:func:`~ectskin.inversion.fit_frames`)."""
     if seeds is not None and len(seeds) != rows.size:
         raise EctskinError(f"invert_rows: seeds must hold one entry per row ({rows.size}), got "
                            f"{len(seeds)}")
@@ -234,15 +237,19 @@ def invert_rows(inv: Inversion, rec: Recording, data: ContactData, rows: np.ndar
     if not np.array_equal(np.concatenate([rows[data.group[rows] == g] for g in groups])
                           if rows.size else rows, rows):
         raise EctskinError("invert_rows: rows must be sorted by trial, then frame")
-    results, seconds = [], []
+    readouts, states = [], []
     for g in groups:
         t = rec.trial(data.group_names[g])
-        of_g = np.flatnonzero(data.group[rows] == g)
-        res, sec = fit_frames(inv, t.capacitance[data.frame[rows[of_g]]], t.inflation,
-                              seeds=None if seeds is None else [seeds[int(i)] for i in of_g])
-        results += res
-        seconds.append(sec)
-    return results_to_arrays(results), np.concatenate(seconds) if seconds else np.zeros(0)
+        frames = data.frame[rows[data.group[rows] == g]]
+        readouts.append(t.capacitance[frames])
+        states.append(np.broadcast_to(np.asarray(t.inflation, np.float64), (frames.size,
+                                                                             len(t.inflation))))
+    if not readouts:
+        return results_to_arrays([]), np.zeros(0)
+    # one frame per fit (window 1), so the frames of all trials go together
+    results, seconds = fit_frames(inv, np.concatenate(readouts), np.concatenate(states),
+                                  seeds=seeds, workers=workers)
+    return results_to_arrays(results), seconds
 
 
 def score(data: ContactData, arrays: Mapping[str, np.ndarray], seconds: np.ndarray
@@ -326,15 +333,23 @@ def two_finger_score(data: ContactData, arrays: Mapping[str, np.ndarray]) -> dic
     }
 
 
+def _workers(config: ReproduceConfig) -> int:
+    """The processes that fit the step's frames: the reproduction's workers (default all
+    cores); the results do not depend on them."""
+    return config.workers or os.cpu_count() or 1
+
+
 def _dataset(rec: Recording, trials: Sequence[str]) -> ContactData | None:
     return contact_dataset(rec, window=1, trials=list(trials)) if trials else None
 
 
 def _choose_push(rec: Recording, fields: Mapping[tuple[float, ...], ResponseField],
                  noise: ReadoutConfig, val: Sequence[str], push: Mapping[Any, np.ndarray],
-                 finger_scale_sd: float | None = None, **options: Any) -> dict[str, Any]:
+                 finger_scale_sd: float | None = None, workers: int = 1, **options: Any
+                 ) -> dict[str, Any]:
     """The validation frames' mean point error with and without the push columns, and which is
-    lower (ties and no validation frame: without, the smaller model)."""
+    lower (ties and no validation frame: without, the smaller model); ``workers``: processes
+    fitting the frames."""
     data = _dataset(rec, val)
     rows = _frames(data, True, PUSH_CHOICE_FRAMES) if data is not None else np.zeros(0, int)
     if rows.size == 0:
@@ -345,7 +360,7 @@ def _choose_push(rec: Recording, fields: Mapping[tuple[float, ...], ResponseFiel
     errors = {}
     for name, cols in (("off", None), ("on", push)):
         arrays, _ = invert_rows(Inversion(fields, noise, push=cols, finger_scale_sd=finger_scale_sd,
-                                          **options), rec, data, rows)
+                                          **options), rec, data, rows, workers=workers)
         errors[name] = contact_report(sub, prediction_columns(arrays, sub.faces, sub.face_extent),
                                       with_maps=False)["loc_mm_mean"]
     return {"use": bool(errors["on"] < errors["off"]), "val_loc_mm_mean": errors,
@@ -367,7 +382,7 @@ def _choice(runner: StepRunner, config: ReproduceConfig, rec: Recording, source:
 
     def invert(data: ContactData, rows: np.ndarray, seeds: Sequence[Any] | None
                ) -> tuple[np.ndarray, np.ndarray]:
-        arrays, seconds = invert_rows(inv, rec, data, rows, seeds)
+        arrays, seconds = invert_rows(inv, rec, data, rows, seeds, workers=_workers(config))
         return prediction_columns(arrays, data.faces, data.face_extent), seconds
 
     learned = load_learned(runner.out / "runs" / CONTACT_RUN, rec, source)
@@ -461,6 +476,8 @@ def inversion_step(
                         seed_search=SEED_SEARCH[0],
                         run=digest(run_settings(config, CONTACT_RUN, dict(data_settings))))
 
+    workers = _workers(config)
+
     def make() -> None:
         t0 = time.perf_counter()
         rec = read_recording(data_path)
@@ -485,7 +502,7 @@ def inversion_step(
             t_push = time.perf_counter() - t1
             if push == "auto":
                 push_pick = _choose_push(rec, fields, noise, [n for n in val if has[n]], cols,
-                                      finger_scale_sd, **options)
+                                         finger_scale_sd, workers=workers, **options)
         inv = Inversion(fields, noise, push=cols if push_pick["use"] else None,
                         finger_scale_sd=finger_scale_sd, **options)
         data = _dataset(rec, [n for n in test if has[n]])
@@ -495,7 +512,8 @@ def inversion_step(
         else:
             rows = _frames(data, False, max_frames)
             test_data = data.take(rows)
-            arrays, seconds = invert_rows(inv, rec, test_data, np.arange(rows.size))
+            arrays, seconds = invert_rows(inv, rec, test_data, np.arange(rows.size),
+                                          workers=workers)
             result = score(test_data, arrays, seconds)
             result["timing"]["push_basis_s"] = t_push
             result["n_frames_in_field_states"] = int(data.n_samples)
@@ -507,7 +525,8 @@ def inversion_step(
             if two_finger_frames != 0:
                 extra = two_finger_rows(data, rows, two_finger_frames)
                 if extra.size:
-                    parts.append((extra, invert_rows(inv, rec, data, extra)[0]))
+                    parts.append((extra, invert_rows(inv, rec, data, extra,
+                                                     workers=workers)[0]))
             every = np.concatenate([r for r, _ in parts])
             order = np.argsort(every, kind="stable")
             keep = data.count[every[order]] == 2
