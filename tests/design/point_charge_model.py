@@ -7,10 +7,12 @@ import numpy as np
 
 from ectskin.design.family import FaceDesign, LayoutDesign, build_layout
 from ectskin.design.information import InformationConfig
+from ectskin.twin.bound import FitModel
 from ectskin.twin.readout import ReadoutConfig, noise_pf
 
 SCALE_K = 1e-3  # pF per ml: the inflation nuisance costs a share of the information
 T_MM = 20.0  # the body between the faces, as the point charges see it
+FIT_SCALE_SD = 0.12  # the fit's prior sd of the finger's signal scale
 D_MM, B_MM_PER_N, A_PF = 4.0, 1.5, 250.0  # height at 0 N (mm), its drop (mm/N), coupling (pF mm²)
 
 
@@ -63,6 +65,10 @@ class PointChargeResponse:
         a, b = self.pairs[:, 0], self.pairs[:, 1]
         return self.c0 + q @ self.K.T - A_PF * phi[:, a] * phi[:, b]
 
+    def untouched(self):
+        """The readout without a finger (φ → 0) at the nominal inflation."""
+        return self.c0.copy()
+
     def jacobian(self, face, uv):
         """Closed form ∂C/∂(u, v, F, q1, q2, q3) at force 1 N, (n_pairs, 6)."""
         uv = np.asarray(uv, float).reshape(1, 2)
@@ -84,8 +90,23 @@ def closed_form_bounds(provider, face, uv, prior_sd=1.0):
     return np.sqrt(cov[0, 0] + cov[1, 1]), np.sqrt(cov[2, 2])
 
 
+def closed_form_fit_error(provider, face, uv, scale_sd=FIT_SCALE_SD, left_sd=1.0):
+    """Position error of the fit of (u, v, F, the finger's scale a) with the inflation q left
+    out at ``left_sd``: A = J_fᵀ Σ⁻¹ J_f + diag(0, 0, 0, 1/scale_sd²), J_f = [∂C/∂(u, v, F),
+    C − c0]; error covariance A⁻¹ + Σ_j left_sd² g_j g_jᵀ, g_j = A⁻¹ J_fᵀ Σ⁻¹ K_j."""
+    J = provider.jacobian(face, uv)
+    c = provider.readout(face, [uv], [1.0], [0.0])[0]
+    s = noise_pf(c, ReadoutConfig())
+    Jf = np.c_[J[:, :3], c - provider.c0] / s[:, None]
+    inv = np.linalg.inv(Jf.T @ Jf + np.diag([0, 0, 0, scale_sd**-2]))
+    cov = inv + sum(np.outer(g, g) for g in (inv @ Jf.T @ (J[:, 3 + j] / s) * left_sd for j in range(3)))
+    return np.sqrt(cov[0, 0] + cov[1, 1])
+
+
 def point_charges(layout, config):
     return {s: PointChargeResponse(layout, s) for s in config.states_ml}
 
 
-CONFIG = InformationConfig(spacing_mm=10.0, nuisances=("inflation",))
+#: the bound estimates the inflation; the fit leaves it out and fits a scale on the finger's signal
+CONFIG = InformationConfig(spacing_mm=10.0, nuisances=("inflation",),
+                           fit=FitModel(nuisances=(), left_out=("inflation",), scale_sd=FIT_SCALE_SD))

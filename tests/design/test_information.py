@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from point_charge_model import (  # tests/design/point_charge_model.py
     CONFIG,
     PointChargeResponse,
     closed_form_bounds,
+    closed_form_fit_error,
     point_charges,
     two_wire_layout,
 )
@@ -63,6 +65,30 @@ def test_the_bound_maps_are_the_closed_form_fisher_information(analytic):
     assert score["force_observable_share"] == pytest.approx(share)
 
 
+def test_the_fit_error_is_the_closed_form_error_of_a_fit_that_leaves_the_inflation_out(analytic):
+    """The fit's maps against the point-charge model's closed form (A⁻¹ plus each left-out
+    column's shift), the summary's keys against the maps, and the fit above the bound."""
+    layout, score = analytic
+    maps = score["maps"]
+    got, want = [], []
+    for si, state in enumerate(CONFIG.states_ml):
+        prov = PointChargeResponse(layout, state)
+        for face, m in maps["states"][si]["faces"].items():
+            fit = np.asarray(m["contact"]["fit"]["position_mm"])
+            for (iv, v), (iu, u) in itertools.product(enumerate(m["v_mm"]), enumerate(m["u_mm"])):
+                got.append(fit[iv, iu])
+                want.append(closed_form_fit_error(prov, face, (u, v)))
+                bound = m["contact"]["inflation"]["position_mm"][iv, iu]
+                assert fit[iv, iu] >= bound * (1 - 1e-9)  # leaving out never beats estimating
+    got, want = np.array(got), np.array(want)
+    np.testing.assert_allclose(got, want, rtol=6e-3)  # central differences, as the bound's
+    assert got.max() > 2 * got.min()  # a map, not one number
+    assert score["fit_error_mm_mean"] == pytest.approx(want.mean(), rel=1e-2)
+    assert score["fit_error_mm_p95"] == pytest.approx(np.percentile(want, 95), rel=1e-2)
+    assert score["fit_error_mm_median"] == pytest.approx(np.median(want), rel=1e-2)
+    assert score["fit_error_mm_mean"] > 1.2 * score["bound_mm_mean"]  # the inflation costs here
+
+
 def test_the_nuisance_and_its_prior_matter_in_this_model(analytic):
     """The closed form above would not match a score that dropped the nuisance or its prior."""
     layout, _ = analytic
@@ -106,7 +132,7 @@ def test_the_ambiguity_is_the_least_noise_distance_between_distinct_points(analy
     a = score["ambiguity"]
     assert min(a["per_state"]) == score["ambiguity_sigma"] and len(a["points"]) == 2
     # on a 4 mm grid the nearest neighbours (4 mm) are not distinct, the diagonal ones (5.7) are
-    fine = InformationConfig(spacing_mm=4.0, nuisances=("inflation",), states_ml=((0, 0, 0),))
+    fine = replace(CONFIG, spacing_mm=4.0, states_ml=((0, 0, 0),))
     got = ambiguity(point_charges(layout, fine), layout, fine)
     assert got["sigma"] == pytest.approx(least_distance(layout, fine), rel=1e-12)
     (p, q) = (np.array(x["uv_mm"]) for x in got["points"])
@@ -139,7 +165,7 @@ def test_a_finished_score_is_read_back_and_other_settings_score_again(tmp_path):
         "bound_mm_p95"]
     again = information_layout(layout, tmp_path, CONFIG, providers=count)
     assert count.calls == 1 and again == first
-    other = InformationConfig(spacing_mm=20.0, nuisances=("inflation",))
+    other = replace(CONFIG, spacing_mm=20.0)
     assert finished_information(tmp_path, layout, other) is None
     information_layout(layout, tmp_path, other, providers=count)
     assert count.calls == 2
@@ -185,7 +211,7 @@ def test_the_pulp_modulus_as_a_nuisance_never_lowers_the_bound():
     mod = replace(TINY, nuisances=(*TINY.nuisances, "modulus"),
                   prior_sd={**TINY.prior_sd, "modulus": DEFAULT_PRIOR_SD["modulus"]})
     with_mod = information_score(lay, mod)
-    assert with_mod["maps"]["cases"][-1] == "all" and "modulus" in with_mod["maps"]["cases"]
+    assert with_mod["maps"]["cases"][-2:] == ["all", "fit"] and "modulus" in with_mod["maps"]["cases"]
     worse = False
     for a, b in zip(without["maps"]["states"], with_mod["maps"]["states"]):
         for face in a["faces"]:

@@ -118,3 +118,19 @@ def test_the_goal_needs_few_electrodes_half_the_bound_and_a_shown_gain():
     assert got["paper_bound_mm_p95"] == 2.0
     assert got["half_bound"] == ["a", "b"] and got["met"] == ["a"]
     assert goal_layouts(layouts[1:])["met"] == []  # no paper: nothing to compare with
+
+
+def test_the_rank_agreement_of_the_fit_error_reads_its_own_key():
+    # the bound ranks the layouts one way, the fit's error the trained way: each key its own rho
+    entries = [
+        {**e, "fit_error_mm_p95": f}
+        for e, f in zip(_entries([1.0, 2.0, 3.0], [3.0, 2.0, 1.0]), [3.0, 2.0, 1.0])
+    ]
+    assert rank_agreement(entries)["rho"] == pytest.approx(-1.0)
+    fit = rank_agreement(entries, key="fit_error_mm_p95")
+    assert fit["rho"] == pytest.approx(1.0) and fit["agree"] and fit["key"] == "fit_error_mm_p95"
+    from ectskin.design.report import rank_agreement as line
+
+    text = line(entries)
+    assert "(worst-case bound) and the trained score (mean localisation error) do not agree" in text
+    assert "fit with one fingertip) and the trained score (mean localisation error) agree" in text

@@ -75,9 +75,12 @@ def test_seeds_give_means_intervals_and_the_paired_verdict(tmp_path):
     assert "vs_paper" not in e["paper"] and "track_ad_mm" not in e["three"]["trained"]
     for x in e.values():  # the information score beside the trained metrics
         assert x["bound_mm_p95"] > 0 and x["ambiguity_sigma"] > 0 and "maps" not in x
+        assert x["fit_error_mm_p95"] > 0 and "fit_error_mm_mean" in x  # (mean: null when inf)
     # the rank agreement and the goal are in design.json (their arithmetic: test_stats.py)
     assert design["rank_agreement"]["n"] == 3
     assert design["rank_agreement"]["layouts"] == ["paper", "three", "five"]
+    assert design["rank_agreement_fit"]["key"] == "fit_error_mm_p95"
+    assert design["rank_agreement_fit"]["layouts"] == ["paper", "three", "five"]
     assert design["goal"]["paper_bound_mm_p95"] == e["paper"]["bound_mm_p95"]
     md = (tmp_path / "design.md").read_text()
     assert "Spearman rho" in md and "At most 8 electrodes" in md

@@ -14,11 +14,13 @@ from ectskin._files import json_text
 from ectskin.layout import default_layout
 from ectskin.twin.bound import (
     COARSE,
+    FitModel,
     TwinResponse,
     bound_maps,
     crb,
     finite_difference_jacobian,
     fisher_information,
+    fit_error,
     point_bounds,
     skin_grid,
 )
@@ -336,3 +338,87 @@ def test_a_quantile_that_reaches_an_unresolved_point_is_unresolved():
     assert s["median"] == pytest.approx(10.5)
     clean = _stats(np.arange(1.0, 21.0))  # all resolved: plain percentiles
     assert clean["p95"] == pytest.approx(np.percentile(np.arange(1.0, 21.0), 95))
+
+
+# ---------------------------------------------------------------------------- a fit that leaves columns out
+def test_a_fit_that_leaves_columns_out_has_the_monte_carlo_error():
+    """Linear Gaussian model, penalised least squares of u, v, F, a free nuisance and one with a
+    prior, while two more columns move the data unmodelled: the empirical mean square error of
+    each parameter of interest is fit_error's rms² (and no longer the CRB)."""
+    rng = np.random.default_rng(7)
+    n_obs = 28
+    J = rng.normal(size=(n_obs, 7))  # u, v, F, free nuisance, prior nuisance, 2 left out
+    sigma = rng.uniform(0.2, 1.0, n_obs)
+    prior_sd, left_sd = 0.7, np.array([0.5, 1.5])
+    draws = 40_000
+    theta = rng.normal(size=3)
+    free = rng.normal(size=(draws, 1)) * 3.0
+    with_prior = rng.normal(size=(draws, 1)) * prior_sd
+    left = rng.normal(size=(draws, 2)) * left_sd
+    x = np.c_[np.tile(theta, (draws, 1)), free, with_prior, left]
+    y = x @ J.T + sigma * rng.standard_normal((draws, n_obs))
+    w = J[:, :5] / sigma[:, None]
+    A = w.T @ w + np.diag([0, 0, 0, 0, prior_sd**-2])
+    est = np.linalg.solve(A, w.T @ (y / sigma).T).T  # the MAP of the fitted columns
+    mse = np.mean((est[:, :3] - theta) ** 2, axis=0)
+    e = fit_error(J, sigma, left_out={5: left_sd[0], 6: left_sd[1]}, nuisance_cols=[3, 4],
+                  prior_var={4: prior_sd**2})
+    # a mean square's sampling error is about sqrt(2 / draws) = 0.7 % relative: allow 5 of them
+    np.testing.assert_allclose(mse, e.rms**2, rtol=5 * np.sqrt(2 / draws))
+    assert np.all(e.rms[:2] > e.std[:2] * 1.5)  # the left-out columns matter in this model
+    np.testing.assert_allclose(
+        e.std, crb(J[:, :5], sigma, nuisance_cols=[3, 4], prior_var={4: prior_sd**2}).std)
+    np.testing.assert_allclose(e.rms**2, e.std**2 + (e.bias**2).sum(axis=1))
+
+
+def test_a_left_out_column_that_a_free_nuisance_spans_costs_nothing_one_along_u_its_sd():
+    rng = np.random.default_rng(8)
+    J = rng.normal(size=(12, 4))
+    sigma = rng.uniform(0.5, 1.0, 12)
+    absorbed = fit_error(np.c_[J, 2.0 * J[:, 3]], sigma, left_out={4: 0.8}, nuisance_cols=[3])
+    np.testing.assert_allclose(absorbed.bias, 0.0, atol=1e-10)
+    np.testing.assert_allclose(absorbed.rms, absorbed.std)
+    # the data shifted along u by 0.8 (sd): read as u, all of it, and nothing else
+    along_u = fit_error(np.c_[J, J[:, 0]], sigma, left_out={4: 0.8}, nuisance_cols=[3])
+    np.testing.assert_allclose(along_u.bias[:, 0], [0.8, 0.0, 0.0], atol=1e-10)
+    # unresolved stays unresolved: u and v collinear
+    J2 = np.c_[J[:, 0], J[:, 0], J[:, 2], J[:, 3]]
+    assert np.all(np.isinf(fit_error(J2, sigma, left_out={3: 1.0}).rms[:2]))
+
+
+def test_the_fit_case_of_point_bounds_is_fit_error_of_the_analytic_jacobian():
+    from ectskin.twin.readout import ReadoutConfig, noise_pf
+
+    prov = PointCharges()
+    steps = dict.fromkeys(("u", "v", "force", "push"), 0.01) | {"inflation": 1e-5}
+    fit = FitModel(nuisances=("push",), left_out=("inflation",))
+    got = point_bounds(prov, "front", (1.0, 2.0), nuisances=("push",), prior_sd={"inflation": 0.5},
+                       steps=steps, fit=fit)
+    assert list(got) == ["none", "push", "fit"]
+    J = prov.analytic((1.0, 2.0), 1.0, 0.0)
+    sigma = noise_pf(prov.readout("front", [[1.0, 2.0]], [1.0], [0.0])[0], ReadoutConfig())
+    e = fit_error(J, sigma, left_out={5: 0.5}, nuisance_cols=[3, 4])
+    np.testing.assert_allclose(got["fit"], [np.hypot(*e.rms[:2]), e.rms[2]], rtol=1e-3)
+    assert got["fit"][0] > got["push"][0] * 1.01  # leaving the inflation out costs here
+    with pytest.raises(EctskinError, match="untouched"):  # a scale needs the untouched readout
+        point_bounds(prov, "front", (1.0, 2.0), nuisances=(), prior_sd={"inflation": 0.5},
+                     fit=FitModel(nuisances=(), left_out=("inflation",), scale_sd=0.1))
+    with pytest.raises(EctskinError, match="needs a prior SD"):
+        point_bounds(prov, "front", (1.0, 2.0), nuisances=(), prior_sd={}, fit=fit)
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda: fit_error(np.ones((3, 3)), np.ones(3), left_out={2: 0.0}), "standard deviations > 0"),
+        (lambda: fit_error(np.ones((3, 3)), np.ones(3), left_out={5: 1.0}), "columns 0..2"),
+        (lambda: fit_error(np.ones((3, 3)), np.ones(3), left_out={2: 1.0}, nuisance_cols=[2]),
+         "cannot be fitted too"),
+        (lambda: FitModel(nuisances=("push",), left_out=("push",)), "fitted or left out"),
+        (lambda: FitModel(left_out=("hand",)), "nuisance"),
+        (lambda: FitModel(scale_sd=0.0), "scale_sd"),
+    ],
+)
+def test_a_bad_fit_is_one_clear_error(call, message):
+    with pytest.raises(EctskinError, match=message):
+        call()

@@ -300,7 +300,8 @@ def run(args: argparse.Namespace) -> int:
         if "bound_mm_p95" in e:
             parts.append(
                 f"bound mean {_num(e['bound_mm_mean'], '.3g')} p95 {_num(e['bound_mm_p95'], '.3g')}"
-                f" mm  force share {_num(e['force_observable_share'], '.2f')}  ambiguity "
+                f" mm  fit error mean {_num(e.get('fit_error_mm_mean'), '.3g')} p95 "
+                f"{_num(e.get('fit_error_mm_p95'), '.3g')} mm  force share {_num(e['force_observable_share'], '.2f')}  ambiguity "
                 f"{_num(e['ambiguity_sigma'], '.3g')} sigma  wire {_num(e['wire_length_mm'], '.0f')}"
                 f" mm"
             )

@@ -15,6 +15,15 @@ The maps reduce to (pooled over states, faces and grid points):
   unresolved; the percentile when it reaches an unresolved point, :func:`worst_case`);
 * ``force_observable_share``: the share of points whose force bound is below
   :data:`~ectskin.twin.bound.FORCE_THRESHOLD_N`;
+* ``fit_error_mm_mean``, ``fit_error_mm_p95``, ``fit_error_mm_median``: the same of the position
+  error of a fit through a field made with one fingertip (``InformationConfig.fit``, a
+  :class:`~ectskin.twin.bound.FitModel`; :func:`~ectskin.twin.bound.fit_error`): it estimates the
+  hand's push, the inflation and a scale on the finger's signal
+  (:data:`~ectskin.inversion.fit.FINGER_SCALE_SD`, as the inversion does), while the person's
+  fingertip radius (±1 mm) and pulp modulus (ln 4 / √12) move the readouts unmodelled. This is
+  the bound plus what the fit's model omits, from the same Jacobians (no extra solves beyond the
+  pulp's column): a layout whose readouts tell a bigger or softer finger from a shifted one
+  scores better on it than on the bound alone;
 * ``ambiguity_sigma``: the global ambiguity a local bound misses: the least distance, in noise
   units, between the nominal readouts of two grid points more than ``separation_mm`` apart (points
   on different faces always count as apart), in the same state, least over the states. Two
@@ -41,6 +50,7 @@ from threadpoolctl import threadpool_limits
 
 from ectskin._check import EctskinError, check_option
 from ectskin._files import read_json, to_jsonable, write_json_atomic, write_text_atomic
+from ectskin.inversion.fit import FINGER_SCALE_SD
 from ectskin.layout import SensorLayout
 from ectskin.twin.bound import (
     COARSE,
@@ -48,6 +58,7 @@ from ectskin.twin.bound import (
     FORCE_THRESHOLD_N,
     NUISANCE_NAMES,
     NUISANCES,
+    FitModel,
     ResponseProvider,
     TwinResponse,
     bound_maps,
@@ -58,7 +69,10 @@ from ectskin.twin.readout import ReadoutConfig, noise_pf
 from ectskin.twin.sensor import Discretisation, SensorModel
 
 INFORMATION_FILE = "information.json"
-INFORMATION_FORMAT = 2  # 2: bound_mm_p95 is inf when it reaches an unresolved point
+INFORMATION_FORMAT = 3  # 2: bound_mm_p95 is inf when it reaches an unresolved point; 3: fit_error
+#: the fit of the information score's ``fit_error_*`` (module docstring)
+DEFAULT_FIT = FitModel(nuisances=("push", "inflation"), left_out=("finger", "modulus"),
+                       scale_sd=FINGER_SCALE_SD)
 #: the meshes of the readouts' solves
 MESHES = {"coarse": COARSE, "default": Discretisation()}
 #: the summary's keys, as they join a layout's entry of ``design.json``
@@ -66,6 +80,8 @@ SUMMARY_KEYS = (
     "bound_mm_mean",
     "bound_mm_p95",
     "force_observable_share",
+    "fit_error_mm_mean",
+    "fit_error_mm_p95",
     "ambiguity_sigma",
     "wire_length_mm",
 )
@@ -82,18 +98,19 @@ class InformationConfig:
         :data:`~ectskin.twin.bound.NUISANCE_NAMES`, the pulp modulus too), with ``prior_sd``.
     mesh : ``coarse`` (:data:`~ectskin.twin.bound.COARSE`, the default) or ``default``.
     separation_mm : two grid points on one face count as distinct beyond this distance.
+    fit : the fit whose error gives ``fit_error_*`` (:data:`DEFAULT_FIT`; its left-out
+        nuisances take their spread from ``prior_sd``), or None: no such keys.
     """
 
     states_ml: tuple[tuple[float, ...], ...] = ((0.0, 0.0, 0.0), (20.0, 20.0, 20.0))
     spacing_mm: float = 15.0
     force_n: float = 1.0
     nuisances: tuple[str, ...] = NUISANCES
-    prior_sd: dict[str, float] = field(
-        default_factory=lambda: {k: DEFAULT_PRIOR_SD[k] for k in NUISANCES if k in DEFAULT_PRIOR_SD}
-    )
+    prior_sd: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_PRIOR_SD))
     mesh: str = "coarse"
     separation_mm: float = 5.0
     readout: ReadoutConfig = field(default_factory=ReadoutConfig)
+    fit: FitModel | None = DEFAULT_FIT
 
     def __post_init__(self) -> None:
         states = tuple(tuple(float(x) for x in s) for s in self.states_ml)
@@ -121,6 +138,17 @@ class InformationConfig:
         check_option("mesh", self.mesh, tuple(MESHES))
         for k in self.nuisances:
             check_option("nuisance", k, NUISANCE_NAMES)
+        if self.fit is not None:
+            if not isinstance(self.fit, FitModel):
+                raise EctskinError(
+                    f"information score: fit must be a FitModel or None, got {type(self.fit).__name__}"
+                )
+            missing = [k for k in self.fit.left_out if self.prior_sd.get(k) is None]
+            if missing:
+                raise EctskinError(
+                    f"information score: the fit's left-out nuisances {missing} need their spread "
+                    f"in prior_sd (got {sorted(self.prior_sd)})"
+                )
 
     def settings(self) -> dict[str, Any]:
         """Everything a finished score depends on (compared on resume)."""
@@ -135,6 +163,7 @@ class InformationConfig:
                 "mesh": self.mesh,
                 "separation_mm": self.separation_mm,
                 "readout": asdict(self.readout),
+                "fit": None if self.fit is None else asdict(self.fit),
             }
         )
 
@@ -251,6 +280,19 @@ def _position_bounds(maps: Mapping[str, Any], case: str) -> np.ndarray:
     ])
 
 
+def _fit_summary(maps: Mapping[str, Any], config: InformationConfig) -> dict[str, Any]:
+    """The ``fit_error_*`` keys (None without a fit): mean (inf with an unresolved point), p95
+    (:func:`worst_case`) and median of the fit's position error over every grid point."""
+    if config.fit is None:
+        return {"fit_error_mm_mean": None, "fit_error_mm_p95": None, "fit_error_mm_median": None}
+    x = _position_bounds(maps, "fit")
+    return {
+        "fit_error_mm_mean": float(np.mean(x)),
+        "fit_error_mm_p95": worst_case(x),
+        "fit_error_mm_median": maps["summary"]["contact"]["fit"]["position_mm"]["median"],
+    }
+
+
 def information_score(
     layout: SensorLayout,
     config: InformationConfig | None = None,
@@ -274,6 +316,7 @@ def information_score(
             prior_sd=config.prior_sd,
             readout=config.readout,
             force_threshold_n=FORCE_THRESHOLD_N,
+            fit=config.fit,
         )
         amb = ambiguity(states, layout, config)
     case = cases(config.nuisances)[-1]  # every nuisance estimated at once
@@ -283,6 +326,7 @@ def information_score(
         # not the maps' own p95: theirs interpolates towards a finite stand-in for inf
         "bound_mm_p95": worst_case(_position_bounds(maps, case)),
         "force_observable_share": s["force_observable_share"],
+        **_fit_summary(maps, config),
         "ambiguity_sigma": amb["sigma"],
         "wire_length_mm": wire_length_mm(layout),
     }

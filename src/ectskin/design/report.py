@@ -42,6 +42,8 @@ INFO_ROWS = (
     ("mean position bound (mm)", "bound_mm_mean", "{:.3g}"),
     ("worst-case (p95) position bound (mm)", "bound_mm_p95", "{:.3g}"),
     ("share of the skin with force bound < 0.1 N", "force_observable_share", "{:.2f}"),
+    ("mean position error of a fit with one fingertip (mm)", "fit_error_mm_mean", "{:.3g}"),
+    ("worst-case (p95) error of that fit (mm)", "fit_error_mm_p95", "{:.3g}"),
     ("ambiguity: least readout distance (noise units)", "ambiguity_sigma", "{:.3g}"),
     ("information score time (s)", "information_seconds", "{:.0f}"),
     ("information score CPU time (s)", "information_cpu_seconds", "{:.0f}"),
@@ -381,26 +383,35 @@ def _verdicts(layouts: Sequence[Mapping[str, Any]]) -> tuple[list[list[str]], li
     return rows, claims
 
 
+#: the information scores whose ranking is set beside the trained score's, and their names
+AGREEMENT_SCORES = (("bound_mm_p95", "worst-case bound"),
+                    ("fit_error_mm_p95", "worst-case error of a fit with one fingertip"))
+
+
 def rank_agreement(layouts: Sequence[Mapping[str, Any]]) -> str | None:
-    """One line: do the information score (worst-case bound) and the trained score (mean
-    localisation error) rank the layouts alike (:func:`~ectskin.design.stats.rank_agreement`;
+    """One line per information score (:data:`AGREEMENT_SCORES`): does it rank the layouts as
+    the trained score (mean localisation error) does (:func:`~ectskin.design.stats.rank_agreement`;
     None with fewer than 3 layouts with both)?"""
     from ectskin.design.stats import rank_agreement as agreement
 
-    r = agreement(layouts)
-    if r is None:
-        return None
-    if r["rho"] is None:
-        return (
-            f"The information score and the trained score cannot be compared by rank: one of "
-            f"them ties all {r['n']} layouts."
+    lines = []
+    for key, name in AGREEMENT_SCORES:
+        r = agreement(layouts, key=key)
+        if r is None:
+            continue
+        if r["rho"] is None:
+            lines.append(
+                f"The information score ({name}) and the trained score cannot be compared by "
+                f"rank: one of them ties all {r['n']} layouts."
+            )
+            continue
+        word = "agree on" if r["agree"] else "do not agree on"
+        lines.append(
+            f"The information score ({name}) and the trained score (mean localisation error) "
+            f"{word} the ranking: Spearman rho = {r['rho']:.2f} over {r['n']} layouts "
+            f"(agreement: rho >= {r['threshold']:g})."
         )
-    word = "agree on" if r["agree"] else "do not agree on"
-    return (
-        f"The information score (worst-case bound) and the trained score (mean localisation "
-        f"error) {word} the ranking: Spearman rho = {r['rho']:.2f} over {r['n']} layouts "
-        f"(agreement: rho >= {r['threshold']:g})."
-    )
+    return " ".join(lines) or None
 
 
 def goal_line(layouts: Sequence[Mapping[str, Any]]) -> str | None:

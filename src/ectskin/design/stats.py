@@ -125,16 +125,18 @@ GOAL_BOUND_SHARE = 0.5
 AGREEMENT_RHO = 0.7
 
 
-def rank_agreement(layouts: Sequence[Mapping[str, Any]]) -> dict[str, Any] | None:
-    """Spearman's rank correlation between the information score's worst-case position bound
-    (``bound_mm_p95``; None, an unresolved point, ranks as the worst) and the trained score's
-    mean localisation error (``loc_mm_mean``) over the layouts that have both (ties get their
-    mean rank). None with fewer than 3 such layouts (no ranking to compare)."""
+def rank_agreement(
+    layouts: Sequence[Mapping[str, Any]], key: str = "bound_mm_p95"
+) -> dict[str, Any] | None:
+    """Spearman's rank correlation between an information score (``key``: the worst-case
+    position bound ``bound_mm_p95`` by default, or ``fit_error_mm_p95``; None, an unresolved
+    point, ranks as the worst) and the trained score's mean localisation error (``loc_mm_mean``)
+    over the layouts that have both (ties get their mean rank). None with fewer than 3 such
+    layouts (no ranking to compare)."""
     both = [
-        (e["name"], np.inf if e["bound_mm_p95"] is None else float(e["bound_mm_p95"]),
-         float(e["loc_mm_mean"]))
+        (e["name"], np.inf if e[key] is None else float(e[key]), float(e["loc_mm_mean"]))
         for e in layouts
-        if "bound_mm_p95" in e and e.get("loc_mm_mean") is not None
+        if key in e and e.get("loc_mm_mean") is not None
     ]
     if len(both) < 3:
         return None
@@ -147,6 +149,7 @@ def rank_agreement(layouts: Sequence[Mapping[str, Any]]) -> dict[str, Any] | Non
     else:
         rho = float(np.corrcoef(rb, rt)[0, 1])
     return {
+        "key": key,
         "rho": rho,
         "n": len(both),
         "layouts": [n for n, _, _ in both],

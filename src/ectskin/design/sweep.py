@@ -329,6 +329,9 @@ def write_design(
     agreement = rank_agreement(entries)
     if agreement is not None:
         design["rank_agreement"] = agreement
+    fit_agreement = rank_agreement(entries, key="fit_error_mm_p95")
+    if fit_agreement is not None:
+        design["rank_agreement_fit"] = fit_agreement
     if any("vs_paper" in e for e in entries):
         design["goal"] = goal_layouts(entries)
     write_json_atomic(Path(out) / DESIGN_FILE, design)
