@@ -321,6 +321,41 @@ def test_the_bound_search_minimises_the_worst_bound_the_electrodes_and_the_wire(
     assert "mean localisation error" not in md  # no trained score in this study
 
 
+def test_the_fit_search_minimises_the_fit_error_not_the_bound(tmp_path):
+    """``--objective fit`` on the point-charge model: each trial's values are its score's (p95
+    fit error, electrodes, wire length), its front is on the fit error; without a fit in the
+    settings it is refused."""
+    from functools import partial
+
+    import optuna
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
+
+    from ectskin.design.report import FIT_FRONT_KEYS, pareto_front
+    from ectskin.design.search import STUDY_FILE, STUDY_NAME, run_search
+
+    score_fn = partial(information_layout, providers=point_charges)
+    design = run_search(tmp_path, n_trials=4, information=CONFIG, n_workers=0, score_fn=score_fn,
+                        objective="fit")
+    assert design["objective"] == "fit" and design["search"]["minimised"] == list(FIT_FRONT_KEYS)
+    entries = {e["name"]: e for e in design["layouts"]}
+    study = optuna.load_study(
+        study_name=STUDY_NAME, storage=JournalStorage(JournalFileBackend(str(tmp_path / STUDY_FILE)))
+    )
+    done = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
+    assert len(done) >= 1
+    for t in done:
+        e = entries[f"design-{t.number:04d}"]
+        assert t.values == [e["fit_error_mm_p95"], e["n_electrodes"], e["wire_length_mm"]]
+        assert e["fit_error_mm_p95"] != e["bound_mm_p95"]
+    points = [e for n, e in entries.items() if n != "paper"]
+    assert design["search"]["front"] == [p["name"] for p in pareto_front(points, FIT_FRONT_KEYS)]
+    assert (tmp_path / "figures" / "front.png").is_file()
+    with pytest.raises(EctskinError, match="no fit"):
+        run_search(tmp_path / "nofit", n_trials=1, information=replace(CONFIG, fit=None),
+                   n_workers=0, score_fn=score_fn, objective="fit")
+
+
 def test_an_unresolved_worst_case_ranks_as_infinite_not_dropped(tmp_path):
     """Proposals whose worst case is unresolved (null in their files) are told to the study as
     inf and still make the front, by electrodes and wire length."""

@@ -21,6 +21,7 @@ EXAMPLES = """\
   ectskin design score my_layout.json --out scores --scheduler tcp://10.0.0.5:8786
   ectskin design search study                    # bound objective: 6 trials on 2 local workers
   ectskin design search study --trials 200 --scheduler tcp://10.0.0.5:8786
+  ectskin design search study --objective fit       # the fit's worst-case error, not the bound
   ectskin design search study --objective trained   # train and evaluate every layout
   ectskin simulate --layout study/layouts/design-0003/layout.json -o rec.h5
 """
@@ -157,7 +158,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--objective",
         default="bound",
         help="bound (default: minimise the worst-case position bound, the electrode count and "
-        "the total wire length) or trained (the mean localisation error and the electrode count)",
+        "the total wire length), fit (the same with the worst-case error of a fit with one "
+        "fingertip instead of the bound) or trained (the mean localisation error and the "
+        "electrode count)",
     )
     q.add_argument("--trials", type=integer(1), default=6, help="trials to finish (default 6)")
     q.add_argument("--sampler", default="tpe", help="tpe (default) or nsga2")
@@ -301,7 +304,8 @@ def run(args: argparse.Namespace) -> int:
             parts.append(
                 f"bound mean {_num(e['bound_mm_mean'], '.3g')} p95 {_num(e['bound_mm_p95'], '.3g')}"
                 f" mm  fit error mean {_num(e.get('fit_error_mm_mean'), '.3g')} p95 "
-                f"{_num(e.get('fit_error_mm_p95'), '.3g')} mm  force share {_num(e['force_observable_share'], '.2f')}  ambiguity "
+                f"{_num(e.get('fit_error_mm_p95'), '.3g')} mm  force share "
+                f"{_num(e['force_observable_share'], '.2f')}  ambiguity "
                 f"{_num(e['ambiguity_sigma'], '.3g')} sigma  wire {_num(e['wire_length_mm'], '.0f')}"
                 f" mm"
             )

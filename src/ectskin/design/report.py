@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
+from ectskin._check import check_option
 from ectskin._files import save_figure_atomic, write_text_atomic
 from ectskin.layout import SensorLayout
 from ectskin.viz.contact import plot_error_maps
@@ -50,6 +51,11 @@ INFO_ROWS = (
 )
 #: what a bound search minimises, in this order
 BOUND_FRONT_KEYS = ("bound_mm_p95", "n_electrodes", "wire_length_mm")
+#: what a fit-error search minimises, in this order
+FIT_FRONT_KEYS = ("fit_error_mm_p95", "n_electrodes", "wire_length_mm")
+#: the y axis of the information fronts, per worst-case key
+FRONT_LABELS = {"bound_mm_p95": "worst-case (p95) position bound (mm)",
+                "fit_error_mm_p95": "worst-case (p95) error of a fit with one fingertip (mm)"}
 
 
 def _value(entry: Mapping[str, Any], key) -> Any:
@@ -138,20 +144,23 @@ def pareto_front(
 
 
 def plot_bound_front(
-    points: Sequence[Mapping[str, Any]], paper: Mapping[str, Any] | None, *, show=False
+    points: Sequence[Mapping[str, Any]], paper: Mapping[str, Any] | None, *, show=False,
+    key: str = "bound_mm_p95",
 ):
-    """The trade-off of a bound search: the worst-case position bound (log scale) against the
-    electrode count per scored layout, coloured by total wire length; the Pareto-optimal ones in
-    (bound, electrodes, wire length) ringed in red and named; the paper's layout a black star.
-    Layouts with an unresolved worst case (inf or None) are triangles along the top edge."""
+    """The trade-off of a bound search: the worst-case position bound (``key``: or the fit's
+    worst-case error, ``fit_error_mm_p95``; log scale) against the electrode count per scored
+    layout, coloured by total wire length; the Pareto-optimal ones in (``key``, electrodes, wire
+    length) ringed in red and named; the paper's layout a black star. Layouts with an unresolved
+    worst case (inf or None) are triangles along the top edge."""
     import matplotlib.pyplot as plt
 
+    check_option("key", key, tuple(FRONT_LABELS))
     fig = _new_figure(show, figsize=(6.0, 4.2), layout="constrained")
     ax = fig.subplots()
-    points = [
-        {**p, "bound_mm_p95": np.inf if p.get("bound_mm_p95") is None else p["bound_mm_p95"]}
-        for p in points
-    ]
+    # the plot reads "bound_mm_p95": the key's values under that name
+    points = [{**p, "bound_mm_p95": np.inf if p.get(key) is None else p[key]} for p in points]
+    if paper is not None:
+        paper = {**paper, "bound_mm_p95": paper.get(key)}
     ok = [p for p in points if np.isfinite(p["bound_mm_p95"])]
     unresolved = [p for p in points if not np.isfinite(p["bound_mm_p95"])]
     every = points + ([paper] if paper is not None and paper.get("wire_length_mm") else [])
@@ -191,7 +200,7 @@ def plot_bound_front(
     ax.set_yscale("log")
     ax.set_xlabel("electrodes")
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set_ylabel("worst-case (p95) position bound (mm)")
+    ax.set_ylabel(FRONT_LABELS[key])
     # below the axes: inside, it can hide the paper's star
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2)
     return _finish(fig, show)
