@@ -7,7 +7,7 @@ import numpy as np
 
 from ectskin.design.family import FaceDesign, LayoutDesign, build_layout
 from ectskin.design.information import InformationConfig
-from ectskin.twin.bound import FitModel
+from ectskin.twin.bound_fit import FitModel
 from ectskin.twin.readout import ReadoutConfig, noise_pf
 
 SCALE_K = 1e-3  # pF per ml: the inflation nuisance costs a share of the information

@@ -14,16 +14,15 @@ from ectskin._files import json_text
 from ectskin.layout import default_layout
 from ectskin.twin.bound import (
     COARSE,
-    FitModel,
     TwinResponse,
     bound_maps,
     crb,
     finite_difference_jacobian,
     fisher_information,
-    fit_error,
     point_bounds,
     skin_grid,
 )
+from ectskin.twin.bound_fit import FitModel, fit_error
 from ectskin.twin.sensor import SensorModel
 
 # a 2 x 2 model by hand: J = [[2, 1], [0, 3]], sigma = (0.5, 2), so Σ⁻¹ = diag(4, 1/4) and

@@ -17,7 +17,7 @@ The maps reduce to (pooled over states, faces and grid points):
   :data:`~ectskin.twin.bound.FORCE_THRESHOLD_N`;
 * ``fit_error_mm_mean``, ``fit_error_mm_p95``, ``fit_error_mm_median``: the same of the position
   error of a fit through a field made with one fingertip (``InformationConfig.fit``, a
-  :class:`~ectskin.twin.bound.FitModel`; :func:`~ectskin.twin.bound.fit_error`): it estimates the
+  :class:`~ectskin.twin.bound_fit.FitModel`; :func:`~ectskin.twin.bound_fit.fit_error`): it estimates the
   hand's push, the inflation and a scale on the finger's signal
   (:data:`~ectskin.inversion.fit.FINGER_SCALE_SD`, as the inversion does), while the person's
   fingertip radius (±1 mm) and pulp modulus (ln 4 / √12) move the readouts unmodelled. This is
@@ -58,13 +58,13 @@ from ectskin.twin.bound import (
     FORCE_THRESHOLD_N,
     NUISANCE_NAMES,
     NUISANCES,
-    FitModel,
     ResponseProvider,
     TwinResponse,
     bound_maps,
     cases,
     skin_grid,
 )
+from ectskin.twin.bound_fit import FitModel
 from ectskin.twin.readout import ReadoutConfig, noise_pf
 from ectskin.twin.sensor import Discretisation, SensorModel
 
@@ -82,6 +82,7 @@ SUMMARY_KEYS = (
     "force_observable_share",
     "fit_error_mm_mean",
     "fit_error_mm_p95",
+    "fit_error_mm_median",
     "ambiguity_sigma",
     "wire_length_mm",
 )

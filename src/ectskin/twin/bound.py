@@ -28,13 +28,9 @@ precomputed response field with the same ``readout`` and ``nuisance_sizes`` plug
 finite differences with the steps of :data:`FD_STEPS` (one-sided where a nuisance's limit, such
 as an empty chamber, forbids a step below).
 
-A fit that leaves something out (:func:`fit_error`, the maps' ``fit`` case with a
-:class:`FitModel`): a field inversion estimates the point, the force and some nuisances but
-models the person's finger only as a scale on its signal, not its radius and pulp. Those are
-in the readouts all the same. To first order (exactly for a linear model with Gaussian noise
-and priors) the fit's error covariance is then A⁻¹ + Σ_j s_j² g_j g_jᵀ, A the fit's FIM with
-its priors, g_j = A⁻¹ J_fᵀ Σ⁻¹ J_j the shift a unit of left-out column j makes, s_j its prior
-SD: the bound of what such a fit reaches, above the Cramér–Rao bound by what its model omits.
+A fit that leaves something out (:mod:`ectskin.twin.bound_fit`, the maps' ``fit`` case): a
+field inversion models the person's finger only as a scale on its signal, not its radius and
+pulp, which move the readouts all the same; its error is the bound plus what its model omits.
 
 The maps (:func:`bound_maps`) evaluate the bound over a grid of points of each skin, per
 inflation state, with and without each nuisance; ``docs/bound.md`` lists the keys.
@@ -45,7 +41,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -208,76 +204,6 @@ def _bound_block(fim: np.ndarray, rcond: float):
     retained[good] = 1.0 / var_s[sub]  # 1 / (F_ii var_i) in scaled units
     resolved[good] = True
     return std, cov, resolved, retained, cond
-
-
-@dataclass(frozen=True)
-class FitError:
-    """The error of a fit whose model leaves columns out (:func:`fit_error`), parameters of
-    interest in column order: ``std`` (k,) its bound with the columns it estimates (inf where
-    unresolved), ``bias`` (k, m) the error one prior SD of each left-out column makes, and
-    ``rms`` (k,) = sqrt(std² + Σ bias²)."""
-
-    std: np.ndarray
-    bias: np.ndarray
-    rms: np.ndarray
-
-
-def fit_error(
-    J: np.ndarray,
-    sigma: np.ndarray,
-    *,
-    left_out: Mapping[int, float],
-    nuisance_cols: Sequence[int] = (),
-    prior_var: Mapping[int, float] | None = None,
-    rcond: float = RCOND,
-) -> FitError:
-    """The error of a penalised least-squares fit of the columns of ``J`` not in ``left_out``
-    to readouts that every column moves (module docstring).
-
-    ``left_out``: {column: its standard deviation in the data (> 0)}, columns the fit does not
-    estimate; ``nuisance_cols`` and ``prior_var`` as in :func:`crb` (for the fitted columns).
-    The parameters of interest are the columns in neither.
-    """
-    n = np.asarray(J).shape[1]
-    out = {int(c): float(s) for c, s in left_out.items()}
-    if not set(out) <= set(range(n)) or not all(np.isfinite(s) and s > 0 for s in out.values()):
-        raise EctskinError(
-            f"fit_error: left_out must map columns 0..{n - 1} to standard deviations > 0, got {left_out}"
-        )
-    if set(out) & {int(c) for c in nuisance_cols} or set(out) & {int(c) for c in (prior_var or {})}:
-        raise EctskinError("fit_error: a left-out column cannot be fitted too (nuisance_cols, prior_var)")
-    fitted = [c for c in range(n) if c not in out]
-    pos = {c: i for i, c in enumerate(fitted)}
-    var = {pos[int(c)]: v for c, v in (prior_var or {}).items()}
-    b = crb(J[:, fitted], sigma, nuisance_cols=[pos[int(c)] for c in nuisance_cols],
-            prior_var=var, rcond=rcond)
-    interest = [i for i, c in enumerate(fitted) if c not in {int(x) for x in nuisance_cols}]
-    # the fit's normal matrix with its priors (known columns, variance 0, out), scaled to unit
-    # diagonal and inverted with the floor of _bound_block
-    keep = [i for i in range(len(fitted)) if var.get(i, np.inf) != 0]
-    s = np.asarray(sigma, dtype=np.float64)
-    Jw = np.asarray(J, dtype=np.float64) / s[:, None]
-    A = Jw[:, [fitted[i] for i in keep]].T @ Jw[:, [fitted[i] for i in keep]]
-    for k, i in enumerate(keep):
-        if np.isfinite(var.get(i, np.inf)):
-            A[k, k] += 1.0 / var[i]
-    d = np.sqrt(np.maximum(np.diag(A), 0.0))
-    live = d > 0
-    bias = np.zeros((len(interest), len(out)))
-    if live.any():
-        dl = d[live]
-        lam, V = np.linalg.eigh(A[np.ix_(live, live)] / np.outer(dl, dl))
-        inv = 1.0 / np.maximum(lam, rcond * lam[-1])
-        M = (V * inv) @ V.T
-        cols = np.asarray([fitted[i] for i in keep])[live]
-        row = {fitted[i]: k for k, i in enumerate(np.asarray(keep)[live])}
-        for j, (c, sd) in enumerate(sorted(out.items())):
-            g = (Jw[:, cols].T @ Jw[:, c]) * sd
-            x = (M @ (g / dl)) / dl
-            for r, i in enumerate(interest):
-                bias[r, j] = x[row[fitted[i]]] if fitted[i] in row else 0.0
-    rms = np.sqrt(b.std**2 + np.sum(bias**2, axis=1))
-    return FitError(b.std, bias, np.where(np.isfinite(b.std), rms, np.inf))
 
 
 # ---------------------------------------------------------------------------- providers
@@ -477,90 +403,29 @@ def finite_difference_jacobian(
 
 
 # ---------------------------------------------------------------------------- one point
+class FitLike(Protocol):
+    """A fit whose error the maps' ``fit`` case reports (:class:`ectskin.twin.bound_fit.FitModel`):
+    the nuisances its Jacobian needs beyond ``nuisances``, and its error at one point."""
+
+    def jacobian_nuisances(self, nuisances: Sequence[str]) -> list[str]: ...
+
+    def settings(self) -> dict[str, Any]: ...
+
+    def error(self, provider: ResponseProvider, c: np.ndarray, J: np.ndarray,
+              cols: Mapping[str, slice], sigma: np.ndarray, prior: Mapping[str, float | None],
+              rcond: float = ...) -> tuple[float, float]: ...
+
+
 def priors_in_use(prior_sd: Mapping[str, float] | None, nuisances: Sequence[str]) -> dict:
     """The prior SDs (``prior_sd``, else :data:`DEFAULT_PRIOR_SD`) of ``nuisances`` only."""
     return {k: v for k, v in (DEFAULT_PRIOR_SD if prior_sd is None else prior_sd).items()
             if k in nuisances}
 
 
-def cases(nuisances: Sequence[str], fit: FitModel | None = None) -> list[str]:
+def cases(nuisances: Sequence[str], fit: FitLike | None = None) -> list[str]:
     """The bound's cases: no nuisance, each alone, all together (with two or more), then ``fit``
-    (the error of the :class:`FitModel`'s fit) when one is given."""
+    (the error of that fit, :class:`FitLike`) when one is given."""
     return ["none", *nuisances] + (["all"] if len(nuisances) > 1 else []) + (["fit"] if fit else [])
-
-
-@dataclass(frozen=True)
-class FitModel:
-    """A fit that estimates some nuisances and leaves others out (the maps' ``fit`` case,
-    :func:`fit_error`).
-
-    nuisances : estimated alongside the point and force (with the maps' ``prior_sd``).
-    left_out : in the readouts at their prior SD (``prior_sd``, which must give one), not
-        estimated.
-    scale_sd : the fit's own finger signal scale, (1 + a) Δ with Δ the readout less the
-        provider's ``untouched()`` readout, a with this prior SD (None: no scale column).
-    """
-
-    nuisances: tuple[str, ...] = ("push", "inflation")
-    left_out: tuple[str, ...] = ("finger", "modulus")
-    scale_sd: float | None = None
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "nuisances", tuple(self.nuisances))
-        object.__setattr__(self, "left_out", tuple(self.left_out))
-        for k in (*self.nuisances, *self.left_out):
-            check_option("nuisance", k, NUISANCE_NAMES)
-        if set(self.nuisances) & set(self.left_out):
-            raise EctskinError(
-                f"FitModel: a nuisance is either fitted or left out, not both: "
-                f"{sorted(set(self.nuisances) & set(self.left_out))}"
-            )
-        if self.scale_sd is not None and not (np.isfinite(self.scale_sd) and self.scale_sd > 0):
-            raise EctskinError(f"FitModel: scale_sd must be > 0 or None, got {self.scale_sd!r}")
-
-
-def jacobian_nuisances(nuisances: Sequence[str], fit: FitModel | None) -> list[str]:
-    """The nuisances whose columns the Jacobian needs: ``nuisances``, then the fit's others."""
-    extra = [] if fit is None else [k for k in (*fit.nuisances, *fit.left_out) if k not in nuisances]
-    return [*nuisances, *extra]
-
-
-def fit_case(
-    provider: ResponseProvider,
-    c: np.ndarray,
-    J: np.ndarray,
-    cols: Mapping[str, slice],
-    sigma: np.ndarray,
-    fit: FitModel,
-    prior: Mapping[str, float | None],
-    rcond: float = RCOND,
-) -> tuple[float, float]:
-    """(position error sqrt(rms_u² + rms_v²) mm, force or height error) of ``fit`` at one point
-    whose readout is ``c`` and Jacobian ``J`` (columns ``cols`` after u, v and the third)."""
-    idx = lambda k: list(range(cols[k].start, cols[k].stop))  # noqa: E731
-    sd = {k: float(v) for k, v in prior.items() if v is not None}
-    use = [0, 1, 2] + [i for k in fit.nuisances for i in idx(k)]
-    var = {use.index(i): sd[k] ** 2 for k in fit.nuisances if k in sd for i in idx(k)}
-    left: dict[int, float] = {}
-    for k in fit.left_out:
-        if k not in sd:
-            raise EctskinError(f"fit case: the left-out nuisance {k!r} needs a prior SD (its spread)")
-        left.update({i: sd[k] for i in idx(k)})
-    Jf = J[:, use]
-    if fit.scale_sd is not None:
-        untouched = getattr(provider, "untouched", None)
-        if untouched is None:
-            raise EctskinError(
-                f"fit case: a finger scale needs the provider's untouched() readout; "
-                f"{type(provider).__name__} has none"
-            )
-        var[Jf.shape[1]] = float(fit.scale_sd) ** 2
-        Jf = np.c_[Jf, c - np.asarray(untouched(), dtype=np.float64)]
-    n_f = Jf.shape[1]
-    lo = list(left)
-    e = fit_error(np.c_[Jf, J[:, lo]], sigma, left_out={n_f + j: left[c_] for j, c_ in enumerate(lo)},
-                  nuisance_cols=range(3, n_f), prior_var=var, rcond=rcond)
-    return float(np.hypot(e.rms[0], e.rms[1])), float(e.rms[2])
 
 
 def point_bounds(
@@ -576,18 +441,18 @@ def point_bounds(
     steps: Mapping[str, float] | None = None,
     rcond: float = RCOND,
     jacobian: Callable[..., tuple[np.ndarray, np.ndarray, list[str]]] | None = None,
-    fit: FitModel | None = None,
+    fit: FitLike | None = None,
 ) -> dict[str, tuple[float, float]]:
     """{case: (position bound sqrt(var_u + var_v) mm, force bound N or height bound mm)} at one
     point, for each case of :func:`cases` (inf: unresolved); with ``fit``, its ``fit`` case is
-    the error of that fit (:func:`fit_case`) from the same Jacobian.
+    the error of that fit (``fit.error``) from the same Jacobian.
 
     One Jacobian with every nuisance's columns (``jacobian``: a function with the signature of
     :func:`finite_difference_jacobian`, which is the default); a case estimates its nuisances
     (with ``prior_sd``: {nuisance: prior standard deviation in its unit}, :data:`DEFAULT_PRIOR_SD`
     when None) and holds the others known. The noise is ``noise_pf`` at the point's readout.
     """
-    every = jacobian_nuisances(nuisances, fit)
+    every = list(nuisances) if fit is None else fit.jacobian_nuisances(nuisances)
     cols = _columns(provider, every)
     prior = DEFAULT_PRIOR_SD if prior_sd is None else prior_sd
     c, J, _ = (jacobian or finite_difference_jacobian)(
@@ -596,7 +461,7 @@ def point_bounds(
     sigma = noise_pf(c, readout or ReadoutConfig())
     out = {}
     if fit is not None:
-        out["fit"] = fit_case(provider, c, J, cols, sigma, fit, prior, rcond)
+        out["fit"] = fit.error(provider, c, J, cols, sigma, prior, rcond)
     for case in cases(nuisances):
         active = list(nuisances) if case == "all" else [] if case == "none" else [case]
         use = [0, 1, 2] + [i for k in active for i in range(cols[k].start, cols[k].stop)]
@@ -673,7 +538,7 @@ def bound_maps(
     runner: Any = None,
     points_per_task: int = 4,
     progress: bool = False,
-    fit: FitModel | None = None,
+    fit: FitLike | None = None,
 ) -> dict[str, Any]:
     """Bound maps over a grid of each face's skin (:func:`skin_grid`), per inflation state.
 
@@ -692,8 +557,9 @@ def bound_maps(
         raise EctskinError(f"hover_mm must be > {FD_STEPS['height']} mm, got {hover_mm!r}")
     faces = list(faces) if faces is not None else list(dict.fromkeys(s.surface for s in layout.skins))
     modes = {"contact": (force_n, 0.0)} | ({} if hover_mm is None else {"hover": (0.0, hover_mm)})
+    every = list(nuisances) if fit is None else fit.jacobian_nuisances(nuisances)
     for provider in states.values():
-        _columns(provider, jacobian_nuisances(nuisances, fit))  # fail here, not in the workers
+        _columns(provider, every)  # unknown nuisances fail here, not in the workers
     names = cases(nuisances, fit)
     grids = {f: skin_grid(layout, f, spacing_mm) for f in faces}
     base = dict(nuisances=tuple(nuisances), prior_sd=prior_sd, readout=readout, steps=steps,
@@ -755,8 +621,8 @@ def bound_maps(
         "settings": {
             "faces": faces, "spacing_mm": spacing_mm, "force_n": force_n, "hover_mm": hover_mm,
             "nuisances": list(nuisances),
-            "prior_sd": priors_in_use(prior_sd, jacobian_nuisances(nuisances, fit)),
-            "fit": None if fit is None else asdict(fit),
+            "prior_sd": priors_in_use(prior_sd, every),
+            "fit": None if fit is None else fit.settings(),
             "steps": {**FD_STEPS, **(steps or {})}, "rcond": rcond, "null_share": NULL_SHARE,
             "force_threshold_n": force_threshold_n,
             "readout": readout or ReadoutConfig(),
