@@ -75,6 +75,19 @@ def test_the_paper_layout_meets_the_default_rules():
     check_manufacturable(default_layout())
 
 
+def test_the_shipped_8_electrode_proposal_loads_and_meets_the_default_rules():
+    """docs/layouts/proposed-8e.json (design-0004 of the 8-electrode search, BENCHMARKS.md)
+    stays a valid, manufacturable layout with the paper's electrode count and pairs."""
+    from pathlib import Path
+
+    from ectskin.layout import load_layout
+
+    layout = load_layout(Path(__file__).parents[2] / "docs" / "layouts" / "proposed-8e.json")
+    check_manufacturable(layout)
+    assert layout.n_electrodes == 8 and layout.n_pairs == 28
+    assert {layout.electrode_surface(k) for k in range(8)} == {"front", "back"}
+
+
 def test_a_thin_wire_is_one_error_naming_file_and_field(tmp_path):
     d = _paper_dict()
     d["electrodes"][2]["width_mm"] = 0.3
