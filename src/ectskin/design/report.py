@@ -55,7 +55,7 @@ BOUND_FRONT_KEYS = ("bound_mm_p95", "n_electrodes", "wire_length_mm")
 FIT_FRONT_KEYS = ("fit_error_mm_p95", "n_electrodes", "wire_length_mm")
 #: the y axis of the information fronts, per worst-case key
 FRONT_LABELS = {"bound_mm_p95": "worst-case (p95) position bound (mm)",
-                "fit_error_mm_p95": "worst-case (p95) error of a fit with one fingertip (mm)"}
+                "fit_error_mm_p95": "worst-case (p95) fit error, one fingertip (mm)"}
 
 
 def _value(entry: Mapping[str, Any], key) -> Any:
