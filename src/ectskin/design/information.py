@@ -164,7 +164,7 @@ class InformationConfig:
                 "mesh": self.mesh,
                 "separation_mm": self.separation_mm,
                 "readout": asdict(self.readout),
-                "fit": None if self.fit is None else asdict(self.fit),
+                "fit": None if self.fit is None else self.fit.settings(),
             }
         )
 
