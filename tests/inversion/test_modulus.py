@@ -8,6 +8,13 @@ pad: a blur of the signal), interpolated for the frames by scipy's cubic
 Cramér–Rao bound of that model from central differences of the field's readouts and of that
 interpolant; and results of the inversion captured before the option existed (the default path
 must stay bit-identical).
+
+One person's finger pooled over frames (:func:`ectskin.inversion.person.pool_fingers`) and the
+frames refitted with it (``Inversion.fit(finger=)``, ``fit_frames(person=)``), against: the
+Gaussian product worked by hand; the linearised posterior mode of a fit with a prior centred off
+0, (w_d x + w_p c) / (w_d + w_p); the ``modulus_prior_sd`` path (a prior centred at 0 given per
+call gives the same fit bit for bit); and the truth of frames made with a known pulp, which the
+frames' own fits, each pulled to 0 by the population's prior, miss.
 """
 
 from __future__ import annotations
@@ -18,8 +25,15 @@ from scipy.interpolate import RegularGridInterpolator
 from scipy.sparse.linalg import spsolve
 
 from ectskin._check import EctskinError
-from ectskin.inversion import Inversion
+from ectskin.inversion import (
+    FingerEstimate,
+    Inversion,
+    InversionResult,
+    fit_frames,
+    results_to_arrays,
+)
 from ectskin.inversion.finger_nuisance import MODULUS_PRIOR_SD, TableColumns
+from ectskin.inversion.person import pool_fingers
 from ectskin.twin.bound import crb
 from ectskin.twin.bound_modulus import ModulusTable
 from ectskin.twin.readout import ReadoutConfig, noise_pf, readout
@@ -342,3 +356,119 @@ def test_modulus_and_radius_come_back_together(analytic_field, table, reference)
         o = one.fit(y, STATE).fingers[0]
         assert abs(o.force_n - p[2]) > 0.02 and o.radius_ln == 0.0 and o.radius_ln_se == 0.0, o
         assert e.modulus_ln_se > o.modulus_ln_se
+
+
+# ------------------------------------------------------------ one person's finger, pooled
+def result(mu: float, se: float, *, contact: bool = True, n: int = 1) -> InversionResult:
+    """A result of n fingers, each at x = ``mu`` ± ``se`` (pressing or hovering)."""
+    e = FingerEstimate("front", contact, 0.0, 0.0, 1.0 if contact else 0.0, 0.0, 0.1, 0.1, 0.1,
+                       0.0, modulus_ln=mu, modulus_ln_se=se)
+    return InversionResult(n, (e,) * n, 0.0, 0.0, True, (0.0,) * 3)
+
+
+def same_arrays(a, b):
+    """The results' arrays equal, NaN for NaN (results hold NaN, unequal to itself)."""
+    x, y = results_to_arrays(a), results_to_arrays(b)
+    assert x.keys() == y.keys()
+    for k in x:
+        np.testing.assert_array_equal(x[k], y[k], err_msg=k)
+
+
+def test_the_pooled_posterior_is_the_gaussian_product_by_hand():
+    """Two frames of x = 0.3 ± 0.2 and 0.5 ± 0.1 fitted with a prior sd 0.4: likelihood
+    precisions 25 − 6.25 = 18.75 and 100 − 6.25 = 93.75, P = 6.25 + 18.75 + 93.75 = 118.75,
+    centre (0.3/0.04 + 0.5/0.01) / P = 57.5 / 118.75; a hovering finger, a two-finger frame and
+    a frame without the nuisance (se 0) add nothing; the floor holds the sd."""
+    frames = [result(0.3, 0.2), result(0.5, 0.1), result(0.9, 0.05, contact=False),
+              result(0.9, 0.05, n=2), result(0.0, 0.0)]
+    pooled = pool_fingers(frames, {"modulus": 0.4}, sd_floor=0.0)
+    assert pooled["modulus"][0] == pytest.approx(57.5 / 118.75, rel=1e-12)
+    assert pooled["modulus"][1] == pytest.approx(118.75 ** -0.5, rel=1e-12)
+    assert pool_fingers(frames, {"modulus": 0.4}, sd_floor=0.2)["modulus"][1] == 0.2
+    assert pool_fingers([], {"modulus": 0.4}, sd_floor=0.0) == {"modulus": (0.0, 0.4)}
+    for bad, what in (({"pulp": 0.4}, "prior_sd"), ({"modulus": 0.0}, "prior_sd")):
+        with pytest.raises(EctskinError, match=what):
+            pool_fingers(frames, bad)
+    with pytest.raises(EctskinError, match="sd_floor"):
+        pool_fingers(frames, {"modulus": 0.4}, sd_floor=-1.0)
+
+
+def test_a_prior_centred_at_zero_is_the_population_prior_bit_for_bit(analytic_field, table,
+                                                                      reference):
+    """``finger={"modulus": (0, sd)}`` per call is ``modulus_prior_sd=sd`` of the inversion."""
+    y = frame(analytic_field, reference, 1.4, 30.6, 0.9, 0.4)
+    narrow = Inversion({STATE: analytic_field}, modulus={STATE: table}, modulus_prior_sd=0.03)
+    wide = Inversion({STATE: analytic_field}, modulus={STATE: table})
+    assert wide.fit(y, STATE, finger={"modulus": (0.0, 0.03)}) == narrow.fit(y, STATE)
+    assert wide.finger_prior_sd == {"modulus": MODULUS_PRIOR_SD}
+    assert Inversion({STATE: analytic_field}).finger_prior_sd == {}
+    for bad in ({"modulus": (0.0, 0.0)}, {"pulp": (0.0, 0.1)}, {"modulus": 0.1}, [0.1]):
+        with pytest.raises(EctskinError, match="finger"):
+            wide.fit(y, STATE, finger=bad)
+
+
+def test_a_prior_centred_off_zero_moves_the_fit_to_the_posterior_mode(analytic_field, table,
+                                                                      reference):
+    """A pulp of x = 0.4 (noise-free), a prior of sd 0.03 centred at c: at c = 0.4 the fit is the
+    truth (point, force, x to 1e-3); at c = 0.2 x is the linearised posterior mode
+    (w_d 0.4 + w_p 0.2) / (w_d + w_p), w_d = 1 / se_d², se_d x's standard error with a flat
+    prior (to 0.01), and the force lies between the truth and the fit at c = 0."""
+    u, v, f, x = 1.4, 30.6, 0.9, 0.4
+    inv = Inversion({STATE: analytic_field}, modulus={STATE: table}, max_fingers=1)
+    flat = Inversion({STATE: analytic_field}, modulus={STATE: table}, max_fingers=1,
+                     modulus_prior_sd=1e3)
+    y = frame(analytic_field, reference, u, v, f, x)
+    e = inv.fit(y, STATE, finger={"modulus": (0.4, 0.03)}).fingers[0]
+    np.testing.assert_allclose([e.u_mm, e.v_mm, e.force_n, e.modulus_ln], [u, v, f, x],
+                               atol=1e-3)
+    se_d = flat.fit(y, STATE).fingers[0].modulus_ln_se
+    wd, wp = se_d**-2, 0.03**-2
+    half = inv.fit(y, STATE, finger={"modulus": (0.2, 0.03)}).fingers[0]
+    assert half.modulus_ln == pytest.approx((wd * 0.4 + wp * 0.2) / (wd + wp), abs=0.01)
+    zero = inv.fit(y, STATE, finger={"modulus": (0.0, 0.03)}).fingers[0]
+    assert min(f, zero.force_n) < half.force_n < max(f, zero.force_n)
+
+
+def test_one_persons_frames_pooled_find_the_pulp_each_frame_misses(analytic_field, table,
+                                                                     reference):
+    """40 frames of one person (x = 0.5) at points over the wires, read with 6 times the
+    electronics' noise (each frame then tells x about as well as the twin's prior does):
+    each frame's x is pulled towards 0 (their mean below 0.45); pooled (prior taken out once)
+    the centre is within 3 pooled sd (and 0.05) of 0.5; ``fit_frames(person=)`` refits every
+    frame with it, and their mean |x − 0.5| and force error drop below the single fits'. A
+    second person (x = −0.3) in the same call is pooled apart."""
+    rng = np.random.default_rng(11)
+    noisy = ReadoutConfig(noise_scale=6.0)
+    inv = Inversion({STATE: analytic_field}, noisy, modulus={STATE: table}, max_fingers=1)
+    truth, frames, forces = [], [], []
+    for who, x in ((0, 0.5), (1, -0.3)):
+        for _ in range(40):
+            p = np.array([rng.uniform(-12, 12), rng.uniform(8, 40), rng.uniform(0.5, 1.8)])
+            y = frame(analytic_field, reference, *p, x)
+            frames.append(y + rng.normal(0, 1, y.size) * noise_pf(y, noisy))
+            truth.append(who)
+            forces.append(p[2])
+    frames, forces = np.array(frames), np.array(forces)
+    x_true = np.where(np.array(truth) == 0, 0.5, -0.3)
+    single, _ = fit_frames(inv, frames, STATE)
+    xs = np.array([r.fingers[0].modulus_ln for r in single])
+    assert xs[:40].mean() < 0.45 and xs[40:].mean() > -0.27
+    centre, sd = pool_fingers(single[:40], inv.finger_prior_sd)["modulus"]
+    assert abs(centre - 0.5) < max(3 * sd, 0.05), (centre, sd)
+    pooled, seconds = fit_frames(inv, frames, STATE, person=truth)
+    assert seconds.shape == (80,) and np.all(seconds > 0)
+    xp = np.array([r.fingers[0].modulus_ln for r in pooled])
+    fs = np.array([r.fingers[0].force_n for r in single])
+    fp = np.array([r.fingers[0].force_n for r in pooled])
+    assert np.abs(xp - x_true).mean() < 0.5 * np.abs(xs - x_true).mean()
+    assert np.abs(fp - forces).mean() < np.abs(fs - forces).mean()
+    assert xp[40:].mean() < 0 < xp[:40].mean()
+    # the same on two worker processes; without tables, person= changes nothing
+    again, _ = fit_frames(inv, frames, STATE, person=truth, workers=2)
+    same_arrays(again, pooled)
+    assert [r.fingers[0].modulus_ln for r in again] == xp.tolist()
+    plain = Inversion({STATE: analytic_field}, noisy, max_fingers=1)
+    same_arrays(fit_frames(plain, frames[:5], STATE, person=truth[:5])[0],
+                fit_frames(plain, frames[:5], STATE)[0])
+    with pytest.raises(EctskinError, match="one label per frame"):
+        fit_frames(inv, frames[:5], STATE, person=truth[:4])

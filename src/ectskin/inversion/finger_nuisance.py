@@ -43,18 +43,19 @@ from ectskin.twin.bound_modulus import (
     log_forces,
     table_nodes,
 )
+from ectskin.twin.field_finger import RADIUS_STEP
 from ectskin.twin.mechanics import Touch
 
-__all__ = ["FINGER_BOUND_SD", "MODULUS_PRIOR_SD", "RADIUS_PRIOR_SD", "TableColumns",
+__all__ = ["FINGER_BOUND_SD", "FINGER_NUISANCES", "MODULUS_PRIOR_SD", "RADIUS_PRIOR_SD", "TableColumns",
            "finger_column", "finger_columns", "nuisance_fingers", "radius_table"]
 
+#: the finger nuisances, in the fit's order
+FINGER_NUISANCES = ("modulus", "radius")
 #: the finger nuisances' range: this many prior sd either side of 0 (a truncated Gaussian prior)
 FINGER_BOUND_SD = 3.0
 #: the radius prior's sd in ln R: the twin's fingertips, uniform on 7-10 mm
 #: (:func:`ectskin.twin.human.trial_fingers`), ln(10 / 7) / √12
 RADIUS_PRIOR_SD = math.log(10.0 / 7.0) / math.sqrt(12.0)
-#: the central difference's step in ln R of :func:`radius_table` (a 5 % smaller and bigger tip)
-RADIUS_STEP = 0.05
 
 
 class TableColumns:

@@ -72,7 +72,12 @@ import numpy as np
 from scipy.stats import chi2
 
 from ectskin._check import EctskinError, check_option
-from ectskin.inversion.finger_nuisance import MODULUS_PRIOR_SD, RADIUS_PRIOR_SD, finger_columns
+from ectskin.inversion.finger_nuisance import (
+    FINGER_NUISANCES,
+    MODULUS_PRIOR_SD,
+    RADIUS_PRIOR_SD,
+    finger_columns,
+)
 from ectskin.inversion.lm import (  # noqa: F401  (the fit's constants, named here too)
     BOUND_WEIGHT,
     LM_CONVERGED,
@@ -300,6 +305,12 @@ class Inversion:
                     "'superposition'"
                 )
         self.n_pairs = int(n_pairs or 0)
+        #: {name: prior sd} of the finger nuisances some state has a table of (what
+        #: :func:`~ectskin.inversion.person.pool_fingers` takes)
+        self.finger_prior_sd: dict[str, float] = {
+            q: float(sd) for q, (tables, sd) in (("modulus", (modulus, modulus_prior_sd)),
+                                                 ("radius", (radius, radius_prior_sd)))
+            if any(q in m.finger_columns for m in self._models) and tables is not None}
 
     # ------------------------------------------------------------------ the door
     def model(self, state: Any) -> StateModel:
@@ -354,12 +365,17 @@ class Inversion:
     # ------------------------------------------------------------------ one frame
     def fit(self, readouts: Any, state: Any, *, kind: str = "absolute",
             reference: Any = None, warm: InversionResult | None = None,
-            seeds: Sequence[Sequence[FingerGuess]] | None = None) -> InversionResult:
+            seeds: Sequence[Sequence[FingerGuess]] | None = None,
+            finger: Mapping[str, tuple[float, float]] | None = None) -> InversionResult:
         """Invert one frame (or a window of frames, averaged) of ``state``; ``warm``: the
         result of the previous frame of a stream (of the same state), the start of the fit of
         its count (module docstring); ``seeds``: guesses of the fingers, each one more start of
-        its count's fit (:mod:`ectskin.inversion.seed`)."""
+        its count's fit (:mod:`ectskin.inversion.seed`); ``finger``: {"modulus" | "radius":
+        (centre, sd)}, the prior of each pressing finger's nuisance in place of the
+        population's, what other frames of the same person tell
+        (:func:`~ectskin.inversion.pool_fingers`)."""
         m = self.model(state)
+        prior = _finger_prior(finger)
         warm_start = self._warm_start(m, warm)
         y, w = self.observed(readouts, state, kind, reference)
         ok = np.isfinite(y)
@@ -371,6 +387,8 @@ class Inversion:
                     f"{self.max_fingers} finger(s) and {nb} nuisance terms"
                 )
             m, y = m.masked(ok), y[ok]
+        if prior:
+            m = m.with_finger_prior(prior)
         sigma = self._sigma(m, y, w)
         delta = y - m.untouched
         n, nb = m.n_pairs, m.N.shape[1]
@@ -529,6 +547,26 @@ class Inversion:
 
     #: one Levenberg–Marquardt fit from a start (:func:`ectskin.inversion.lm.fit_fingers`)
     _fit_fingers = staticmethod(fit_fingers)
+
+
+def _finger_prior(finger: Any) -> dict[str, tuple[float, float]]:
+    """``finger`` of :meth:`Inversion.fit` checked: {name: (centre, sd)}."""
+    if finger is None:
+        return {}
+    if not isinstance(finger, Mapping):
+        raise EctskinError(f"Inversion: finger must be a mapping {{'modulus' | 'radius': (centre, "
+                           f"sd)}} or None, got {type(finger).__name__}")
+    out = {}
+    for name, value in finger.items():
+        try:
+            centre, sd = (float(x) for x in value)
+        except (TypeError, ValueError):
+            centre = sd = math.nan
+        if name not in FINGER_NUISANCES or not (math.isfinite(centre) and 0 < sd < math.inf):
+            raise EctskinError(f"Inversion: finger[{name!r}] must be (centre, sd > 0) of one of "
+                               f"{list(FINGER_NUISANCES)}, got {value!r}")
+        out[name] = (centre, sd)
+    return out
 
 
 @functools.lru_cache(maxsize=64)

@@ -10,7 +10,7 @@ engine make.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -19,6 +19,7 @@ from threadpoolctl import threadpool_limits
 from ectskin._check import EctskinError
 from ectskin.inversion.fit import Inversion, InversionResult
 from ectskin.inversion.model import FieldLike
+from ectskin.inversion.person import POOL_SD_FLOOR, pool_fingers
 from ectskin.io.recording import Recording
 from ectskin.twin.pool import run_in_workers
 from ectskin.twin.readout import ReadoutConfig
@@ -43,6 +44,8 @@ def fit_frames(
     reference: Any = None,
     seeds: Sequence[Any] | None = None,
     workers: int = 1,
+    person: Sequence[Hashable] | None = None,
+    sd_floor: float = POOL_SD_FLOOR,
 ) -> tuple[list[InversionResult], np.ndarray]:
     """Invert every frame of ``readouts`` (n_frames, n_pairs), or of every trial of a
     :class:`~ectskin.io.recording.Recording` (each at its trial's inflation, windows within a
@@ -57,13 +60,33 @@ def fit_frames(
     overhead). ``workers`` > 1: the frames are fitted in that many processes
     (:func:`ectskin.twin.pool.run_in_workers`), :data:`FRAMES_PER_JOB` at a time; every fit
     depends on its own frames alone, so the results are the same as on one.
+
+    ``person``: one label per frame (arrays only), whose finger pressed it (a trial, a
+    session). The frames are fitted, each person's finger nuisances pooled over its frames
+    (:func:`~ectskin.inversion.person.pool_fingers`, ``sd_floor``), and every frame of a person
+    whose frames told something is fitted again with that as its ``finger`` prior; the seconds
+    are both fits'. Without finger tables (``Inversion(modulus=, radius=)``) nothing is pooled
+    and the results are those without ``person``.
     """
+    if person is not None:
+        return _fit_per_person(inversion, readouts, states, person, sd_floor, window=window,
+                               kind=kind, reference=reference, seeds=seeds, workers=workers)
+    return _fit(inversion, readouts, states, window=window, kind=kind, reference=reference,
+                seeds=seeds, workers=workers)
+
+
+def _fit(inversion: Inversion, readouts: Any, states: Any, *, window: int, kind: str,
+         reference: Any, seeds: Sequence[Any] | None, workers: int,
+         fingers: Sequence[Any] | None = None) -> tuple[list[InversionResult], np.ndarray]:
+    """:func:`fit_frames` without ``person``; ``fingers``: per frame the ``finger`` prior of
+    :meth:`Inversion.fit`, or None to skip the frame (its result None, its seconds 0)."""
     if isinstance(readouts, Recording):
         if states is not None or seeds is not None:
             raise EctskinError("fit_frames: a recording's trials carry their states; give no "
                                "states or seeds")
-        parts = [fit_frames(inversion, t.capacitance, t.inflation, window=window, kind=kind,
-                            reference=reference, workers=workers) for t in readouts.trials]
+        parts = [_fit(inversion, t.capacitance, t.inflation, window=window, kind=kind,
+                      reference=reference, seeds=None, workers=workers)
+                 for t in readouts.trials]
         return ([r for res, _ in parts for r in res],
                 np.concatenate([sec for _, sec in parts]) if parts else np.zeros(0))
     if states is None:
@@ -88,7 +111,7 @@ def fit_frames(
                            f"{len(seeds)}")
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise EctskinError(f"fit_frames: workers must be an integer >= 1, got {workers!r}")
-    work = (inversion, y, s, window, kind, reference, seeds)
+    work = (inversion, y, s, window, kind, reference, seeds, fingers)
     spans = [(lo, min(lo + FRAMES_PER_JOB, n)) for lo in range(0, n, FRAMES_PER_JOB)]
     if workers == 1 or len(spans) < 2:
         return _fit_span(work, 0, n)
@@ -99,16 +122,50 @@ def fit_frames(
 
 def _fit_span(work: tuple, lo: int, hi: int) -> tuple[list[InversionResult], np.ndarray]:
     """Frames ``lo`` .. ``hi`` − 1 of :func:`fit_frames`' arguments ``work``, one by one."""
-    inversion, y, s, window, kind, reference, seeds = work
-    results, seconds = [], np.empty(hi - lo)
+    inversion, y, s, window, kind, reference, seeds, fingers = work
+    results: list[Any] = []  # InversionResult, or None for a frame skipped (fingers)
+    seconds = np.zeros(hi - lo)
     with threadpool_limits(limits=1):  # the products are tiny: BLAS threads only cost
         for f in range(lo, hi):
+            if fingers is not None and fingers[f] is None:
+                results.append(None)
+                continue
             t0 = time.perf_counter()
             results.append(inversion.fit(y[max(0, f - window + 1): f + 1], s[f], kind=kind,
                                          reference=reference,
-                                         seeds=None if seeds is None else seeds[f]))
+                                         seeds=None if seeds is None else seeds[f],
+                                         finger=None if fingers is None else fingers[f]))
             seconds[f - lo] = time.perf_counter() - t0
     return results, seconds
+
+
+def _fit_per_person(inversion: Inversion, readouts: Any, states: Any, person: Sequence[Hashable],
+                    sd_floor: float, **kw: Any) -> tuple[list[InversionResult], np.ndarray]:
+    """:func:`fit_frames` with ``person``: fit, pool per person, refit."""
+    if isinstance(readouts, Recording):
+        raise EctskinError("fit_frames: person labels go with arrays of frames; a recording's "
+                           "frames are pooled by trial with person=[trial of each frame]")
+    first, seconds = _fit(inversion, readouts, states, **kw)
+    n = len(first)
+    if len(person) != n:
+        raise EctskinError(f"fit_frames: person must hold one label per frame ({n}), got "
+                           f"{len(person)}")
+    prior_sd = inversion.finger_prior_sd
+    if not prior_sd:
+        return first, seconds
+    frames: dict[Hashable, list[int]] = {}
+    for i, label in enumerate(person):
+        frames.setdefault(label, []).append(i)
+    priors: list[Any] = [None] * n
+    for idx in frames.values():
+        pooled = pool_fingers([first[i] for i in idx], prior_sd, sd_floor=sd_floor)
+        told = {q: v for q, v in pooled.items() if v != (0.0, float(prior_sd[q]))}
+        for i in idx:
+            priors[i] = told or None
+    if all(p is None for p in priors):
+        return first, seconds
+    second, more = _fit(inversion, readouts, states, fingers=priors, **kw)
+    return [b if b is not None else a for a, b in zip(first, second)], seconds + more
 
 
 def _set_work(work: tuple) -> None:

@@ -60,15 +60,19 @@ def fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
     names = list(m.finger_columns)
     nm = len(mod) * len(names)  # per nuisance, per pressing finger
     mws = np.repeat([m.finger_columns[q][1] for q in names], len(mod))
+    # the priors' centres: 0 for the scales, the finger nuisances' (0 unless set)
+    centre = np.r_[np.zeros(ns), np.repeat([m.finger_centre.get(q, 0.0) for q in names],
+                                           len(mod))]
     nr = ns + nm  # the priors' rows of the finger nuisances
     na = nx + nr  # the bounded parameters
     Nw = m.N / sigma[:, None]
     a_max = SCALE_BOUND_SD / sw if ns else 0.0
     e_max = FINGER_BOUND_SD / mws if nm else np.zeros(0)
     lo = np.concatenate([m.bounds[key][0] for key in keys]
-                        + [np.zeros(int(with_rho)), np.full(ns, -a_max), -e_max])
+                        + [np.zeros(int(with_rho)), np.full(ns, -a_max), centre[ns:] - e_max])
     hi = np.concatenate([m.bounds[key][1] for key in keys]
-                        + [np.full(int(with_rho), RHO_MAX), np.full(ns, a_max), e_max])
+                        + [np.full(int(with_rho), RHO_MAX), np.full(ns, a_max),
+                           centre[ns:] + e_max])
     # rows: the channels, the range penalties, the scales', the moduli's and the nuisances'
     # priors; the Jacobian's constant parts (the nuisance columns, the priors) are set once
     J = np.zeros((n + na + nr + nb, na + nb))
@@ -113,20 +117,20 @@ def fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
                 J[:n, :na][:, ~inside] = 0.0
             J[n + diag, diag] = np.where(inside, 0.0, BOUND_WEIGHT)
             r = np.concatenate([(delta - total) / sigma - Nw @ p[na:], BOUND_WEIGHT * (x - xc),
-                                prior_rows * xc[nx:], m.prior_w * p[na:]])
+                                prior_rows * (xc[nx:] - centre), m.prior_w * p[na:]])
             cache.update(p=p.copy(), r=r, J=J.copy())
         return cache["r"], cache["J"]
 
     x0 = np.concatenate([x for _, _, x in start]
-                        + [np.full(int(with_rho), RHO_START), np.zeros(nr)])
+                        + [np.full(int(with_rho), RHO_START), centre])
     x0 = np.clip(x0, lo, hi)
     r0 = evaluate(np.concatenate([x0, np.zeros(nb)]))[0][:n]
-    # the linear parameters (the scales, the moduli and β) from a linear fit at the start, with
-    # their priors, so that the optimiser begins near its valley
+    # the linear parameters (the scales, the moduli and β) from a linear fit at the start (the
+    # priors' centres), with their priors, so that the optimiser begins near its valley
     A = np.vstack([np.c_[-J[:n, nx:na], Nw], np.diag(np.r_[prior_rows, m.prior_w])])
     lin = (np.linalg.lstsq(A, np.r_[r0, np.zeros(nr + nb)], rcond=None)[0] if nr + nb
            else np.zeros(0))
-    x0[nx:] = np.clip(lin[:nr], lo[nx:], hi[nx:])
+    x0[nx:] = np.clip(x0[nx:] + lin[:nr], lo[nx:], hi[nx:])
     beta0 = lin[nr:]
     with warnings.catch_warnings():  # out of evaluations: `converged` says so
         warnings.simplefilter("ignore", RuntimeWarning)

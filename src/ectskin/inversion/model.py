@@ -37,7 +37,7 @@ from __future__ import annotations
 import bisect
 import copy
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -460,6 +460,9 @@ class StateModel:
         #: pressing fingers' nuisances, "modulus" and "radius" (set by Inversion; none: {};
         #: :mod:`ectskin.inversion.finger_nuisance`)
         self.finger_columns: dict[str, tuple[FingerColumn, float]] = {}
+        #: {name: the centre of its prior} of the finger nuisances (absent: 0, the field's
+        #: finger; :meth:`with_finger_prior`)
+        self.finger_centre: dict[str, float] = {}
         spec = field.spec
         self.modes: tuple[str, ...] = ("contact", "hover") if np.size(field.heights_mm) else ("contact",)
         lo_f, hi_f = (float(a) for a in spec.force_range_n)
@@ -533,6 +536,20 @@ class StateModel:
             sub.table = sub._table(noise_pf(sub.untouched, self.noise))
             self._masked[key] = sub
         return self._masked[key]
+
+    def with_finger_prior(self, prior: Mapping[str, tuple[float, float]]) -> StateModel:
+        """This model with the prior of its finger nuisances set to ``prior`` {name: (centre,
+        sd)} (ln(E / E0), ln(R / R0)): what is already known of the person's finger
+        (:func:`~ectskin.inversion.pool_fingers`); a name the model has no column of is
+        ignored, one not in ``prior`` keeps its prior."""
+        sub = copy.copy(self)
+        sub.finger_columns = dict(self.finger_columns)
+        sub.finger_centre = dict(self.finger_centre)
+        for name, (centre, sd) in prior.items():
+            if name in sub.finger_columns:
+                sub.finger_columns[name] = (sub.finger_columns[name][0], 1.0 / float(sd))
+                sub.finger_centre[name] = float(centre)
+        return sub
 
     def sigma(self, readout: np.ndarray, n_frames: int = 1) -> np.ndarray:
         """σ (n_pairs,) of a readout averaged over ``n_frames`` frames."""
