@@ -61,8 +61,7 @@ def test_finger_tables_from_fields_are_the_direct_solves_differences(small_spec,
     """:func:`~ectskin.twin.field_finger.finger_tables`: the columns of both nuisances from coarse
     fields (5 mm here, 4 forces, no hover part) at a node against central differences of direct
     solves with the same fingers (E0 e^(±0.1), R0 e^(±0.05)), to 1e-4 of the column (2.6e-5
-    seen); the
-    inversion takes them as its finger nuisances' tables."""
+    seen); the inversion takes them as its finger nuisances' tables."""
     with threadpool_limits(limits=1):
         tabs = finger_tables([small_spec], tmp_path, workers=0, progress=False,
                              spacing_mm=(5.0, 5.0))

@@ -1,6 +1,6 @@
 """The skin's own untouched readout (``Inversion(untouched=...)``), the check whether a hovering
 finger presses (``press_check``), and what the reproduction's step makes of them
-(:func:`ectskin.pipeline.inversion.untouched_readouts`, the slots of hovering fingers).
+(:func:`ectskin.io.calibration.untouched_readouts`, the slots of hovering fingers).
 
 References: frames made from the closed-form field (``conftest``) at known parameters on top of
 an untouched readout that differs from the field's by a per-channel pattern (what a skin's body
@@ -20,8 +20,9 @@ import pytest
 from ectskin._check import EctskinError
 from ectskin.inversion import FingerEstimate, Inversion, InversionResult
 from ectskin.inversion.frames import results_to_arrays
+from ectskin.io.calibration import untouched_readouts
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
-from ectskin.pipeline.inversion import prediction_columns, untouched_readouts
+from ectskin.pipeline.inversion import prediction_columns
 
 STATE = (0.0,)
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 import pytest
@@ -23,6 +24,7 @@ from ectskin.pipeline.contact import _simulate_contact
 from ectskin.pipeline.metrics import inversion_block
 from ectskin.pipeline.runner import StepRunner
 from ectskin.twin import Protocol
+from ectskin.twin.field_finger import finger_tables
 from ectskin.twin.field_spec import FieldGrid
 from ectskin.twin.mechanics import recording_manipulator
 
@@ -156,7 +158,8 @@ def test_the_push_is_chosen_on_the_validation_frames(world, tmp_path, monkeypatc
     seen = []
     real = pinv.invert_rows
 
-    def spy(inv, rec, data, rows, seeds=None, workers=1):
+    def spy(inv, rec, data, rows, seeds=None, workers=1, person=False):
+        assert not person
         seen.append((set(np.asarray(data.group_names)[np.unique(data.group[rows])]),
                      inv.model((0.0, 0.0, 0.0)).N.shape[1]))
         return real(inv, rec, data, rows, seeds, workers)
@@ -280,6 +283,51 @@ def test_the_metrics_block_sets_contactnet_and_the_bound_beside_each_state():
         "count_accuracy": 0.75, "n_trials": 2}
 
 
+def test_the_persons_finger_is_chosen_on_the_validation_frames(world, tmp_path, monkeypatch):
+    """``finger="auto"``: the finger tables are built from coarse fields of the state (10 ×
+    27.5 mm here, for speed), the validation trials' one-finger frames are inverted without and
+    then with the tables and per-trial pooling (never a test frame), the lower point error wins,
+    and the test frames are inverted with that choice; "on" pools without asking; the settings
+    name the option, so a step made without it is not reused."""
+    config, fields, path = world
+    config = _out(tmp_path, config)
+    monkeypatch.setattr(pinv, "finger_tables", partial(finger_tables, spacing_mm=(10.0, 27.5)))
+    seen = []
+    real = pinv.invert_rows
+
+    def spy(inv, rec, data, rows, seeds=None, workers=1, person=False):
+        seen.append((set(np.asarray(data.group_names)[np.unique(data.group[rows])]), person,
+                     sorted(inv.finger_prior_sd)))
+        return real(inv, rec, data, rows, seeds, workers, person)
+
+    monkeypatch.setattr(pinv, "invert_rows", spy)
+    m = pinv.inversion_step(StepRunner(config.out_dir, False), config, fields, (path, {}),
+                            push="off", max_frames=None, finger="auto", two_finger_frames=0)
+    rec = read_recording(path)
+    f = m["finger"]
+    n_val = sum(int(np.sum(rec.trial(n).n_contacts == 1)) for n in VAL)
+    assert f["n_frames"] == min(n_val, pinv.PUSH_CHOICE_FRAMES) and f["tables_s"] > 0
+    off, on = f["val_loc_mm_mean"]["off"], f["val_loc_mm_mean"]["on"]
+    assert f["use"] is bool(on < off) and set(f["val_force_mae_n"]) == {"on", "off"}
+    val_trials = {n for n in VAL if np.any(rec.trial(n).n_contacts == 1)}
+    both = ["modulus", "radius"]
+    assert seen == [(val_trials, False, []), (val_trials, True, both),
+                    (set(TEST[:2]), f["use"], both if f["use"] else [])]
+    assert m["settings"]["finger"] == "auto"
+    assert inversion_block(m, None, None)["finger"] == f
+    seen.clear()
+    on_dir = _out(tmp_path / "on", config)
+    m_on = pinv.inversion_step(StepRunner(on_dir.out_dir, False), on_dir, fields, (path, {}),
+                               push="off", max_frames=None, finger="on", two_finger_frames=0)
+    assert m_on["finger"]["use"] and seen == [(set(TEST[:2]), True, both)]
+    with pytest.raises(EctskinError, match="would overwrite.*finger"):
+        pinv.inversion_step(StepRunner(config.out_dir, False), config, fields, (path, {}),
+                            push="off", max_frames=None, two_finger_frames=0)
+    with pytest.raises(EctskinError, match="finger"):
+        pinv.inversion_step(StepRunner(config.out_dir, False), config, fields, (path, {}),
+                            finger="maybe")
+
+
 def test_the_two_finger_model_reaches_every_fit_and_the_settings(world, tmp_path, monkeypatch):
     config, fields, path = world
     config = _out(tmp_path, config)
@@ -321,3 +369,4 @@ def test_the_reproduction_fits_two_fingers_as_coupled_conductors(tmp_path, monke
 
     rep._physics_steps(Runner(), ReproduceConfig(tmp_path), (tmp_path, {}), {})
     assert got["two_fingers"] == "coupled" and got["press_check"] and got["choice"]
+    assert got["finger"] == "auto"  # ReproduceConfig.inversion_finger's default

@@ -103,6 +103,15 @@ def add_common_arguments(p: argparse.ArgumentParser, *, default_profile: str) ->
         "low); docs/bound.md",
     )
     p.add_argument(
+        "--inversion-finger",
+        choices=("auto", "on", "off"),
+        default="auto",
+        help="the inversion fits each pressing finger's pulp modulus and radius (tables from "
+        "coarse response fields, built into the field cache) and pools them over each trial, one "
+        "person's: where the validation point error is lower (auto, default), always, or never; "
+        "docs/inversion.md",
+    )
+    p.add_argument(
         "--field-cache",
         metavar="DIR",
         default=None,
@@ -179,6 +188,7 @@ def run_reproduce(args: argparse.Namespace, out_dir: str) -> int:
         field_grid=args.field_grid,
         field_states=args.field_states,
         bound_push_columns=args.bound_push_columns,
+        inversion_finger=args.inversion_finger,
         field_cache=args.field_cache,
     )
     m = reproduce(config)

@@ -55,7 +55,7 @@ reference recording given, the recording's own and a stored one, and says which 
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -238,6 +238,34 @@ def is_no_contact(trial: Trial) -> bool:
     if kind is not None:
         return kind == "no_contact"
     return trial.region == 0 and not np.any(trial.labels)
+
+
+def untouched_readouts(rec: Recording, states: Iterable[Sequence[float]],
+                       exclude: Sequence[str] = (), tol_ml: float = 1e-6
+                       ) -> dict[tuple[float, ...], dict[str, Any]]:
+    """{state: {"pF": (n_pairs,) mean readout, "trials": names}} of every state of ``states``
+    (inflation vectors, ml; a trial's state within ``tol_ml`` of one) that has a no-contact trial
+    in ``rec`` (:func:`is_no_contact`) not in ``exclude``: the mean of their frames, per channel
+    over the finite readouts. A state without one, or with a channel never read, is left out."""
+    keys = [tuple(float(x) for x in s) for s in states]
+    found: dict[tuple[float, ...], list[Trial]] = {}
+    skip = set(exclude)
+    for t in rec.trials:
+        if t.name in skip or not is_no_contact(t):
+            continue
+        infl = np.asarray(t.inflation, float)
+        for state in keys:
+            if len(state) == infl.size and np.all(np.abs(np.asarray(state) - infl) < tol_ml):
+                found.setdefault(state, []).append(t)
+    out = {}
+    for state, trials in found.items():
+        frames = np.concatenate([t.capacitance for t in trials], axis=0)
+        ok = np.isfinite(frames)
+        if not ok.any(axis=0).all():
+            continue
+        mean = np.where(ok, frames, 0.0).sum(axis=0) / ok.sum(axis=0)
+        out[state] = {"pF": mean, "trials": [t.name for t in trials]}
+    return out
 
 
 def is_uninflated(trial: Trial) -> bool:

@@ -68,6 +68,9 @@ FIELD_STATES = ("contact", "all")
 #: where the bound's push columns come from (ReproduceConfig.bound_push_columns; the same as
 #: ectskin.twin.bound_field.PUSH_COLUMNS, which tests/pipeline/test_bound_push_option.py checks)
 BOUND_PUSH_COLUMNS = ("untouched", "finger")
+#: the inversion's person's finger (ReproduceConfig.inversion_finger; the inversion step's
+#: ``finger``, ectskin.pipeline.inversion.FINGER_CHOICES)
+INVERSION_FINGER = ("auto", "on", "off")
 #: how the contact experiment's touch trials are read (ReproduceConfig.contact_response)
 CONTACT_RESPONSES = ("field", "solve")
 #: the contact experiment read from the fields (ReproduceConfig.contact_protocol): touch trials
@@ -168,6 +171,11 @@ class ReproduceConfig:
         default, seconds), or a table of direct solves with the finger pressing per state (about
         30 000 solves a state), without which the bound beyond the wire ends with the hand's
         push unknown is several times too low (docs/bound.md).
+    inversion_finger : "auto" | "on" | "off"
+        The inversion fits each pressing finger's pulp modulus and radius and pools them over
+        each trial's frames, one person's (:mod:`ectskin.pipeline.inversion`): "auto" (the
+        default) where the validation trials' point error says so, "on", or "off" (no finger
+        tables built).
     """
 
     out_dir: Path
@@ -196,6 +204,7 @@ class ReproduceConfig:
     field_grid: str = "quick"
     field_states: str = "contact"
     bound_push_columns: str = "untouched"
+    inversion_finger: str = "auto"
 
     def __post_init__(self) -> None:
         check_type("out_dir", self.out_dir, (str, os.PathLike))
@@ -229,6 +238,7 @@ class ReproduceConfig:
         check_option("field_grid", self.field_grid, tuple(FIELD_GRIDS))
         check_option("field_states", self.field_states, FIELD_STATES)
         check_option("bound_push_columns", self.bound_push_columns, BOUND_PUSH_COLUMNS)
+        check_option("inversion_finger", self.inversion_finger, INVERSION_FINGER)
         if self.field_cache is not None:
             check_type("field_cache", self.field_cache, (str, os.PathLike))
             object.__setattr__(self, "field_cache", Path(self.field_cache))

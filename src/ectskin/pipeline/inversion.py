@@ -39,6 +39,15 @@ a common gain and offset cannot absorb (docs/inversion.md).
 ``press_check``: each hovering finger of the chosen fit is refitted pressing, and kept so where
 that fits about as well (``Inversion(press_check=True)``).
 
+The person's finger (``finger``): each pressing finger's pulp modulus and fingertip radius
+fitted too (``Inversion(modulus=, radius=)``, their tables from coarse response fields of the
+states, :func:`ectskin.twin.field_finger.finger_tables`, built into the field cache), and pooled
+over the frames of each trial, one person's, before every frame is fitted again with what they
+tell (:func:`ectskin.inversion.fit_frames` ``person=``; :mod:`ectskin.inversion.person`). No
+label is read: the pooling uses the trial's readouts alone. ``"auto"`` keeps it where
+:data:`PUSH_CHOICE_FRAMES` one-finger frames of the validation trials get a lower mean point
+error with it than without; ``"on"`` / ``"off"`` force it.
+
 Two fingers (``two_finger``): the evenly spread frames hold few with two fingers on the skin
 (some 50-70 of 3000 in a quick reproduction, from a few trials), too few to tell a count
 accuracy of 95 %; up to ``two_finger_frames`` (:data:`MAX_TWO_FINGER_FRAMES`) more of the test
@@ -75,9 +84,10 @@ from ectskin._check import EctskinError, check_option
 from ectskin._files import read_json, to_jsonable, write_json_atomic
 from ectskin.inversion import Inversion, fit_frames, push_basis, results_to_arrays
 from ectskin.inversion.fit import TWO_FINGER_MODELS
+from ectskin.inversion.person import POOL_SD_FLOOR
 from ectskin.inversion.seed import SEED_SEARCH
 from ectskin.io import Recording, read_recording
-from ectskin.io.calibration import is_no_contact
+from ectskin.io.calibration import untouched_readouts
 from ectskin.learn.data.contact import HOVER_MAX_MM, MAX_FINGERS, ContactData, contact_dataset
 from ectskin.learn.metrics.contact import multi_metrics
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
@@ -85,10 +95,16 @@ from ectskin.learn.tasks.contact import contact_report, slot_points
 from ectskin.pipeline.bound import state_key
 from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
 from ectskin.pipeline.contact_pick import CHOICE_FRAMES, RULE, contact_choice, load_learned
+from ectskin.pipeline.field import field_cache_dir
 from ectskin.pipeline.metrics import beside
 from ectskin.pipeline.runner import StepRunner, digest
 from ectskin.pipeline.steps import run_settings
 from ectskin.twin.field import ResponseField
+from ectskin.twin.field_finger import (
+    FINGER_FIELD_FORCE_NODES,
+    FINGER_FIELD_SPACING_MM,
+    finger_tables,
+)
 from ectskin.twin.readout import ReadoutConfig
 
 log = logging.getLogger(__name__)
@@ -97,6 +113,8 @@ INVERSION_DIR = "inversion"
 METRICS_FILE = "metrics.json"
 #: how the hand's push enters the inversion (module docstring)
 PUSH_CHOICES = ("auto", "on", "off")
+#: ``finger`` (the person's finger fitted and pooled per trial) of :func:`inversion_step`
+FINGER_CHOICES = ("auto", "on", "off")
 #: where each state's untouched readout comes from (module docstring)
 UNTOUCHED_CHOICES = ("field", "auto")
 #: validation frames with one finger on the skin (at most, evenly spread) that choose the push
@@ -188,31 +206,6 @@ def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
     return pred
 
 
-def untouched_readouts(rec: Recording, fields: Mapping[tuple[float, ...], Any],
-                       exclude: Sequence[str] = ()) -> dict[tuple[float, ...], dict[str, Any]]:
-    """{state: {"pF": (n_pairs,) mean readout, "trials": names}} of every state of ``fields``
-    that has a no-contact trial in ``rec`` (:func:`~ectskin.io.calibration.is_no_contact`) not
-    in ``exclude``: the mean of their frames, per channel over the finite readouts. A state
-    without one, or with a channel never read, is left out (it keeps its field's)."""
-    found: dict[tuple[float, ...], list[Any]] = {}
-    skip = set(exclude)
-    for t in rec.trials:
-        if t.name in skip or not is_no_contact(t):
-            continue
-        for state in fields:
-            if _field_of({state: True}, t.inflation) is not None:
-                found.setdefault(state, []).append(t)
-    out = {}
-    for state, trials in found.items():
-        frames = np.concatenate([t.capacitance for t in trials], axis=0)
-        ok = np.isfinite(frames)
-        if not ok.any(axis=0).all():
-            continue
-        mean = np.where(ok, frames, 0.0).sum(axis=0) / ok.sum(axis=0)
-        out[state] = {"pF": mean, "trials": [t.name for t in trials]}
-    return out
-
-
 def _frames(data: ContactData, single_only: bool, limit: int | None) -> np.ndarray:
     """Rows of ``data`` to invert: all, or those with one finger on the skin, at most ``limit``
     evenly spread."""
@@ -223,12 +216,14 @@ def _frames(data: ContactData, single_only: bool, limit: int | None) -> np.ndarr
 
 
 def invert_rows(inv: Inversion, rec: Recording, data: ContactData, rows: np.ndarray,
-                seeds: Sequence[Any] | None = None, workers: int = 1
+                seeds: Sequence[Any] | None = None, workers: int = 1, person: bool = False
                 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Invert the frames ``rows`` of ``data`` (samples of ``rec``'s trials, window 1): the
     arrays of :func:`ectskin.inversion.results_to_arrays` and each frame's seconds; ``seeds``:
     per row, the ``seeds`` of :meth:`ectskin.inversion.Inversion.fit` (the hybrid);
-    ``workers``: processes fitting them (:func:`~ectskin.inversion.fit_frames`)."""
+    ``workers``: processes fitting them (:func:`~ectskin.inversion.fit_frames`); ``person``:
+    each trial's frames among them pool the finger (``fit_frames(person=)``: a trial is one
+    person's)."""
     if seeds is not None and len(seeds) != rows.size:
         raise EctskinError(f"invert_rows: seeds must hold one entry per row ({rows.size}), got "
                            f"{len(seeds)}")
@@ -248,7 +243,8 @@ def invert_rows(inv: Inversion, rec: Recording, data: ContactData, rows: np.ndar
         return results_to_arrays([]), np.zeros(0)
     # one frame per fit (window 1), so the frames of all trials go together
     results, seconds = fit_frames(inv, np.concatenate(readouts), np.concatenate(states),
-                                  seeds=seeds, workers=workers)
+                                  seeds=seeds, workers=workers,
+                                  person=data.group[rows].tolist() if person else None)
     return results_to_arrays(results), seconds
 
 
@@ -343,13 +339,12 @@ def _dataset(rec: Recording, trials: Sequence[str]) -> ContactData | None:
     return contact_dataset(rec, window=1, trials=list(trials)) if trials else None
 
 
-def _choose_push(rec: Recording, fields: Mapping[tuple[float, ...], ResponseField],
-                 noise: ReadoutConfig, val: Sequence[str], push: Mapping[Any, np.ndarray],
-                 finger_scale_sd: float | None = None, workers: int = 1, **options: Any
-                 ) -> dict[str, Any]:
-    """The validation frames' mean point error with and without the push columns, and which is
-    lower (ties and no validation frame: without, the smaller model); ``workers``: processes
-    fitting the frames."""
+def _choose(rec: Recording, val: Sequence[str], off: tuple[Inversion, bool],
+            on: tuple[Inversion, bool], workers: int = 1) -> dict[str, Any]:
+    """The validation frames' mean point error (and force MAE) of two inversions, ``off`` and
+    ``on`` ((the inversion, whether each trial pools the finger)), and whether ``on``'s is lower
+    (ties and no validation frame: ``off``, the smaller model); ``workers``: processes fitting
+    the frames."""
     data = _dataset(rec, val)
     rows = _frames(data, True, PUSH_CHOICE_FRAMES) if data is not None else np.zeros(0, int)
     if rows.size == 0:
@@ -357,32 +352,34 @@ def _choose_push(rec: Recording, fields: Mapping[tuple[float, ...], ResponseFiel
                 "n_frames": 0}
     assert data is not None
     sub = data.take(rows)
-    errors = {}
-    for name, cols in (("off", None), ("on", push)):
-        arrays, _ = invert_rows(Inversion(fields, noise, push=cols, finger_scale_sd=finger_scale_sd,
-                                          **options), rec, data, rows, workers=workers)
-        errors[name] = contact_report(sub, prediction_columns(arrays, sub.faces, sub.face_extent),
-                                      with_maps=False)["loc_mm_mean"]
+    errors, forces = {}, {}
+    for name, (inv, person) in (("off", off), ("on", on)):
+        arrays, _ = invert_rows(inv, rec, data, rows, workers=workers, person=person)
+        rep = contact_report(sub, prediction_columns(arrays, sub.faces, sub.face_extent),
+                             with_maps=False)
+        errors[name], forces[name] = rep["loc_mm_mean"], rep["force_mae_n"]
     return {"use": bool(errors["on"] < errors["off"]), "val_loc_mm_mean": errors,
-            "n_frames": int(rows.size), "why": "lower validation point error"}
+            "val_force_mae_n": forces, "n_frames": int(rows.size),
+            "why": "lower validation point error"}
 
 
 def _choice(runner: StepRunner, config: ReproduceConfig, rec: Recording, source: str,
             inv: Inversion, split: Mapping[str, Any], val: Sequence[str], test: ContactData,
-            own: tuple[Mapping[str, np.ndarray], np.ndarray], n_field: int, n_without: int
-            ) -> dict[str, Any]:
+            own: tuple[Mapping[str, np.ndarray], np.ndarray], n_field: int, n_without: int,
+            person: bool = False) -> dict[str, Any]:
     """The contact model choice on the field states (:func:`ectskin.pipeline.contact_pick.
     contact_choice`): validation frames of ``val`` spread as the test frames, at most
     :data:`~ectskin.pipeline.contact_pick.CHOICE_FRAMES`; ``test``: the test frames inverted,
     ``own`` their inversion (arrays, seconds); ``n_field``, ``n_without``: the test frames in
-    states with and without a field."""
+    states with and without a field; ``person``: the finger pooled per trial."""
     val_data = _dataset(rec, val)
     val_rows = (_frames(val_data, False, CHOICE_FRAMES) if val_data is not None
                 else np.zeros(0, np.int64))
 
     def invert(data: ContactData, rows: np.ndarray, seeds: Sequence[Any] | None
                ) -> tuple[np.ndarray, np.ndarray]:
-        arrays, seconds = invert_rows(inv, rec, data, rows, seeds, workers=_workers(config))
+        arrays, seconds = invert_rows(inv, rec, data, rows, seeds, workers=_workers(config),
+                                      person=person)
         return prediction_columns(arrays, data.faces, data.face_extent), seconds
 
     learned = load_learned(runner.out / "runs" / CONTACT_RUN, rec, source)
@@ -410,6 +407,7 @@ def inversion_step(
     two_finger_frames: int | None = MAX_TWO_FINGER_FRAMES,
     choice: bool = False,
     two_fingers: str = "superposition",
+    finger: str = "off",
 ) -> dict[str, Any]:
     """Step "inversion": OUT_DIR/inversion/metrics.json (module docstring); returns it.
 
@@ -430,7 +428,8 @@ def inversion_step(
     (runs/contact), its k-NN and ridge baselines, the inversion and the hybrid on validation
     frames (:mod:`ectskin.pipeline.contact_pick`); the result's ``choice``.
     ``two_fingers``: the fit's two-finger model, "superposition" or "coupled"
-    (:class:`~ectskin.inversion.Inversion`).
+    (:class:`~ectskin.inversion.Inversion`). ``finger``: "auto", "on" or "off", the person's
+    finger fitted and pooled per trial (module docstring; the result's ``finger``).
     """
     if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
         raise EctskinError(f"inversion_step: max_frames must be an integer >= 1 or None, got "
@@ -445,6 +444,7 @@ def inversion_step(
     check_option("push", push, PUSH_CHOICES)
     check_option("untouched", untouched, UNTOUCHED_CHOICES)
     check_option("two_fingers", two_fingers, TWO_FINGER_MODELS)
+    check_option("finger", finger, FINGER_CHOICES)
     for name, flag in (("press_check", press_check), ("choice", choice)):
         if not isinstance(flag, bool):
             raise EctskinError(f"inversion_step: {name} must be True or False, got {flag!r}")
@@ -469,6 +469,8 @@ def inversion_step(
         "two_finger_frames": two_finger_frames,
         # named only when not the default, so that the steps cached before keep their key
         **({"two_fingers": two_fingers} if two_fingers != "superposition" else {}),
+        **({"finger": finger, "finger_fields": [FINGER_FIELD_SPACING_MM, FINGER_FIELD_FORCE_NODES,
+                                                POOL_SD_FLOOR]} if finger != "off" else {}),
     }
     if choice:  # the run's model and its baselines' seed are candidates' settings too
         settings.update(choice=True, choice_frames=CHOICE_FRAMES, choice_rule=RULE,
@@ -490,9 +492,11 @@ def inversion_step(
             if not has[name]:
                 t = rec.trial(name)
                 without[state_key(t.inflation)] = without.get(state_key(t.inflation), 0) + t.n_frames
-        base = untouched_readouts(rec, fields, test) if untouched == "auto" else {}
-        options: dict[str, Any] = {"press_check": press_check, "two_fingers": two_fingers,
-                                   "untouched": {s: b["pF"] for s, b in base.items()} or None}
+        base = (untouched_readouts(rec, fields, test, STATE_TOL_ML) if untouched == "auto"
+                else {})
+        plain: dict[str, Any] = {"press_check": press_check, "two_fingers": two_fingers,
+                                 "untouched": {s: b["pF"] for s, b in base.items()} or None,
+                                 "finger_scale_sd": finger_scale_sd}
         cols: dict[Any, np.ndarray] | None = None
         push_pick: dict[str, Any] = {"use": push == "on", "why": f"push={push!r}"}
         t_push = 0.0
@@ -501,10 +505,27 @@ def inversion_step(
             cols = {s: push_basis(f, noise=noise) for s, f in fields.items()}
             t_push = time.perf_counter() - t1
             if push == "auto":
-                push_pick = _choose_push(rec, fields, noise, [n for n in val if has[n]], cols,
-                                         finger_scale_sd, workers=workers, **options)
-        inv = Inversion(fields, noise, push=cols if push_pick["use"] else None,
-                        finger_scale_sd=finger_scale_sd, **options)
+                push_pick = _choose(rec, [n for n in val if has[n]],
+                                    (Inversion(fields, noise, **plain), False),
+                                    (Inversion(fields, noise, push=cols, **plain), False),
+                                    workers)
+        inv = Inversion(fields, noise, push=cols if push_pick["use"] else None, **plain)
+        finger_pick: dict[str, Any] = {"use": False, "why": f"finger={finger!r}"}
+        if finger != "off":
+            t1 = time.perf_counter()
+            tables = finger_tables([f.spec for f in fields.values()],
+                                   field_cache_dir(config.field_cache), workers=config.workers,
+                                   progress=config.progress)
+            t_tables = time.perf_counter() - t1
+            pooled = Inversion(fields, noise, push=cols if push_pick["use"] else None,
+                               modulus=tables["modulus"], radius=tables["radius"], **plain)
+            finger_pick = ({"use": True, "why": "finger='on'"} if finger == "on" else
+                           _choose(rec, [n for n in val if has[n]], (inv, False), (pooled, True),
+                                   workers))
+            finger_pick["tables_s"] = t_tables
+            if finger_pick["use"]:
+                inv = pooled
+        person = bool(finger_pick["use"])
         data = _dataset(rec, [n for n in test if has[n]])
         n_without = sum(without.values())
         if data is None:
@@ -513,20 +534,21 @@ def inversion_step(
             rows = _frames(data, False, max_frames)
             test_data = data.take(rows)
             arrays, seconds = invert_rows(inv, rec, test_data, np.arange(rows.size),
-                                          workers=workers)
+                                          workers=workers, person=person)
             result = score(test_data, arrays, seconds)
             result["timing"]["push_basis_s"] = t_push
             result["n_frames_in_field_states"] = int(data.n_samples)
             if choice:
                 result["choice"] = _choice(runner, config, rec, str(data_path), inv, split,
                                            [n for n in val if has[n]], test_data,
-                                           (arrays, seconds), data.n_samples, n_without)
+                                           (arrays, seconds), data.n_samples, n_without,
+                                           person=person)
             parts = [(rows, arrays)]
             if two_finger_frames != 0:
                 extra = two_finger_rows(data, rows, two_finger_frames)
                 if extra.size:
                     parts.append((extra, invert_rows(inv, rec, data, extra,
-                                                     workers=workers)[0]))
+                                                     workers=workers, person=person)[0]))
             every = np.concatenate([r for r, _ in parts])
             order = np.argsort(every, kind="stable")
             keep = data.count[every[order]] == 2
@@ -538,11 +560,12 @@ def inversion_step(
         result.update(
             frames_without_field=without, n_frames_without_field=n_without,
             share_without_field=(n_without / total) if total else None,
-            n_test_trials=len(test), push=push_pick,
+            n_test_trials=len(test), push=push_pick, finger=finger_pick,
             settings={"window": 1, "kind": "absolute", "noise": to_jsonable(noise),
                       "push": push, "max_fingers": inv.max_fingers,
                       "finger_scale_sd": finger_scale_sd, "press_check": press_check,
                       "two_fingers": two_fingers, "min_separation_mm": inv.min_separation_mm,
+                      "finger": finger,
                       "untouched": {"source": untouched,
                                     "trials": {state_key(st): b["trials"]
                                                for st, b in base.items()}},

@@ -184,6 +184,20 @@ def _options_text(settings: Mapping[str, Any]) -> str:
     return "".join(out)
 
 
+def _finger_text(finger: Any) -> str:
+    """Whether each trial's frames pooled the person's finger (pulp, radius), and what the
+    validation frames said of it ("" for a step made before the option, or with it off)."""
+    if not isinstance(finger, Mapping) or "val_loc_mm_mean" not in finger and not finger.get("use"):
+        return ""
+    val = finger.get("val_loc_mm_mean") or {}
+    force = finger.get("val_force_mae_n") or {}
+    return (f" Each pressing finger's pulp modulus and radius are {'' if finger.get('use') else 'not '}"
+            "fitted and pooled over its trial's frames, one person's"
+            + (f", chosen on {finger.get('n_frames')} validation frames ({_mm(val.get('on'))} "
+               f"and {_n(force.get('on'))} force MAE with it, {_mm(val.get('off'))} and "
+               f"{_n(force.get('off'))} without)" if val else "") + ".")
+
+
 def inversion_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
     """The report's items for metrics.json's ``inversion``; [] without it (or with no frame)."""
     inv = lookup(metrics, "inversion")
@@ -198,7 +212,7 @@ def inversion_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
            f"{_mm(val.get('off'))} without)" if val else "")
         + "."
     )
-    push_text += _options_text(inv.get("settings") or {})
+    push_text += _options_text(inv.get("settings") or {}) + _finger_text(inv.get("finger"))
     n, n_all = inv.get("n_frames"), inv.get("n_frames_in_field_states")
     sub = (f" {n} of its {n_all} test frames in states with a field, evenly spread, were "
            "inverted." if isinstance(n_all, int) and isinstance(n, int) and n < n_all else "")
