@@ -533,8 +533,16 @@ def inversion_step(
         else:
             rows = _frames(data, False, max_frames)
             test_data = data.take(rows)
-            arrays, seconds = invert_rows(inv, rec, test_data, np.arange(rows.size),
-                                          workers=workers, person=person)
+            # the spread and the extra two-finger frames in one call: a trial's finger is
+            # pooled over all of them (its one-finger frames are in the spread)
+            extra = (two_finger_rows(data, rows, two_finger_frames) if two_finger_frames != 0
+                     else np.zeros(0, np.int64))
+            every = np.union1d(rows, extra)
+            both, all_seconds = invert_rows(inv, rec, data, every, workers=workers,
+                                            person=person)
+            spread = np.searchsorted(every, rows)
+            arrays = {k: np.asarray(v)[spread] for k, v in both.items()}
+            seconds = all_seconds[spread]
             result = score(test_data, arrays, seconds)
             result["timing"]["push_basis_s"] = t_push
             result["n_frames_in_field_states"] = int(data.n_samples)
@@ -543,19 +551,10 @@ def inversion_step(
                                            [n for n in val if has[n]], test_data,
                                            (arrays, seconds), data.n_samples, n_without,
                                            person=person)
-            parts = [(rows, arrays)]
-            if two_finger_frames != 0:
-                extra = two_finger_rows(data, rows, two_finger_frames)
-                if extra.size:
-                    parts.append((extra, invert_rows(inv, rec, data, extra,
-                                                     workers=workers, person=person)[0]))
-            every = np.concatenate([r for r, _ in parts])
-            order = np.argsort(every, kind="stable")
-            keep = data.count[every[order]] == 2
+            keep = data.count[every] == 2
             if keep.any():
-                joined = {k: np.concatenate([np.asarray(a[k]) for _, a in parts])[order][keep]
-                          for k in arrays}
-                result["two_finger"] = two_finger_score(data.take(every[order][keep]), joined)
+                result["two_finger"] = two_finger_score(
+                    data.take(every[keep]), {k: np.asarray(v)[keep] for k, v in both.items()})
         total = result.get("n_frames_in_field_states", 0) + n_without
         result.update(
             frames_without_field=without, n_frames_without_field=n_without,
