@@ -386,6 +386,8 @@ def test_the_pooled_posterior_is_the_gaussian_product_by_hand():
     assert pooled["modulus"][1] == pytest.approx(118.75 ** -0.5, rel=1e-12)
     assert pool_fingers(frames, {"modulus": 0.4}, sd_floor=0.2)["modulus"][1] == 0.2
     assert pool_fingers([], {"modulus": 0.4}, sd_floor=0.0) == {"modulus": (0.0, 0.4)}
+    sd0 = 0.10296  # a prior told nothing comes back exactly (fit_frames refits only where told)
+    assert pool_fingers(frames[2:], {"modulus": sd0}) == {"modulus": (0.0, sd0)}
     for bad, what in (({"pulp": 0.4}, "prior_sd"), ({"modulus": 0.0}, "prior_sd")):
         with pytest.raises(EctskinError, match=what):
             pool_fingers(frames, bad)

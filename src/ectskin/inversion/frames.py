@@ -143,8 +143,8 @@ def _fit_per_person(inversion: Inversion, readouts: Any, states: Any, person: Se
                     sd_floor: float, **kw: Any) -> tuple[list[InversionResult], np.ndarray]:
     """:func:`fit_frames` with ``person``: fit, pool per person, refit."""
     if isinstance(readouts, Recording):
-        raise EctskinError("fit_frames: person labels go with arrays of frames; a recording's "
-                           "frames are pooled by trial with person=[trial of each frame]")
+        raise EctskinError("fit_frames: person labels go with arrays of frames, not a "
+                           "recording: give its frames and one label per frame (its trial)")
     first, seconds = _fit(inversion, readouts, states, **kw)
     n = len(first)
     if len(person) != n:

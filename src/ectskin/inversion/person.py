@@ -42,7 +42,8 @@ def pool_fingers(results: Iterable[InversionResult], prior_sd: Mapping[str, floa
                  sd_floor: float = POOL_SD_FLOOR) -> dict[str, tuple[float, float]]:
     """{name: (centre, sd)} of each finger nuisance in ``prior_sd`` {name: the population
     prior's sd that the fits were made with}, pooled over the one-pressing-finger ``results``
-    of one person (module docstring); a nuisance no frame resolved keeps its prior (0, sd)."""
+    of one person (module docstring); a nuisance no frame resolved keeps its prior (0, sd),
+    exactly."""
     if not isinstance(prior_sd, Mapping):
         raise EctskinError(f"pool_fingers: prior_sd must be a mapping {{name: sd}}, got "
                            f"{type(prior_sd).__name__}")
@@ -55,6 +56,7 @@ def pool_fingers(results: Iterable[InversionResult], prior_sd: Mapping[str, floa
         raise EctskinError(f"pool_fingers: sd_floor must be a number >= 0, got {sd_floor!r}")
     precision = {name: 1.0 / float(sd) ** 2 for name, sd in prior_sd.items()}
     info = dict.fromkeys(prior_sd, 0.0)
+    told = dict.fromkeys(prior_sd, 0)
     for r in results:
         if not isinstance(r, InversionResult):
             raise EctskinError(f"pool_fingers: results must be InversionResults, got "
@@ -68,5 +70,6 @@ def pool_fingers(results: Iterable[InversionResult], prior_sd: Mapping[str, floa
                 continue  # not fitted in this frame
             precision[name] += max(1.0 / se**2 - 1.0 / float(prior_sd[name]) ** 2, 0.0)
             info[name] += mu / se**2
-    return {name: (info[name] / p, max(1.0 / math.sqrt(p), float(sd_floor)))
-            for name, p in precision.items()}
+            told[name] += 1
+    return {name: (info[name] / p, max(1.0 / math.sqrt(p), float(sd_floor))) if told[name]
+            else (0.0, float(prior_sd[name])) for name, p in precision.items()}
