@@ -85,3 +85,7 @@ def test_finger_tables_from_fields_are_the_direct_solves_differences(small_spec,
     assert inv.finger_prior_sd == {"modulus": MODULUS_PRIOR_SD, "radius": RADIUS_PRIOR_SD}
     with pytest.raises(EctskinError, match="finger nuisance"):
         finger_field_specs(small_spec, "pulp")
+    # never finer than the state's own field; no hover part, no graded bands
+    small, big = finger_field_specs(replace(small_spec, spacing_mm=(12.0, 3.0)), "radius")
+    assert small.spacing_mm == big.spacing_mm == (12.0, 8.0) and small.height_nodes == 0
+    assert big.finger.radius_mm == pytest.approx(small_spec.finger.radius_mm * math.exp(0.05))

@@ -46,13 +46,15 @@ def finger_field_specs(spec: FieldSpec, name: str, *,
                        force_nodes: int = FINGER_FIELD_FORCE_NODES) -> tuple[FieldSpec, FieldSpec]:
     """The specs (smaller, bigger) of ``spec``'s state whose finger's nuisance ``name``
     ("modulus" or "radius") is e^(∓step) times ``spec``'s, on the coarse grid (no graded bands,
-    no hover part)."""
+    no hover part): steps of ``spacing_mm``, never finer than ``spec``'s own (a state's field
+    on a coarser grid keeps its steps), and ``force_nodes`` forces."""
     if name not in FINGER_STEPS:
         raise EctskinError(f"Invalid value for 'finger nuisance': allowed values are "
                            f"{list(FINGER_STEPS)}; got {name!r}")
     f, h = spec.finger, FINGER_STEPS[name]
     field = "pulp_modulus_mpa" if name == "modulus" else "radius_mm"
-    coarse = replace(spec, spacing_mm=spacing_mm, force_nodes=force_nodes, height_nodes=0,
+    steps = tuple(max(float(a), float(b)) for a, b in zip(spacing_mm, spec.spacing_mm))
+    coarse = replace(spec, spacing_mm=steps, force_nodes=force_nodes, height_nodes=0,
                      fine_spacing_mm=None, refine_u_mm=(), refine_v_mm=())
     return tuple(replace(coarse, finger=replace(f, **{field: getattr(f, field) * math.exp(s)}))
                  for s in (-h, h))  # type: ignore[return-value]
