@@ -53,7 +53,8 @@ def finger_field_specs(spec: FieldSpec, name: str, *,
                            f"{list(FINGER_STEPS)}; got {name!r}")
     f, h = spec.finger, FINGER_STEPS[name]
     field = "pulp_modulus_mpa" if name == "modulus" else "radius_mm"
-    steps = tuple(max(float(a), float(b)) for a, b in zip(spacing_mm, spec.spacing_mm))
+    steps = (max(float(spacing_mm[0]), float(spec.spacing_mm[0])),
+             max(float(spacing_mm[1]), float(spec.spacing_mm[1])))
     coarse = replace(spec, spacing_mm=steps, force_nodes=force_nodes, height_nodes=0,
                      fine_spacing_mm=None, refine_u_mm=(), refine_v_mm=())
     return tuple(replace(coarse, finger=replace(f, **{field: getattr(f, field) * math.exp(s)}))
