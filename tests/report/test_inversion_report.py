@@ -113,6 +113,21 @@ def test_the_report_says_what_the_fit_assumed_beyond_the_field():
     assert "untouched readout" not in text and "prior sd" not in text and "pressing" not in text
 
 
+def test_the_report_says_whether_each_trial_pooled_the_persons_finger():
+    m = _metrics()
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert "fitted, alone," in text and "pulp" not in text
+    m["inversion"]["finger"] = {"use": True, "n_frames": 240,
+                                "val_loc_mm_mean": {"on": 0.46, "off": 0.83},
+                                "val_force_mae_n": {"on": 0.264, "off": 0.288}}
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert "alone" not in text and "pulp modulus and radius are fitted and pooled" in text
+    assert "chosen on 240 validation frames (0.46 mm and 0.264 N" in text
+    m["inversion"]["finger"]["use"] = False
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert "fitted, alone," in text and "are not fitted and pooled" in text
+
+
 def test_the_report_gives_the_two_finger_frames_scored_apart():
     m = _metrics()
     text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")

@@ -218,7 +218,9 @@ def inversion_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
            "inverted." if isinstance(n_all, int) and isinstance(n, int) and n < n_all else "")
     s.append((
         "p",
-        "Each test frame of the contact run is fitted, alone, through the twin's response field "
+        "Each test frame of the contact run is fitted"
+        + ("" if (inv.get("finger") or {}).get("use") else ", alone,")
+        + " through the twin's response field "
         "of its inflation state (docs/inversion.md): 0, 1 or 2 fingers, each finger's face, "
         "point, force or hover height, with drift as a nuisance, the count chosen by BIC. No "
         "training data. It is scored by ContactNet's metric function on the same test trials; "
