@@ -393,7 +393,9 @@ def test_reproduce_tiny_twin_experiment(tmp_path, monkeypatch):
     """The real chain: the digital twin simulates a tiny protocol (levels 0/20 ml, one touch trial
     per state, 2-s trials), characterises the skin, trains, evaluates and reports. The contact
     experiment's response fields are built coarse (a 10 × 27.5 mm grid) into a cache of the
-    test's own (~30 s each), and the bound and the inversion run on them."""
+    test's own (~30 s each), and the bound and the inversion run on them (without the person's
+    finger: its 32 finger fields would add minutes; tests/pipeline/test_inversion_step.py runs
+    it on a field of its own)."""
     from ectskin.pipeline import field as pfield
     from ectskin.twin import Protocol
     from ectskin.twin.field_spec import FieldGrid
@@ -411,6 +413,7 @@ def test_reproduce_tiny_twin_experiment(tmp_path, monkeypatch):
         epochs={"touch": 5, "track": 1},
         progress=False,
         field_cache=tmp_path / "fields",
+        inversion_finger="off",
     )
     m = reproduce(config)
     assert len(list((tmp_path / "fields").iterdir())) == 8  # one field per contact state
