@@ -500,16 +500,18 @@ def inversion_step(
         cols: dict[Any, np.ndarray] | None = None
         push_pick: dict[str, Any] = {"use": push == "on", "why": f"push={push!r}"}
         t_push = 0.0
+        # the inversion without and with the push columns, those the choice needs, each built
+        # once (its node tables)
+        candidates = {} if push == "on" else {False: Inversion(fields, noise, **plain)}
         if push != "off":
             t1 = time.perf_counter()
             cols = {s: push_basis(f, noise=noise) for s, f in fields.items()}
             t_push = time.perf_counter() - t1
+            candidates[True] = Inversion(fields, noise, push=cols, **plain)
             if push == "auto":
-                push_pick = _choose(rec, [n for n in val if has[n]],
-                                    (Inversion(fields, noise, **plain), False),
-                                    (Inversion(fields, noise, push=cols, **plain), False),
-                                    workers)
-        inv = Inversion(fields, noise, push=cols if push_pick["use"] else None, **plain)
+                push_pick = _choose(rec, [n for n in val if has[n]], (candidates[False], False),
+                                    (candidates[True], False), workers)
+        inv = candidates[bool(push_pick["use"])]
         finger_pick: dict[str, Any] = {"use": False, "why": f"finger={finger!r}"}
         if finger != "off":
             t1 = time.perf_counter()
