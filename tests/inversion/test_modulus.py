@@ -33,7 +33,7 @@ from ectskin.inversion import (
     results_to_arrays,
 )
 from ectskin.inversion.finger_nuisance import MODULUS_PRIOR_SD, TableColumns
-from ectskin.inversion.person import pool_fingers
+from ectskin.inversion.person import FingerPool, pool_fingers
 from ectskin.twin.bound import crb
 from ectskin.twin.bound_modulus import ModulusTable
 from ectskin.twin.readout import ReadoutConfig, noise_pf, readout
@@ -474,3 +474,35 @@ def test_one_persons_frames_pooled_find_the_pulp_each_frame_misses(analytic_fiel
                 fit_frames(plain, frames[:5], STATE)[0])
     with pytest.raises(EctskinError, match="one label per frame"):
         fit_frames(inv, frames[:5], STATE, person=truth[:4])
+
+
+def test_a_running_pool_is_the_batch_pool_whatever_prior_each_frame_had():
+    """A stream pools as it goes (:class:`FingerPool`): each frame is fitted with the pool so
+    far as its prior. Linear-Gaussian by hand: a frame whose likelihood is m ± l^−½ fitted with
+    a prior (c, s) has the posterior μ = (m l + c/s²) / (l + 1/s²), se = (l + 1/s²)^−½;
+    added with the prior it was fitted with, the pool is the population prior times the
+    likelihoods: P = 1/s0² + Σ l, centre Σ m l / P, whatever prior each frame had."""
+    s0 = 0.4
+    likelihoods = [(0.7, 30.0), (0.2, 5.0), (0.55, 80.0), (0.4, 12.0), (0.9, 2.0)]
+    pool = FingerPool({"modulus": s0}, sd_floor=0.0)
+    assert pool.prior() is None and pool.n_frames == 0
+    assert not pool.add(result(0.8, 0.1, contact=False)) and pool.prior() is None
+    for m, lik in likelihoods:
+        used = pool.prior()
+        c, s = (used or {"modulus": (0.0, s0)})["modulus"]
+        precision = lik + 1 / s**2
+        assert pool.add(result((m * lik + c / s**2) / precision, precision**-0.5), used)
+    P = 1 / s0**2 + sum(lik for _, lik in likelihoods)
+    centre, sd = pool.prior()["modulus"]
+    assert centre == pytest.approx(sum(m * lik for m, lik in likelihoods) / P, rel=1e-12)
+    assert sd == pytest.approx(P**-0.5, rel=1e-12)
+    assert pool.n_frames == len(likelihoods)
+    # the same frames all fitted with the population prior: the batch pool of pool_fingers
+    batch = [result((m * lik) / (lik + 1 / s0**2), (lik + 1 / s0**2) ** -0.5)
+             for m, lik in likelihoods]
+    assert pool_fingers(batch, {"modulus": s0}, sd_floor=0.0)["modulus"] == pytest.approx(
+        (centre, sd), rel=1e-12)
+    pool.reset()
+    assert pool.prior() is None and pool.posterior() == {"modulus": (0.0, s0)}
+    with pytest.raises(EctskinError, match="FingerPool: prior_sd"):
+        FingerPool({"pulp": 0.4})

@@ -475,3 +475,120 @@ def test_cli_inversion_options_reach_the_head(fields, field_dirs, tmp_path, monk
     assert main(["live", "--source", "sim", "--fields", str(field_dirs),
                  "--inversion-finger-sd", "-1"]) == 2
     assert "--inversion-finger-sd must be a number >= 0 (0: off), got -1.0" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------ the person's finger, pooled
+#: a frame read with this noise tells the pulp about as well as the population's prior does
+NOISY = ReadoutConfig(noise_scale=6.0)
+
+
+def modulus_table(field):
+    """∂C/∂ln E of the tiny field's fingertip in closed form (tests/inversion/test_modulus.py's
+    model): a softer pulp presses deeper, as a larger force does, and spreads its pad (the
+    signal's discrete Laplacian over 3 mm, kept in the window)."""
+    from ectskin.twin.bound_modulus import ModulusTable
+
+    (u0, u1), (v0, v1) = WINDOW
+    u, v = np.linspace(u0, u1, 9), np.linspace(v0, v1, 11)
+    forces = np.exp(np.linspace(*np.log(field.spec.force_range_n), 4))
+    U, V, F = np.meshgrid(u, v, forces, indexing="ij")
+    d0 = field.delta("front", U, V, F)
+    lap = sum(field.delta("front", np.clip(U + a, u0, u1), np.clip(V + b, v0, v1), F)
+              for a, b in ((3, 0), (-3, 0), (0, 3), (0, -3))) - 4 * d0
+    col = -0.5 * F[..., None] * field.jacobian("front", U, V, F)[..., 2] - 0.6 * lap
+    return ModulusTable({"front": (u, v)}, forces, {"front": col}, 0.1)
+
+
+def person_recording(field, table, people, rng) -> Recording:
+    """A rest trial and one trial per person [(name, x, points)]: the field's readout plus
+    x times the table's column (x = ln(E / E0) of their pulp), read with ``NOISY``."""
+    def read(c):
+        return c + rng.standard_normal(P) * noise_pf(c, NOISY)
+    out = [Trial("rest", np.stack([read(field.untouched) for _ in range(6)]),
+                 np.arange(6) / 30.0, np.zeros(6), inflation=REST)]
+    for name, x, points in people:
+        cap = np.stack([read(field.readout("front", u, v, f) + x * table.column(
+            "front", np.array([[u, v]]), np.array([f]))[0]) for u, v, f, _ in points])
+        out.append(Trial(name, cap, np.arange(len(points)) / 30.0, np.ones(len(points)),
+                         inflation=REST, region=1))
+    return Recording(LAYOUT, out, 30.0)
+
+
+def test_the_head_pools_each_persons_finger_over_the_stream(fields):
+    """Two people (pulp x = +0.5, then −0.4) press 30 frames each, read with 6× the noise: each
+    frame's own fit is pulled towards 0 by the population's prior. With ``person="trial"`` the
+    head pools as the frames come and restarts at the second trial; at each trial's end the
+    pool's centre lies within 3 sd (and 0.12) of the truth, and in each trial's second half the
+    frames' x and force come closer to the truth than without pooling. The message carries
+    the pool."""
+    field = fields[REST]
+    table = modulus_table(field)
+    rng = np.random.default_rng(5)
+    people = [("anna", 0.5, slide(30)), ("ben", -0.4, slide(30, start=(3.1, 57.2),
+                                                          step=(-0.25, -0.33)))]
+    rec = person_recording(field, table, people, rng)
+    inv = Inversion({REST: field}, NOISY, modulus={REST: table}, max_fingers=1)
+    got = {}
+    for person in ("trial", "off"):
+        outs: list[Output] = []
+        head = InversionHead(inv, LAYOUT, person=person)
+        LiveEngine(ReplaySource(rec, speed=math.inf), LAYOUT, inversion=head,
+                   reference_frames=6, policy="block").run(on_output=outs.append)
+        got[person] = {name: outs[6 + 30 * k: 36 + 30 * k] for k, (name, _, _) in
+                       enumerate(people)}
+    for name, x, points in people:
+        pooled, plain = got["trial"][name], got["off"][name]
+        assert all(o.trial == name and o.inversion.n_fingers == 1 for o in pooled + plain)
+        first, last = pooled[0].inversion.finger, pooled[-1].inversion.finger
+        assert first["frames"] == 1  # a new person at the trial's first frame
+        assert last["frames"] == 30
+        centre, sd = last["modulus_ln"]
+        assert abs(centre - x) < max(3 * sd, 0.12), (name, centre, sd)
+        assert all(o.inversion.finger is None for o in plain)
+        late = slice(15, 30)
+        err = {k: (np.mean([abs(o.inversion.fingers[0].modulus_ln - x) for o in g[late]]),
+                   np.mean([abs(o.inversion.fingers[0].force_n - p[2])
+                            for o, p in zip(g[late], points[late])]))
+               for k, g in (("trial", pooled), ("off", plain))}
+        assert err["trial"][0] < 0.6 * err["off"][0], (name, err)
+        assert err["trial"][1] < err["off"][1], (name, err)
+    msg = json.loads(json.dumps(got["trial"]["ben"][-1].to_json_dict(), allow_nan=False))
+    assert msg["inversion"]["finger"] == {"modulus_ln": last["modulus_ln"], "frames": 30}
+    head = InversionHead(inv, LAYOUT, person="session")
+    assert head.meta()["person"] == "session" and head.meta()["finger_nuisances"] == ["modulus"]
+    with pytest.raises(EctskinError, match="finger tables"):
+        InversionHead(Inversion({REST: field}), LAYOUT, person="session")
+    with pytest.raises(EctskinError, match="'person'"):
+        InversionHead(inv, LAYOUT, person="everyone")
+
+
+def test_cli_live_pools_the_person_with_the_finger_fields(fields, field_dirs, tmp_path,
+                                                          monkeypatch, capsys):
+    """``--inversion-person session`` reads the finger tables of the fields' states from
+    ``--finger-fields`` (:func:`ectskin.twin.field_finger.finger_tables`, here the closed-form
+    table) and the messages carry the pool; ``--finger-fields`` alone is refused."""
+    from ectskin.twin import field_finger
+
+    table = modulus_table(fields[REST])
+    calls = []
+
+    def tables(specs, cache_dir, **kw):
+        calls.append(([tuple(s.inflation_ml) for s in specs], str(cache_dir)))
+        return {"modulus": {REST: table}}
+
+    monkeypatch.setattr(field_finger, "finger_tables", tables)
+    rec = person_recording(fields[REST], table, [("press", 0.3, slide(10))],
+                           np.random.default_rng(2))
+    src = write_recording(rec, tmp_path / "in.h5")
+    jsonl = tmp_path / "out.jsonl"
+    argv = ["live", "--source", f"replay:{src}", "--speed", "inf", "--policy", "block",
+            "--fields", str(field_dirs), "--reference-frames", "6", "--jsonl", str(jsonl),
+            "--inversion-person", "session", "--finger-fields", str(tmp_path / "cache")]
+    assert main(argv) == 0
+    assert len(calls) == 1 and sorted(calls[0][0]) == sorted([REST, INFLATED])
+    assert calls[0][1] == str(tmp_path / "cache")
+    lines = [json.loads(x) for x in jsonl.read_text().splitlines()]
+    frames = [m["inversion"]["finger"]["frames"] for m in lines[6:]]
+    assert frames == list(range(1, 11))
+    assert main(argv[:-4] + ["--finger-fields", str(tmp_path)]) == 2
+    assert "--finger-fields is where --inversion-person reads" in capsys.readouterr().err

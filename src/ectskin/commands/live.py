@@ -26,7 +26,7 @@ from ectskin.commands._options import add_overwrite
 from ectskin.dashboard import serve
 from ectskin.layout import SensorLayout, default_layout, load_layout
 from ectskin.live.engine import POLICIES, LiveEngine
-from ectskin.live.inversion_head import READOUTS, InversionHead, load_fields
+from ectskin.live.inversion_head import PERSONS, READOUTS, InversionHead, load_fields
 from ectskin.live.output import JsonLinesWriter, status_line
 from ectskin.live.recorder import Recorder
 from ectskin.live.reference import reference_line
@@ -130,6 +130,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=(0, 1, 2),
         default=2,
         help="--fields: the most fingers fitted (default 2)",
+    )
+    p.add_argument(
+        "--inversion-person",
+        choices=PERSONS,
+        default="off",
+        help="--fields: pool what the frames tell of the person's finger (pulp modulus, "
+        "fingertip radius) and fit each frame with it: one person for the whole stream "
+        "(session), a new one at each trial of a replay (trial), or none (off, default). Needs "
+        "coarse finger fields of the states: read from --finger-fields, built there first "
+        "where missing (minutes)",
+    )
+    p.add_argument(
+        "--finger-fields",
+        metavar="DIR",
+        default=None,
+        help="--inversion-person: the field cache of the finger fields (default: ectskin's field "
+        "cache, $ECTSKIN_CACHE/fields or ~/.cache/ectskin/fields)",
     )
     p.add_argument("--dashboard", action="store_true", help="serve the web dashboard")
     p.add_argument("--port", type=int, default=8765, help="dashboard port (default 8765)")
@@ -268,6 +285,12 @@ def run(args: argparse.Namespace) -> int:
         raise EctskinError(f"--inversion-finger-sd must be a number >= 0 (0: off), got {sd}")
     if not args.fields and args.state is not None:
         raise EctskinError("--state is the inflation state of the inversion's frames: give --fields")
+    if not args.fields and (args.inversion_person != "off" or args.finger_fields is not None):
+        raise EctskinError("--inversion-person and --finger-fields pool the inversion's person's "
+                           "finger: give --fields")
+    if args.finger_fields is not None and args.inversion_person == "off":
+        raise EctskinError("--finger-fields is where --inversion-person reads the finger fields: "
+                           "give --inversion-person session or trial")
     _check_outputs(args)
     ref_markers = None
     if args.reference_markers:
@@ -351,11 +374,21 @@ def _inversion(args: argparse.Namespace, fields, layout: SensorLayout) -> Invers
     if fields is None:
         return None
     sd = args.inversion_finger_sd
+    tables = None
+    if args.inversion_person != "off":
+        from ectskin.pipeline.field import field_cache_dir
+        from ectskin.twin.field_finger import finger_tables
+
+        cache = field_cache_dir(args.finger_fields)
+        log.info("inversion: the finger fields of %d state(s) from %s (built there where "
+                 "missing)", len(fields), cache)
+        tables = finger_tables([f.spec for f in fields.values()], cache, progress=False)
     return InversionHead.from_fields(
         fields, layout, max_fingers=args.inversion_fingers, state=args.state,
         every=args.inversion_every, readout=args.inversion_readout,
         press_check=args.inversion_press_check,
         finger_scale_sd="reproduction" if sd is None else sd,
+        finger_tables=tables, person=args.inversion_person,
     )
 
 

@@ -43,6 +43,17 @@ force or height, and their standard errors; the count's BIC) into the output.
 * **Warm start**: a live stream is continuous, so each fit starts from the previous fitted
   frame's answer (``Inversion.fit(warm=...)``) while the state stays the same: the coarse
   search of that count is skipped while the fit from there explains the frame within the noise.
+* **The person's finger** (``person``, with an inversion of finger tables: ``from_fields(
+  finger_tables=...)``, :func:`ectskin.twin.field_finger.finger_tables`): a person's pulp
+  modulus and fingertip radius do not change from frame to frame, so the head pools what the
+  frames tell of them as they come (:class:`ectskin.inversion.FingerPool`) and fits each frame
+  with the pool so far as its prior, the reproduction's ``finger`` pooling done online (there
+  every frame of a trial is fitted twice; here each frame once, with what the frames before it
+  told). ``"session"``: one person for the stream until :meth:`InversionHead.new_person`;
+  ``"trial"``: a new person whenever the frame's trial changes (a replay of a recording whose
+  trials are each one person's, as the twin's are); ``"off"``: each frame with the
+  population's prior. The pool rides in the message (:class:`~ectskin.live.output.
+  InversionFrame` ``finger``).
 
 :func:`load_fields` reads the fields: a field folder or ``field.npz`` each, or a folder of
 cached fields (the field cache of :mod:`ectskin.twin.field_build`: one folder per field).
@@ -71,6 +82,8 @@ if TYPE_CHECKING:
 #: what the head fits: the raw frame against the touch reference as the untouched readout, the
 #: raw frame against the field's, or its change against the touch reference (module docstring)
 READOUTS = ("reference", "absolute", "difference")
+#: whose finger the frames are (module docstring): one person per stream, per trial, or none pooled
+PERSONS = ("off", "session", "trial")
 #: ``finger_scale_sd``'s default in :meth:`InversionHead.from_fields`: the reproduction's,
 #: :data:`ectskin.inversion.fit.FINGER_SCALE_SD` (imported there: see below)
 REPRODUCTION = "reproduction"
@@ -138,6 +151,8 @@ class InversionHead:
     rebuild : ``rebuild(state, untouched)``: the inversion of ``state`` with the untouched
         readout ``untouched`` (n_pairs,) pF, built with ``inversion``'s options (readout
         "reference"); None: none (then "reference" is refused).
+    person : "off", "session" or "trial": the person's finger pooled over the frames (module
+        docstring); needs ``inversion`` built with finger tables.
     """
 
     key, what, reference, window = "inversion", "physical inversion", "touch", 1
@@ -153,8 +168,9 @@ class InversionHead:
         warm: bool = True,
         fields: Mapping[tuple[float, ...], Any] | None = None,
         rebuild: Callable[[tuple[float, ...], np.ndarray], Inversion] | None = None,
+        person: str = "off",
     ) -> None:
-        from ectskin.inversion import Inversion
+        from ectskin.inversion import FingerPool, Inversion
 
         what = self.what
         if not isinstance(inversion, Inversion):
@@ -175,8 +191,21 @@ class InversionHead:
                 f"{what}: readout 'reference' rebuilds the inversion with the touch reference as "
                 "the untouched readout: give rebuild (InversionHead.from_fields does)"
             )
+        if person not in PERSONS:
+            raise EctskinError(
+                f"Invalid value for 'person': allowed values are {list(PERSONS)}; got {person!r}"
+            )
+        if person != "off" and not inversion.finger_prior_sd:
+            raise EctskinError(
+                f"{what}: person {person!r} pools the person's finger, and the inversion fits "
+                "none: build it with finger tables (InversionHead.from_fields(finger_tables=...), "
+                "ectskin live --inversion-person)"
+            )
         self.inversion = inversion
         self.layout = layout
+        self.person = person
+        self.pool = None if person == "off" else FingerPool(inversion.finger_prior_sd)
+        self._trial: str | None = None
         self.every = int(every)
         self.readout = readout
         self.warm = bool(warm)
@@ -202,14 +231,18 @@ class InversionHead:
     def from_fields(cls, fields: Mapping[tuple[float, ...], ResponseField] | str | os.PathLike
                     | Sequence[str | os.PathLike], layout: SensorLayout, *, max_fingers: int = 2,
                     press_check: bool = True, finger_scale_sd: float | str | None = REPRODUCTION,
-                    readout: str = "reference", **kw: Any) -> InversionHead:
+                    readout: str = "reference",
+                    finger_tables: Mapping[str, Mapping[tuple[float, ...], Any]] | None = None,
+                    **kw: Any) -> InversionHead:
         """The head over ``fields`` (state → field, or the paths of :func:`load_fields`),
         refused unless they are fields of ``layout`` (the same pairs in the same order).
 
         The inversion is built as the reproduction's step builds it (module docstring):
         ``press_check`` (default True), ``finger_scale_sd`` (default :data:`REPRODUCTION`:
         :data:`ectskin.inversion.fit.FINGER_SCALE_SD`; None or 0: no scale) and the readout
-        "reference" (the touch reference as the untouched readout)."""
+        "reference" (the touch reference as the untouched readout). ``finger_tables``:
+        {"modulus" | "radius": {state: table}} (:func:`ectskin.twin.field_finger.
+        finger_tables`), each pressing finger's nuisances fitted (and pooled: ``person``)."""
         from ectskin.inversion import Inversion
         from ectskin.inversion.fit import FINGER_SCALE_SD
 
@@ -239,6 +272,12 @@ class InversionHead:
             finger_scale_sd = float(sd) or None
         options: dict[str, Any] = {"max_fingers": max_fingers, "press_check": press_check,
                                    "finger_scale_sd": finger_scale_sd}
+        if finger_tables is not None:
+            unknown = set(finger_tables) - {"modulus", "radius"}
+            if not isinstance(finger_tables, Mapping) or unknown:
+                raise EctskinError(f"finger_tables must be {{'modulus' | 'radius': {{state: "
+                                   f"table}}}}, got {sorted(unknown) or type(finger_tables)}")
+            options.update(finger_tables)
         base = dict(fields)
 
         def rebuild(state: tuple[float, ...], untouched: np.ndarray) -> Inversion:
@@ -333,19 +372,31 @@ class InversionHead:
                 y = np.where(masked, np.nan, y)
         y = np.where(np.isfinite(y), y, np.nan)  # a channel without a usable value is masked
         warm = self._last if self.warm and self._last_state == state else None
+        prior = None if self.pool is None else self.pool.prior()
         t0 = time.perf_counter()
         try:
-            r = inversion.fit(y, state, kind=kind, warm=warm)
+            r = inversion.fit(y, state, kind=kind, warm=warm, finger=prior)
         finally:
             self._last = None  # a failed fit starts the next one cold
         ms = (time.perf_counter() - t0) * 1e3
         if r.n_fingers:
             self._last, self._last_state = r, state
+        finger = None
+        if self.pool is not None:
+            self.pool.add(r, prior)
+            finger = {**{f"{name}_ln": list(v) for name, v in self.pool.posterior().items()},
+                      "frames": self.pool.n_frames}
         return InversionFrame(
             state=state, n_fingers=r.n_fingers, fingers=r.fingers,
             bic_by_count=r.bic_by_count, converged=r.converged, warm=warm is not None,
-            fit_ms=ms,
+            fit_ms=ms, finger=finger,
         )
+
+    def new_person(self) -> None:
+        """Another person's finger from the next frame on: the pool starts again (module
+        docstring)."""
+        if self.pool is not None:
+            self.pool.reset()
 
     def untouched(self, c0: np.ndarray, state: tuple[float, ...],
                   reference_state: tuple[float, ...]) -> tuple[np.ndarray | None, np.ndarray]:
@@ -387,6 +438,9 @@ class InversionHead:
         return inv, masked
 
     def step(self, frames: np.ndarray, ref: ReferenceInUse, out: Output) -> None:
+        if self.person == "trial" and out.trial != self._trial:
+            self._trial = out.trial
+            self.new_person()
         if self.due():
             state = self.state_of(out)
             # the engine refuses a touch reference captured inflated: with the frames' own
@@ -407,6 +461,8 @@ class InversionHead:
             "press_check": inv.press_check,
             "finger_scale_sd": inv.finger_scale_sd,
             "warm": self.warm,
+            "person": self.person,
+            "finger_nuisances": list(inv.finger_prior_sd),
         }
 
 

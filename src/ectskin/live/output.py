@@ -89,7 +89,9 @@ class InversionFrame:
     pressing or hovering, u, v mm, force N, height mm and their standard errors);
     ``bic_by_count`` (index = count, inf where not tried); whether the chosen fit
     ``converged``; whether it started ``warm`` from the previous frame's answer; ``fit_ms``
-    the fit's wall time."""
+    the fit's wall time; ``finger``: the person's finger pooled so far, this frame included
+    (``{"modulus_ln": [centre, sd], "radius_ln": [centre, sd], "frames": n}``, the nuisances
+    fitted; ln of the ratio to the field's finger), None where the head pools none."""
 
     state: tuple[float, ...]
     n_fingers: int
@@ -98,11 +100,12 @@ class InversionFrame:
     converged: bool
     warm: bool
     fit_ms: float
+    finger: dict[str, Any] | None = None
 
     def to_json_dict(self) -> dict[str, Any]:
         """``{"state", "n_fingers", "fingers": [{"face", "contact", "u_mm", "v_mm", "force_n",
         "height_mm", "u_se_mm", "v_se_mm", "force_se_n", "height_se_mm"}], "bic_by_count",
-        "converged", "warm", "fit_ms"}`` (non-finite → None)."""
+        "converged", "warm", "fit_ms", "finger"}`` (non-finite → None)."""
         return {
             "state": [float(v) for v in self.state],
             "n_fingers": int(self.n_fingers),
@@ -115,6 +118,9 @@ class InversionFrame:
             "converged": bool(self.converged),
             "warm": bool(self.warm),
             "fit_ms": _number(self.fit_ms),
+            "finger": None if self.finger is None else {
+                k: int(v) if k == "frames" else [_number(x) for x in v]
+                for k, v in self.finger.items()},
         }
 
 

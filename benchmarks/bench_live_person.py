@@ -1,0 +1,131 @@
+"""The live inversion head with the person's finger pooled over the stream, against the head
+without it, on a reproduction's contact test trials (twin data with people's fingers).
+
+::
+
+    python benchmarks/bench_live_person.py DEMO_DIR --field-cache DIR [--every 10] [--out F]
+
+``DEMO_DIR`` is an ``ectskin demo`` / ``reproduce`` output folder (its contact.h5, the contact
+run's split and the inversion step's metrics). The inversion is built as that step built it
+(the fields of the contact states from ``--field-cache``, the skin's own untouched readouts, the
+hand's push columns where the step kept them, the finger tables of the coarse finger fields,
+built there where missing), and each test trial is replayed through
+:class:`ectskin.live.InversionHead` in frame order, every ``--every``-th frame, twice: with
+``person="trial"`` (each trial one person, the pool restarted at its first frame) and with
+``person="off"``. Scored on the frames with one finger on the skin: the point error, the force
+MAE (all, and where the fit's force standard error is below 0.1 N), each over all fitted
+frames and over those after a trial's first ``--warm-up`` fitted frames (the pool has little to
+go on before), and the fit's time per frame. The two variants run side by side, one process and
+one BLAS thread each.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from multiprocessing import Pool
+from pathlib import Path
+
+import numpy as np
+
+
+def _setup(demo: Path, cache: Path):
+    from ectskin._files import read_json
+    from ectskin.inversion import Inversion, push_basis
+    from ectskin.inversion.fit import FINGER_SCALE_SD
+    from ectskin.io import read_recording
+    from ectskin.io.calibration import untouched_readouts
+    from ectskin.pipeline import inversion as step
+    from ectskin.pipeline.config import ReproduceConfig
+    from ectskin.pipeline.field import contact_fields
+    from ectskin.twin.field_finger import finger_tables
+
+    seed = read_json(demo / "metrics.json", "metrics")["seed"]
+    config = ReproduceConfig(demo, seed=seed, workers=1, progress=False, field_cache=cache)
+    fields = contact_fields(config)
+    split = read_json(demo / "runs" / "contact" / "split.json", "split")
+    done = read_json(demo / "inversion" / "metrics.json", "inversion step")
+    rec = read_recording(demo / "contact.h5")
+    test = [n for n in split["test"] if step._field_of(fields, rec.trial(n).inflation) is not None]
+    noise = config.contact_protocol().readout
+    base = untouched_readouts(rec, fields, split["test"], step.STATE_TOL_ML)
+    push = ({s: push_basis(f, noise=noise) for s, f in fields.items()}
+            if done["push"]["use"] else None)
+    tables = finger_tables([f.spec for f in fields.values()], cache, progress=False)
+    inv = Inversion(fields, noise, push=push, finger_scale_sd=FINGER_SCALE_SD, press_check=True,
+                    two_fingers="coupled", untouched={s: b["pF"] for s, b in base.items()},
+                    modulus=tables["modulus"], radius=tables["radius"])
+    return inv, rec, test, step._dataset(rec, test)
+
+
+def _replay(args):
+    demo, cache, every, person, warm_up = args
+    from threadpoolctl import threadpool_limits
+
+    from ectskin.live import InversionHead
+
+    with threadpool_limits(1):
+        inv, rec, test, data = _setup(demo, cache)
+        head = InversionHead(inv, rec.layout, person=person)
+        rows = {(g, f): i for i, (g, f) in enumerate(zip(data.group, data.frame))}
+        names = list(data.group_names)
+        point, force, se_f, late, ms = [], [], [], [], []
+        for name in test:
+            t = rec.trial(name)
+            head.new_person()
+            for k, f in enumerate(range(0, t.n_frames, every)):
+                frame = head(t.capacitance[f], np.full(rec.layout.n_pairs, np.nan),
+                             tuple(float(x) for x in t.inflation))
+                ms.append(frame.fit_ms)
+                i = rows.get((names.index(name), f))
+                if i is None or data.count[i] != 1 or data.force[i, 0] <= 0:
+                    continue
+                e = next((x for x in frame.fingers if x.contact), None)
+                uv = (e.u_mm, e.v_mm) if e is not None else (np.nan, np.nan)
+                point.append(float(np.hypot(*(np.asarray(uv) - data.uv[i, 0]))))
+                force.append(abs((e.force_n if e is not None else 0.0) - data.force[i, 0]))
+                se_f.append(e.force_se_n if e is not None else np.inf)
+                late.append(k >= warm_up)
+    point, force, se_f, late = map(np.asarray, (point, force, se_f, late))
+    point = np.where(np.isfinite(point), point, 50.0)  # no pressing finger: charged 50 mm
+
+    def score(sel):
+        obs = sel & (se_f < 0.1)
+        return {"n_frames": int(sel.sum()), "loc_mm_mean": float(point[sel].mean()),
+                "loc_mm_median": float(np.median(point[sel])),
+                "force_mae_n": float(force[sel].mean()),
+                "force_mae_n_observable": float(force[obs].mean()) if obs.any() else None,
+                "force_observable_share": float(obs.sum() / sel.sum())}
+
+    ms = np.asarray(ms)
+    return {"person": person, "all": score(np.ones(point.size, bool)), "late": score(late),
+            "ms_per_frame_median": float(np.median(ms)),
+            "ms_per_frame_p95": float(np.percentile(ms, 95)), "n_fits": int(ms.size)}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("demo", type=Path)
+    p.add_argument("--field-cache", type=Path, required=True)
+    p.add_argument("--every", type=int, default=10, help="fit every N-th frame (default 10)")
+    p.add_argument("--warm-up", type=int, default=10,
+                   help="fitted frames of a trial before 'late' counts (default 10)")
+    p.add_argument("--out", type=Path)
+    a = p.parse_args(argv)
+    t0 = time.perf_counter()
+    _setup(a.demo, a.field_cache)  # the finger fields built once, before the two replays
+    jobs = [(a.demo, a.field_cache, a.every, person, a.warm_up) for person in ("trial", "off")]
+    with Pool(2) as pool:
+        got = pool.map(_replay, jobs)
+    result = {"demo": str(a.demo), "every": a.every, "warm_up": a.warm_up,
+              "variants": got, "wall_s": time.perf_counter() - t0}
+    text = json.dumps(result, indent=2)
+    print(text)
+    if a.out:
+        a.out.write_text(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
