@@ -134,3 +134,46 @@ def test_the_rank_agreement_of_the_fit_error_reads_its_own_key():
     text = line(entries)
     assert "(worst-case bound) and the trained score (mean localisation error) do not agree" in text
     assert "fit with one fingertip) and the trained score (mean localisation error) agree" in text
+
+
+def _seeded(bounds, per_seed, seeds=None):
+    """Entries whose trained score holds per-seed values (layouts × seeds)."""
+    seeds = list(range(len(per_seed[0]))) if seeds is None else seeds
+    return [{"name": f"L{i}", "bound_mm_p95": b, "loc_mm_mean": float(np.mean(v)),
+             "trained": {"loc_mm_mean": {"seeds": seeds, "values": list(v)}}}
+            for i, (b, v) in enumerate(zip(bounds, per_seed))]
+
+
+def test_the_seeds_interval_is_the_bootstrap_by_hand():
+    """Two seeds: a resample is (0, 0), (1, 1) with 1/4 each or one of each (the mean) with
+    1/2, so rho takes three values, and the 95 % interval runs from the least to the greatest
+    of them. Bound order (1, 2, 3); seed 0 ranks the layouts (1, 2, 3): rho 1; seed 1
+    (2, 1, 3): rho 0.5; the mean (3.0, 2.5, 4.5) ranks (2, 1, 3): 0.5. Seed to seed: 0.5."""
+    got = rank_agreement(_seeded([1.0, 2.0, 3.0], [[1.0, 5.0], [2.0, 3.0], [3.0, 6.0]]))
+    assert got["rho"] == pytest.approx(0.5)
+    s = got["seeds"]
+    assert s["n_seeds"] == 2 and s["level"] == 0.95
+    assert s["rho_ci"] == pytest.approx([0.5, 1.0])
+    assert s["seed_to_seed_rho"] == pytest.approx(0.5)
+    # every seed ranks as the bound does: the interval is the point, the seeds agree
+    same = rank_agreement(_seeded([1.0, 2.0, 3.0, 4.0],
+                                  [[1.0, 1.1, 0.9], [2.0, 2.2, 1.9], [3.0, 3.1, 2.8],
+                                   [4.0, 4.3, 4.1]]))
+    assert same["seeds"]["rho_ci"] == pytest.approx([1.0, 1.0])
+    assert same["seeds"]["seed_to_seed_rho"] == pytest.approx(1.0)
+    # deterministic: the same answer twice
+    assert rank_agreement(_seeded([1.0, 2.0, 3.0], [[1.0, 5.0], [2.0, 3.0], [3.0, 6.0]])) == got
+
+
+def test_the_seeds_are_left_out_where_the_layouts_do_not_share_them():
+    entries = _seeded([1.0, 2.0, 3.0], [[1.0, 5.0], [2.0, 3.0], [3.0, 6.0]])
+    other = {**_seeded([3.0], [[3.0, 6.0]], [4, 5])[0], "name": "L2"}  # seeds 4 and 5
+    assert "seeds" not in rank_agreement(entries[:2] + [other])
+    one = _seeded([1.0, 2.0, 3.0], [[1.0], [2.0], [3.0]])
+    assert "seeds" not in rank_agreement(one)  # one seed: nothing to resample
+    assert "seeds" not in rank_agreement(_entries([1.0, 2.0, 3.0], [3.0, 2.0, 1.0]))
+    from ectskin.design.report import rank_agreement as line
+
+    text = line(entries)
+    assert "over the 2 seeds resampled, 95 % of rho in [0.50, 1.00]" in text
+    assert "the trained rankings of two seeds agree at rho = 0.50 on average" in text

@@ -415,10 +415,19 @@ def rank_agreement(layouts: Sequence[Mapping[str, Any]]) -> str | None:
             )
             continue
         word = "agree on" if r["agree"] else "do not agree on"
+        seeds = r.get("seeds")
+        said = ""
+        if seeds is not None and seeds["rho_ci"] is not None:
+            lo, hi = seeds["rho_ci"]
+            said = (f"; over the {seeds['n_seeds']} seeds resampled, "
+                    f"{100 * seeds['level']:g} % of rho in [{lo:.2f}, {hi:.2f}]")
+            if seeds["seed_to_seed_rho"] is not None:
+                said += (f", and the trained rankings of two seeds agree at rho = "
+                         f"{seeds['seed_to_seed_rho']:.2f} on average")
         lines.append(
             f"The information score ({name}) and the trained score (mean localisation error) "
             f"{word} the ranking: Spearman rho = {r['rho']:.2f} over {r['n']} layouts "
-            f"(agreement: rho >= {r['threshold']:g})."
+            f"(agreement: rho >= {r['threshold']:g}){said}."
         )
     return " ".join(lines) or None
 

@@ -123,6 +123,73 @@ GOAL_MAX_ELECTRODES = 8
 GOAL_BOUND_SHARE = 0.5
 #: the rank agreement asked of the two scores (Spearman's rho at least this)
 AGREEMENT_RHO = 0.7
+#: resamples of the seeds behind the rank agreement's interval, and their generator's seed
+BOOTSTRAP_DRAWS = 2000
+BOOTSTRAP_SEED = 0
+
+
+def _spearman(a: np.ndarray, b: np.ndarray) -> float | None:
+    """Spearman's rho of two score vectors (ties: mean ranks); None where one ties them all."""
+    from scipy.stats import rankdata
+
+    ra, rb = rankdata(a), rankdata(b)
+    if np.ptp(ra) == 0 or np.ptp(rb) == 0:
+        return None
+    return float(np.corrcoef(ra, rb)[0, 1])
+
+
+def _per_seed(layouts: Sequence[Mapping[str, Any]], names: Sequence[str]) -> np.ndarray | None:
+    """(layouts, seeds) trained mean localisation errors of ``names``, where every one was
+    scored with the same two or more seeds (``trained.loc_mm_mean``); else None."""
+    by_name = {e["name"]: e for e in layouts}
+    rows, seeds = [], None
+    for n in names:
+        t = (by_name[n].get("trained") or {}).get("loc_mm_mean") or {}
+        vals, got = t.get("values"), t.get("seeds")
+        if not vals or got is None or any(v is None for v in vals):
+            return None
+        if seeds is None:
+            seeds = list(got)
+        elif list(got) != seeds:
+            return None
+        rows.append([float(v) for v in vals])
+    if seeds is None or len(seeds) < 2:
+        return None
+    return np.asarray(rows)
+
+
+def seed_agreement(info: Sequence[float], per_seed: np.ndarray, level: float = LEVEL
+                   ) -> dict[str, Any]:
+    """How well the trained ranking is resolved by its seeds, beside the information score
+    ``info`` (one per layout; inf ranks worst) and the trained scores ``per_seed`` (layouts,
+    seeds), the same seeds for every layout:
+
+    * ``rho_ci``: the ``level`` percentile interval of Spearman's rho between ``info`` and the
+      trained mean over seeds resampled with replacement (:data:`BOOTSTRAP_DRAWS`, every layout
+      the same resample: a seed's test touches are every layout's), None where no resample
+      ranks;
+    * ``seed_to_seed_rho``: the mean over pairs of seeds of the rho between their trained
+      rankings: how far one seed's ranking says the next one's. A trained ranking that its own
+      seeds do not repeat cannot be matched by any score more closely than they match each
+      other.
+    """
+    x = np.asarray(info, dtype=np.float64)
+    v = np.asarray(per_seed, dtype=np.float64)
+    n = v.shape[1]
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    draws = [_spearman(x, v[:, rng.integers(0, n, n)].mean(axis=1))
+             for _ in range(BOOTSTRAP_DRAWS)]
+    got = np.array([r for r in draws if r is not None])
+    pairs = [_spearman(v[:, i], v[:, j]) for i in range(n) for j in range(i + 1, n)]
+    pairs_ok = [r for r in pairs if r is not None]
+    tail = 50 * (1 - level)
+    return {
+        "rho_ci": ([float(np.percentile(got, tail)), float(np.percentile(got, 100 - tail))]
+                   if got.size else None),
+        "level": level,
+        "n_seeds": int(n),
+        "seed_to_seed_rho": float(np.mean(pairs_ok)) if pairs_ok else None,
+    }
 
 
 def rank_agreement(
@@ -132,7 +199,9 @@ def rank_agreement(
     position bound ``bound_mm_p95`` by default, or ``fit_error_mm_p95``; None, an unresolved
     point, ranks as the worst) and the trained score's mean localisation error (``loc_mm_mean``)
     over the layouts that have both (ties get their mean rank). None with fewer than 3 such
-    layouts (no ranking to compare)."""
+    layouts (no ranking to compare). Where each layout's trained score holds the same two or more
+    seeds, ``seeds`` says how well they resolve the ranking (:func:`seed_agreement`: rho's
+    interval over resampled seeds, and the trained rankings' own seed-to-seed rho)."""
     both = [
         (e["name"], np.inf if e[key] is None else float(e[key]), float(e["loc_mm_mean"]))
         for e in layouts
@@ -140,15 +209,9 @@ def rank_agreement(
     ]
     if len(both) < 3:
         return None
-    from scipy.stats import rankdata
-
-    rb = rankdata([b for _, b, _ in both])
-    rt = rankdata([t for _, _, t in both])
-    if np.ptp(rb) == 0 or np.ptp(rt) == 0:  # one score ties every layout: no ranking
-        rho = None
-    else:
-        rho = float(np.corrcoef(rb, rt)[0, 1])
-    return {
+    info = np.array([b for _, b, _ in both])
+    rho = _spearman(info, np.array([t for _, _, t in both]))  # None: one score ties them all
+    out = {
         "key": key,
         "rho": rho,
         "n": len(both),
@@ -156,6 +219,10 @@ def rank_agreement(
         "agree": rho is not None and rho >= AGREEMENT_RHO,
         "threshold": AGREEMENT_RHO,
     }
+    per_seed = _per_seed(layouts, out["layouts"])
+    if rho is not None and per_seed is not None:
+        out["seeds"] = seed_agreement(info, per_seed)
+    return out
 
 
 def goal_layouts(layouts: Sequence[Mapping[str, Any]], paper: str = "paper") -> dict[str, Any]:
@@ -194,5 +261,6 @@ __all__ = [
     "goal_layouts",
     "paired_comparison",
     "rank_agreement",
+    "seed_agreement",
     "t_interval",
 ]
