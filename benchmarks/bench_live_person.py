@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import platform
 import time
 from multiprocessing import Pool
 from pathlib import Path
@@ -118,8 +120,10 @@ def main(argv=None) -> int:
     jobs = [(a.demo, a.field_cache, a.every, person, a.warm_up) for person in ("trial", "off")]
     with Pool(2) as pool:
         got = pool.map(_replay, jobs)
-    result = {"demo": str(a.demo), "every": a.every, "warm_up": a.warm_up,
-              "variants": got, "wall_s": time.perf_counter() - t0}
+    result = {"demo": str(a.demo), "every": a.every, "warm_up": a.warm_up, "variants": got,
+              "wall_s": time.perf_counter() - t0,
+              "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
+                          "load_avg": os.getloadavg()}}
     text = json.dumps(result, indent=2)
     print(text)
     if a.out:
