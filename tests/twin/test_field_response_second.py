@@ -84,7 +84,7 @@ def _direct(sensor, state, first: FingerPath, second: FingerPath, frames, first_
 
 
 def _model(field, sensor, first, second):
-    return FieldTouchResponse(field, sensor, sensor, field.spec.inflation_ml, "front", first,
+    return FieldTouchResponse(field, sensor, field.spec.inflation_ml, "front", first,
                               Handling(), None, REGION, "front", second)
 
 

@@ -39,6 +39,7 @@ from ectskin.pipeline.runner import StepRunner, digest
 from ectskin.pipeline.steps import DATA_FILE, recording_digest, run_settings, train_job
 from ectskin.twin import simulate_experiment
 from ectskin.twin.ect_metrics import ect_image_metrics
+from ectskin.twin.field_response import FIELD_RESPONSE_VERSION
 from ectskin.viz import figure_file
 from ectskin.viz.ect import plot_ect_images
 
@@ -168,6 +169,7 @@ def contact_data(
         }
         if protocol.response == "field":
             settings["fields"] = [s.key() for s in contact_field_specs(config)]
+            settings["field_response"] = FIELD_RESPONSE_VERSION
 
         def make() -> None:
             rec = _simulate_contact(protocol, config, runner)

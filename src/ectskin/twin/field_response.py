@@ -12,20 +12,23 @@ trial. A frame's readout is
 * **B(m), the body under the hand's push, without a finger**: direct solves of the simulation's
   own sensor (its mesh) at the trial's least and greatest push magnitude m along the push's
   direction, linear in between (one solve without a hand). The untouched readouts are thus the
-  twin's own, those of the paper's trials; only the fingers' signal comes from the field (and
-  its mesh).
+  twin's own, those of the paper's trials.
 * **Δ₁, the first finger in contact**: the field's signal at the frame's point and force,
   ``field.delta(face, u, v, F)`` (beyond the field's force range: linear in F from the range's
   end, with the field's own slope), plus the trial's finger's *difference* from the field's:
-  *anchors*, direct solves of the field's sensor (its mesh) with the trial's finger and its
-  off-axis push, less the field, at a grid over the finger's region (``grid_nodes``, 2 × 4) at
-  the trial's median force, bilinear in (u, v), and linear in force from two more at the
-  region's centre (the trial's 5th and 95th percentile forces). The anchors carry the trial's
-  finger (people differ; the field is built for one finger), its tangential force and the
-  field's interpolation error at the nodes; their number does not grow with the trial's points.
+  *anchors*, direct solves of the simulation's own sensor (its mesh, with the trial's finger
+  and its off-axis push) less its untouched readout, less the field's signal, at a grid over the
+  finger's region (``grid_nodes``, 2 × 4) at the trial's median force, bilinear in (u, v), and
+  linear in force from two more at the region's centre (the trial's 5th and 95th percentile
+  forces). The anchors carry the trial's finger (people differ; the field is built for one
+  finger), its tangential force, the field's interpolation error at the nodes, and the
+  simulation's mesh where it differs from the field's (a field is solved on a coarser one,
+  ``COARSE_FIELD_MESH``): wherever a direct solve anchors the readout it is the twin's own, as
+  the paper's trials' are, and the field carries the signal's change between the anchors.
+  Their number does not grow with the trial's points.
 * **Δ₁, the finger above the skin**: within the field's heights, the field's hover signal
-  scaled by a per-trial factor k = ⟨D, Δ⟩ / ⟨Δ, Δ⟩ that matches it to a direct solve D with
-  the trial's finger at the hover frames' mean point and median height (a bigger fingertip
+  scaled by a per-trial factor k = ⟨D, Δ⟩ / ⟨Δ, Δ⟩ that matches it to a direct solve's signal D
+  with the trial's finger at the hover frames' mean point and median height (a bigger fingertip
   couples more; above the skin that is nearly a common factor). Beyond the field's top (the
   approach from ``approach_height_mm``, lifts of a few centimetres): direct solves at
   ``far_nodes`` heights (Chebyshev-Lobatto in ln h from the field's top to the trial's highest)
@@ -115,14 +118,20 @@ def hover_delta(field: ResponseField, face: str, u, v, height) -> np.ndarray:
     return out
 
 
+#: the reading's version, in the settings of the steps that simulate with it: 2 = every direct
+#: solve of the reading (anchors, hover scale, far solves, two-finger anchors) on the
+#: simulation's own sensor (1: those on the field's sensor and mesh)
+FIELD_RESPONSE_VERSION = 2
+
+
 class FieldTouchResponse:
     """The readout of one touch trial from a response field (module docstring).
 
     Parameters
     ----------
-    field : the trial's state's field; ``field_sensor`` its sensor (its mesh) with the trial's
-        fingers (:meth:`SensorModel.with_fingers`), for the anchors.
-    sensor : the simulation's sensor (with the trial's fingers), for the body under the hand.
+    field : the trial's state's field.
+    sensor : the simulation's sensor with the trial's fingers
+        (:meth:`SensorModel.with_fingers`), for the body under the hand and the anchors.
     inflation, surface, path, hand, push_dir : as :class:`~ectskin.twin.response.TouchResponse`.
     region : ((u_lo, v_lo), (u_hi, v_hi)) mm, where the first finger's points lie (its
         region's bounds): the anchors' grid spans it.
@@ -142,7 +151,6 @@ class FieldTouchResponse:
     def __init__(
         self,
         field: ResponseField,
-        field_sensor: SensorModel,
         sensor: SensorModel,
         inflation,
         surface: str,
@@ -159,11 +167,14 @@ class FieldTouchResponse:
                     f"response field: the trial touches the {face!r} face, the field covers "
                     f"{list(field.faces)}"
                 )
-        self.field, self.fsensor, self.sensor = field, field_sensor, sensor
+        self.field, self.sensor = field, sensor
         self.p, self.face = tuple(inflation), surface
         self.face2: str = surface2 if surface2 is not None else surface  # (unused without one)
         self.n_solves = 0
         self._base(hand, push_dir)
+        #: the sensor's untouched readout (P,): the direct solves' signals are taken from it
+        self.u0 = (self.b_nodes[0] if self.push_dir is None
+                   else self._solve(self.sensor, None, [0.0])[0])
         self._above(path)
         self._first(path, np.asarray(region, dtype=np.float64))
         self._second(path, path2)
@@ -192,10 +203,10 @@ class FieldTouchResponse:
         """(P,) the direct solve with the trial's first finger less the field's, at one point."""
         f = self.field
         direct = self._solve(
-            self.fsensor, Touch(self.face, (float(uv[0]), float(uv[1]))), [force],
+            self.sensor, Touch(self.face, (float(uv[0]), float(uv[1]))), [force],
             Handling(shear_n=np.asarray(shear, dtype=np.float64)[None]),
         )[0]
-        return direct - f.untouched - contact_delta(f, self.face, uv[0], uv[1], force)[0]
+        return direct - self.u0 - contact_delta(f, self.face, uv[0], uv[1], force)[0]
 
     def _first(self, path, region: np.ndarray) -> None:
         """The first finger's anchors: a grid over its region at the trial's median force, and
@@ -262,12 +273,12 @@ class FieldTouchResponse:
             nodes_h = np.clip(np.exp(x) - c, lo, hi)  # (exp∘log round-off kept inside)
             shear = np.tile(np.stack([np.zeros(2), sh2]), (k, 1, 1))  # (k, 2 fingers, 2)
             direct = self._solve(
-                self.fsensor, (Touch(self.face, tuple(uv1)), Touch(self.face2, tuple(uv2))),
+                self.sensor, (Touch(self.face, tuple(uv1)), Touch(self.face2, tuple(uv2))),
                 np.tile([0.0, f2], (k, 1)), Handling(shear_n=shear),
                 heights=np.c_[nodes_h, np.zeros(k)],
             )
             corr = (
-                direct - f.untouched - contact_delta(f, self.face2, uv2[0], uv2[1], f2)[0]
+                direct - self.u0 - contact_delta(f, self.face2, uv2[0], uv2[1], f2)[0]
                 - self.finger_above(np.tile(uv1, (k, 1)), nodes_h)
             )
             self.screen = (x, corr, (lo, hi))
@@ -280,11 +291,11 @@ class FieldTouchResponse:
             uv2, f2 = path2.uv_mm[part].mean(axis=0), float(path2.force_n[part].mean())
             sh = np.stack([path.shear_n[part].mean(axis=0), path2.shear_n[part].mean(axis=0)])
             direct = self._solve(
-                self.fsensor, (Touch(self.face, tuple(uv1)), Touch(self.face2, tuple(uv2))),
+                self.sensor, (Touch(self.face, tuple(uv1)), Touch(self.face2, tuple(uv2))),
                 np.array([[f1, f2]]), Handling(shear_n=sh[None]),
             )[0]
             values.append(
-                direct - f.untouched - contact_delta(f, self.face, uv1[0], uv1[1], f1)[0]
+                direct - self.u0 - contact_delta(f, self.face, uv1[0], uv1[1], f1)[0]
                 - self.first_difference(uv1[None], np.array([f1]))[0]
                 - contact_delta(f, self.face2, uv2[0], uv2[1], f2)[0]
             )
@@ -305,8 +316,8 @@ class FieldTouchResponse:
         if near.any():
             uv = path.uv_mm[near].mean(axis=0)
             hm = float(np.median(h[near]))
-            d = self._solve(self.fsensor, Touch(face, tuple(uv)), [0.0], heights=[hm])[0]
-            d = d - f.untouched
+            d = self._solve(self.sensor, Touch(face, tuple(uv)), [0.0], heights=[hm])[0]
+            d = d - self.u0
             fd = hover_delta(f, face, uv[0], uv[1], hm)[0]
             self.k_hover = float(d @ fd / max(fd @ fd, 1e-30))
         if far.any():
@@ -315,8 +326,8 @@ class FieldTouchResponse:
             far_h = np.exp(lobatto_nodes(np.log(top), np.log(hi), k)) if k > 1 else np.array([top])
             far_uv = path.uv_mm[far].mean(axis=0)
             z = np.zeros(far_h.size)
-            d = self._solve(self.fsensor, Touch(face, tuple(far_uv)), z, heights=far_h)
-            self.far = (np.log(far_h), d - f.untouched)
+            d = self._solve(self.sensor, Touch(face, tuple(far_uv)), z, heights=far_h)
+            self.far = (np.log(far_h), d - self.u0)
 
     # ------------------------------------------------------------------ readout
     def base(self, hand: Handling, n: int) -> np.ndarray:
@@ -422,7 +433,7 @@ class TrialFields:
                 raise EctskinError(
                     f"fields[{key}] must be a ResponseField or a path, got {type(src).__name__}"
                 )
-        self._loaded: dict[tuple[float, ...], tuple[ResponseField, SensorModel]] = {}
+        self._loaded: dict[tuple[float, ...], ResponseField] = {}
 
     @property
     def states(self) -> list[tuple[float, ...]]:
@@ -432,8 +443,8 @@ class TrialFields:
         """What to send to a worker process (paths stay paths)."""
         return dict(self._sources)
 
-    def get(self, inflation) -> tuple[ResponseField, SensorModel]:
-        """The field of state ``inflation`` and its sensor (read and built once)."""
+    def get(self, inflation) -> ResponseField:
+        """The field of state ``inflation`` (read once)."""
         key = _state(inflation)
         if key not in self._loaded:
             if key not in self._sources:
@@ -448,7 +459,7 @@ class TrialFields:
                     f"the response field given for state {list(key)} ml was built for "
                     f"{list(field.spec.inflation_ml)} ml"
                 )
-            self._loaded[key] = (field, field.spec.sensor())
+            self._loaded[key] = field
         return self._loaded[key]
 
 

@@ -106,9 +106,8 @@ def simulate_trial(
         if protocol.response == "field":
             if fields is None:
                 raise EctskinError("simulate: protocol.response is 'field' but no fields given")
-            field, field_sensor = fields.get(p)
             response = FieldTouchResponse(
-                field, field_sensor.with_fingers(*fingers), trial_sensor, p, str(plan.surface), path,
+                fields.get(p), trial_sensor, p, str(plan.surface), path,
                 hand, push_dir, (lo, hi), plan.second_surface, path2,
             )
             c_true = response(path, hand, path2)
@@ -159,7 +158,7 @@ def simulate_trial(
         "mom_solves": n_solves,
     }
     if plan.kind == "touch" and protocol.response == "field" and fields is not None:
-        meta["response_field"] = fields.get(p)[0].key
+        meta["response_field"] = fields.get(p).key
     if plan.second_surface is not None and plan.second_uv_mm is not None:
         meta["second_finger"] = {
             "surface": plan.second_surface,
@@ -397,7 +396,7 @@ def _check_fields(protocol, plans, fields, layout, manipulator, eps_r, chamber_e
             used = faces.setdefault(tuple(plan.inflation), set())
             used.update(f for f in (plan.surface, plan.second_surface) if f is not None)
     for state, used in faces.items():
-        spec = out.get(state)[0].spec
+        spec = out.get(state).spec
         same = {
             "layout": spec.layout.to_json() == layout.to_json(),
             "manipulator": spec.manipulator == manipulator,
