@@ -37,6 +37,9 @@ BENCHMARKS = {
         "bench_inversion.py", [], ["--frames", "10", "--streams", "1", "--stream", "5"]
     ),
     "bench_ect": ("bench_ect.py", [], ["--states", "1", "--frames", "200"]),
+    "bench_live_person": (
+        "bench_live_person.py", ["--synthetic"], ["--synthetic", "--people", "2", "--frames", "15"]
+    ),
     "bench_design": ("bench_design.py", [], ["--layouts", "1", "--workers", "1"]),
     "bench_candidates": (
         "bench_candidates.py",
