@@ -560,6 +560,9 @@ def test_the_head_pools_each_persons_finger_over_the_stream(fields):
         InversionHead(Inversion({REST: field}), LAYOUT, person="session")
     with pytest.raises(EctskinError, match="'person'"):
         InversionHead(inv, LAYOUT, person="everyone")
+    for bad in ({"pulp": {REST: table}}, [table]):
+        with pytest.raises(EctskinError, match="finger_tables must be"):
+            InversionHead.from_fields(fields, LAYOUT, finger_tables=bad)
 
 
 def test_cli_live_pools_the_person_with_the_finger_fields(fields, field_dirs, tmp_path,

@@ -273,10 +273,11 @@ class InversionHead:
         options: dict[str, Any] = {"max_fingers": max_fingers, "press_check": press_check,
                                    "finger_scale_sd": finger_scale_sd}
         if finger_tables is not None:
-            unknown = set(finger_tables) - {"modulus", "radius"}
-            if not isinstance(finger_tables, Mapping) or unknown:
+            unknown = (sorted(set(finger_tables) - {"modulus", "radius"})
+                       if isinstance(finger_tables, Mapping) else type(finger_tables).__name__)
+            if unknown:
                 raise EctskinError(f"finger_tables must be {{'modulus' | 'radius': {{state: "
-                                   f"table}}}}, got {sorted(unknown) or type(finger_tables)}")
+                                   f"table}}}}, got {unknown}")
             options.update(finger_tables)
         base = dict(fields)
 
