@@ -45,19 +45,6 @@ __all__ = ["POOL_SD_FLOOR", "FingerPool", "pool_fingers"]
 POOL_SD_FLOOR = 0.05
 
 
-def _check_prior_sd(prior_sd: Mapping[str, float], sd_floor: float, what: str) -> None:
-    if not isinstance(prior_sd, Mapping):
-        raise EctskinError(f"{what}: prior_sd must be a mapping {{name: sd}}, got "
-                           f"{type(prior_sd).__name__}")
-    for name, sd in prior_sd.items():
-        if name not in FINGER_NUISANCES or not (isinstance(sd, int | float)
-                                                and 0 < sd < math.inf):
-            raise EctskinError(f"{what}: prior_sd[{name!r}] must be the prior sd (> 0) of "
-                               f"one of {list(FINGER_NUISANCES)}, got {sd!r}")
-    if not (isinstance(sd_floor, int | float) and 0 <= sd_floor < math.inf):
-        raise EctskinError(f"{what}: sd_floor must be a number >= 0, got {sd_floor!r}")
-
-
 class FingerPool:
     """One person's finger nuisances pooled frame by frame (module docstring).
 
@@ -67,7 +54,16 @@ class FingerPool:
     population's), :meth:`reset` for another person."""
 
     def __init__(self, prior_sd: Mapping[str, float], *, sd_floor: float = POOL_SD_FLOOR) -> None:
-        _check_prior_sd(prior_sd, sd_floor, "FingerPool")
+        if not isinstance(prior_sd, Mapping):
+            raise EctskinError(f"FingerPool: prior_sd must be a mapping {{name: sd}}, got "
+                               f"{type(prior_sd).__name__}")
+        for name, sd in prior_sd.items():
+            if name not in FINGER_NUISANCES or not (isinstance(sd, int | float)
+                                                    and 0 < sd < math.inf):
+                raise EctskinError(f"FingerPool: prior_sd[{name!r}] must be the prior sd (> 0) "
+                                   f"of one of {list(FINGER_NUISANCES)}, got {sd!r}")
+        if not (isinstance(sd_floor, int | float) and 0 <= sd_floor < math.inf):
+            raise EctskinError(f"FingerPool: sd_floor must be a number >= 0, got {sd_floor!r}")
         self.prior_sd = {name: float(sd) for name, sd in prior_sd.items()}
         self.sd_floor = float(sd_floor)
         self.reset()
@@ -122,11 +118,7 @@ def pool_fingers(results: Iterable[InversionResult], prior_sd: Mapping[str, floa
     prior's sd that the fits were made with}, pooled over the one-pressing-finger ``results``
     of one person (module docstring); a nuisance no frame resolved keeps its prior (0, sd),
     exactly."""
-    _check_prior_sd(prior_sd, sd_floor, "pool_fingers")
     pool = FingerPool(prior_sd, sd_floor=sd_floor)
     for r in results:
-        if not isinstance(r, InversionResult):
-            raise EctskinError(f"pool_fingers: results must be InversionResults, got "
-                               f"{type(r).__name__}")
         pool.add(r)
     return pool.posterior()
