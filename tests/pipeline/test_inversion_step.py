@@ -220,6 +220,47 @@ def test_two_finger_frames_beyond_the_cap_are_inverted_and_scored_apart(world, t
     assert m["two_finger"]["n_frames"] == np.isin(two, spread).sum()
 
 
+def test_the_standard_errors_carry_the_model_error_of_the_validation_residuals(world, tmp_path):
+    """By hand: the validation trials' frames (spread, every count) fitted by the step's
+    inversion, the model error estimated from their residuals alone; the step reports it, and
+    its test frames' force standard errors are those of the inversion with it. The fits, and so
+    every error, are those without it; "off" leaves the standard errors the noise's."""
+    from ectskin.inversion import estimate_model_error, fit_frames
+
+    config, fields, path = world
+    noise = config.contact_protocol().readout
+    rec = read_recording(path)
+    inv = Inversion(fields, noise)
+    val = pinv._dataset(rec, VAL)
+    rows = pinv._frames(val, False, pinv.MODEL_ERROR_FRAMES)
+    y, states = pinv.rows_frames(rec, val, rows)
+    est = estimate_model_error(inv, y, states, fit_frames(inv, y, states)[0])
+    m = {}
+    for mode in ("validation", "off"):
+        c = _out(tmp_path / mode, config, test=TEST[:2])
+        m[mode] = pinv.inversion_step(StepRunner(c.out_dir, False), c, fields, (path, {}),
+                                      push="off", max_frames=None, bound_error=mode)
+    me = m["validation"]["model_error"]
+    assert me["source"] == "validation" and me["n_frames"] == rows.size == val.n_samples
+    assert (me["a_pf"], me["r"]) == pytest.approx(est.floor, rel=1e-9)
+    assert m["off"]["model_error"]["source"] is None
+    assert m["validation"]["loc_mm_mean"] == m["off"]["loc_mm_mean"]
+    assert m["validation"]["force_mae_n"] == m["off"]["force_mae_n"]
+    test = pinv._dataset(rec, TEST[:2])
+    ty, tst = pinv.rows_frames(rec, test, np.arange(test.n_samples))
+    sigma = []
+    for widened in (inv.with_bound_error(est.floor), inv):
+        res, _ = fit_frames(widened, ty, tst)
+        se = [f.force_se_n for r, n in zip(res, test.count) if n == 1
+              for f in r.fingers[:1] if f.contact]
+        sigma.append(float(np.median(se)))
+    assert m["validation"]["force"]["force_sigma_n_median"] == pytest.approx(sigma[0], rel=1e-9)
+    assert m["off"]["force"]["force_sigma_n_median"] == pytest.approx(sigma[1], rel=1e-9)
+    assert sigma[0] > sigma[1]
+    block = inversion_block(m["validation"], None, None)
+    assert block["model_error"] == me and set(block["force_coverage"]) == {"1sigma", "2sigma"}
+
+
 def test_bad_input_is_refused(world, tmp_path):
     config, fields, path = world
     runner = StepRunner(tmp_path, False)
@@ -229,6 +270,8 @@ def test_bad_input_is_refused(world, tmp_path):
     runner = StepRunner(config.out_dir, False)
     with pytest.raises(EctskinError, match="push"):
         pinv.inversion_step(runner, config, fields, (path, {}), push="maybe")
+    with pytest.raises(EctskinError, match="bound_error"):
+        pinv.inversion_step(runner, config, fields, (path, {}), bound_error="labels")
     with pytest.raises(EctskinError, match="max_frames must be an integer >= 1"):
         pinv.inversion_step(runner, config, fields, (path, {}), max_frames=0)
     with pytest.raises(EctskinError, match="no response fields"):

@@ -72,11 +72,25 @@ def test_the_inversion_stands_beside_contactnet_the_baselines_and_the_bound():
     assert "below 0.1 N) at 25.00 % of the one-finger test frames; there the inversion's " \
            "force MAE is 0.031 N" in text
     assert "60.00 % of the cells near a wire and on 5.00 % of those away" in text
+    # without a model error the standard error is the bound's alone, and no coverage is told
+    assert "(the fitted force's standard error, the bound at the solution, below" in text
+    assert "within one standard error" not in text
     assert "median 9.5 ms, 95th percentile 21.0 ms" in text
     assert "10/10/10 ml (90 frames), 18.75 % of the test frames" in text
     # the contact sections carry it, and so do the rendered report's
     assert ("h2", "The physical inversion (no training)") in contact_sections(_metrics())
     assert "The physical inversion (no training)" in render_markdown(_metrics(), [], Path("."))
+
+
+def test_the_force_line_says_the_model_error_and_the_coverage():
+    m = _metrics()
+    m["inversion"].update(model_error={"source": "validation", "a_pf": 1.2e-4, "r": 0.0094},
+                          force_coverage={"1sigma": 0.625, "2sigma": 0.84375})
+    text = " ".join(p for k, p in inversion_sections(m) if k == "p")
+    assert ("the bound at the solution with the field's model error, 0.12 fF and 0.94 % of the "
+            "signal, estimated from the validation fits' residuals, below 0.1 N) at 25.00 %") in text
+    assert ("62.50 % of the force errors lie within one standard error and 84.38 % within two "
+            "(a Gaussian's: 68 % and 95 %)") in text
 
 
 def test_without_an_inversion_the_report_says_nothing_of_it():

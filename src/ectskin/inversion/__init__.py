@@ -6,12 +6,15 @@
 :func:`pool_fingers` (one person's finger pooled over their frames) and :class:`FingerPool`
 (the same frame by frame, for a stream; :mod:`ectskin.inversion.person`);
 :class:`FingerGuess` (a guess that seeds a fit, :mod:`ectskin.inversion.seed`);
-:mod:`ectskin.inversion.coupling` (two fingers as coupled conductors).
+:mod:`ectskin.inversion.coupling` (two fingers as coupled conductors);
+:func:`estimate_model_error` (what the field does not model, from the fits' residuals:
+:mod:`ectskin.inversion.model_error`).
 """
 
 from ectskin.inversion.fit import FingerEstimate, Inversion, InversionResult
 from ectskin.inversion.frames import fit_frames, invert_recording, results_to_arrays
 from ectskin.inversion.model import FieldLike, StateModel, push_basis
+from ectskin.inversion.model_error import ModelError, estimate_model_error
 from ectskin.inversion.person import FingerPool, pool_fingers
 from ectskin.inversion.seed import FingerGuess
 
@@ -22,7 +25,9 @@ __all__ = [
     "FingerPool",
     "Inversion",
     "InversionResult",
+    "ModelError",
     "StateModel",
+    "estimate_model_error",
     "fit_frames",
     "invert_recording",
     "pool_fingers",

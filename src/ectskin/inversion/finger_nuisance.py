@@ -47,7 +47,7 @@ from ectskin.twin.field_finger import RADIUS_STEP
 from ectskin.twin.mechanics import Touch
 
 __all__ = ["FINGER_BOUND_SD", "FINGER_NUISANCES", "MODULUS_PRIOR_SD", "RADIUS_PRIOR_SD", "TableColumns",
-           "finger_column", "finger_columns", "nuisance_fingers", "radius_table"]
+           "finger_column", "finger_columns", "finger_prior", "nuisance_fingers", "radius_table"]
 
 #: the finger nuisances, in the fit's order
 FINGER_NUISANCES = ("modulus", "radius")
@@ -186,3 +186,23 @@ def radius_table(sensor: Any, inflation_ml: Any,
                              - small.capacitance(inflation_ml, touch, forces)) / (2 * step)
         nodes[face], values[face] = (u, v), val
     return ModulusTable(nodes, forces, values, step)
+
+
+def finger_prior(finger: Any) -> dict[str, tuple[float, float]]:
+    """``finger`` of :meth:`Inversion.fit` checked: {name: (centre, sd)}."""
+    if finger is None:
+        return {}
+    if not isinstance(finger, Mapping):
+        raise EctskinError(f"Inversion: finger must be a mapping {{'modulus' | 'radius': (centre, "
+                           f"sd)}} or None, got {type(finger).__name__}")
+    out = {}
+    for name, value in finger.items():
+        try:
+            centre, sd = (float(x) for x in value)
+        except (TypeError, ValueError):
+            centre = sd = math.nan
+        if name not in FINGER_NUISANCES or not (math.isfinite(centre) and 0 < sd < math.inf):
+            raise EctskinError(f"Inversion: finger[{name!r}] must be (centre, sd > 0) of one of "
+                               f"{list(FINGER_NUISANCES)}, got {value!r}")
+        out[name] = (centre, sd)
+    return out

@@ -42,6 +42,10 @@ nuisances estimated): the Fisher information of the fitted model.
 superposition of two fingers, the twin's per-channel drift. Zero by default (the readout noise
 alone; then the standard errors are the bound).
 
+``bound_error`` is such a floor for the fingers' points', forces' and heights' standard errors
+only, the fits unchanged: (a, r) estimated from the fits' residuals, no labels
+(:mod:`ectskin.inversion.model_error`).
+
 **The untouched readout** (``untouched``): c_u may be the skin's own measured untouched
 readout of each state instead of the field's (the fingers' signals stay the field's).
 
@@ -63,6 +67,8 @@ fitted with Gaussian priors (:mod:`ectskin.inversion.finger_nuisance`; the fit i
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import functools
 import math
 from collections.abc import Mapping, Sequence
@@ -73,10 +79,10 @@ from scipy.stats import chi2
 
 from ectskin._check import EctskinError, check_option
 from ectskin.inversion.finger_nuisance import (
-    FINGER_NUISANCES,
     MODULUS_PRIOR_SD,
     RADIUS_PRIOR_SD,
     finger_columns,
+    finger_prior,
 )
 from ectskin.inversion.lm import (  # noqa: F401  (the fit's constants, named here too)
     BOUND_WEIGHT,
@@ -88,6 +94,7 @@ from ectskin.inversion.lm import (  # noqa: F401  (the fit's constants, named he
     fit_fingers,
 )
 from ectskin.inversion.model import MODES, FieldLike, StateModel
+from ectskin.inversion.noise import check_floor, widened_sigma
 from ectskin.inversion.result import FingerEstimate, Fit, InversionResult, build_result
 from ectskin.inversion.seed import SEED_SEARCH, FingerGuess, seed_starts
 from ectskin.twin.readout import ReadoutConfig
@@ -126,6 +133,8 @@ class Inversion:
     drift : the drift terms, some of ("gain", "offset").
     max_fingers : 0, 1 or 2: the largest count tried.
     model_error : (a pF, r) the σ floor of the module docstring.
+    bound_error : (a pF, r) the σ floor of the points', forces' and heights' standard errors
+        only (module docstring); :meth:`with_bound_error` sets it on a built inversion.
     starts : how many starts a count may take (one finger: the nearest node of each face and
         mode, best first; two: the best pairs of nodes, and the one-finger solution with the
         node nearest what it leaves); it stops at the first whose χ² passes the gate.
@@ -181,6 +190,7 @@ class Inversion:
         drift: Sequence[str] = ("gain", "offset"),
         max_fingers: int = 2,
         model_error: tuple[float, float] = (0.0, 0.0),
+        bound_error: tuple[float, float] = (0.0, 0.0),
         starts: int = 2,
         gate_p: float = 1e-4,
         push_prior_sd: float | None = None,
@@ -204,12 +214,7 @@ class Inversion:
             )
         if max_fingers not in (0, 1, 2):
             raise EctskinError(f"Inversion: max_fingers must be 0, 1 or 2, got {max_fingers!r}")
-        try:
-            a, r = (float(x) for x in model_error)
-        except (TypeError, ValueError):
-            a = r = math.nan
-        if not (a >= 0 and r >= 0 and math.isfinite(a) and math.isfinite(r)):
-            raise EctskinError(f"Inversion: model_error must be (pF >= 0, ratio >= 0), got {model_error!r}")
+        a, r = check_floor("model_error", model_error)
         if not (isinstance(starts, int) and starts >= 1):
             raise EctskinError(f"Inversion: starts must be an integer >= 1, got {starts!r}")
         if not (isinstance(gate_p, int | float) and 0 <= gate_p < 1):
@@ -251,6 +256,7 @@ class Inversion:
         self.noise = noise or ReadoutConfig()
         self.max_fingers = int(max_fingers)
         self.model_error = (a, r)
+        self.bound_error = check_floor("bound_error", bound_error)
         self.states: list[tuple[float, ...]] = []
         self._models: list[StateModel] = []
         n_pairs = None
@@ -375,7 +381,7 @@ class Inversion:
         population's, what other frames of the same person tell
         (:func:`~ectskin.inversion.pool_fingers`)."""
         m = self.model(state)
-        prior = _finger_prior(finger)
+        prior = finger_prior(finger)
         warm_start = self._warm_start(m, warm)
         y, w = self.observed(readouts, state, kind, reference)
         ok = np.isfinite(y)
@@ -445,7 +451,21 @@ class Inversion:
             chosen = self._pressing(m, delta, sigma, chosen)
             lls[best_k] = const - 0.5 * chosen.chi2
             bics[best_k] = chosen.n_params * math.log(n) - 2 * lls[best_k]
-        return build_result(m, chosen, w, lls[best_k], bics, self._sigma)
+        result = build_result(m, chosen, w, lls[best_k], bics, self._sigma,
+                              self._point_sigma if any(self.bound_error) else None)
+        if not ok.all():  # the fitted readout on every channel, NaN where left out
+            fitted, hat = np.full(ok.size, np.nan), np.full(ok.size, np.nan)
+            fitted[ok], hat[ok] = result.fitted, result.leverage
+            result = dataclasses.replace(result, fitted=fitted, leverage=hat)
+        return result
+
+    def with_bound_error(self, bound_error: tuple[float, float]) -> Inversion:
+        """This inversion (its fields, tables and options shared) with ``bound_error`` (a pF, r)
+        in place of its own: the fits are the same, the points', forces' and heights' standard
+        errors those of that model error (module docstring)."""
+        other = copy.copy(self)
+        other.bound_error = check_floor("bound_error", bound_error)
+        return other
 
     def _overlap(self, m: StateModel, fit: Fit) -> bool:
         """Whether the two fingers of ``fit`` lie on one face with their fingertips' centres
@@ -487,11 +507,11 @@ class Inversion:
         return fit.chi2 <= _chi2_gate(n - fit.n_params, self.gate_p)
 
     def _sigma(self, m: StateModel, y: np.ndarray, w: int) -> np.ndarray:
-        s = m.sigma(y, w)
-        a, r = self.model_error
-        if a or r:
-            s = np.sqrt(s**2 + a**2 + (r * (y - m.untouched)) ** 2)
-        return s
+        return widened_sigma(m, y, w, self.model_error)
+
+    def _point_sigma(self, m: StateModel, y: np.ndarray, w: int) -> np.ndarray:
+        """The points', forces' and heights' noise: the fit's, widened by ``bound_error``."""
+        return widened_sigma(m, y, w, self.model_error, self.bound_error)
 
     def _starts(self, m: StateModel, delta: np.ndarray, k: int,
                 one: Fit | None) -> list[list[tuple[int, int, np.ndarray]]]:
@@ -547,26 +567,6 @@ class Inversion:
 
     #: one Levenberg–Marquardt fit from a start (:func:`ectskin.inversion.lm.fit_fingers`)
     _fit_fingers = staticmethod(fit_fingers)
-
-
-def _finger_prior(finger: Any) -> dict[str, tuple[float, float]]:
-    """``finger`` of :meth:`Inversion.fit` checked: {name: (centre, sd)}."""
-    if finger is None:
-        return {}
-    if not isinstance(finger, Mapping):
-        raise EctskinError(f"Inversion: finger must be a mapping {{'modulus' | 'radius': (centre, "
-                           f"sd)}} or None, got {type(finger).__name__}")
-    out = {}
-    for name, value in finger.items():
-        try:
-            centre, sd = (float(x) for x in value)
-        except (TypeError, ValueError):
-            centre = sd = math.nan
-        if name not in FINGER_NUISANCES or not (math.isfinite(centre) and 0 < sd < math.inf):
-            raise EctskinError(f"Inversion: finger[{name!r}] must be (centre, sd > 0) of one of "
-                               f"{list(FINGER_NUISANCES)}, got {value!r}")
-        out[name] = (centre, sd)
-    return out
 
 
 @functools.lru_cache(maxsize=64)

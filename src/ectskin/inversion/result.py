@@ -50,7 +50,12 @@ class InversionResult:
     count (index = count; inf where the count was not tried, see ``gate_p``); ``converged``
     whether the chosen fit's optimiser stopped on a tolerance (always True for no finger);
     ``nuisance`` the fitted nuisance coefficients by name; ``coupling`` the two fingers' fitted
-    coupling ρ (:mod:`ectskin.inversion.coupling`; NaN unless two coupled fingers).
+    coupling ρ (:mod:`ectskin.inversion.coupling`; NaN unless two coupled fingers); ``fitted``
+    the chosen fit's readout (n_pairs,) pF, NaN at the channels left out (masked), what the
+    residual y − fitted is taken from (:mod:`ectskin.inversion.model_error`); ``leverage``
+    each channel's leverage in that fit (the diagonal of the weighted hat matrix of its Jacobian
+    at the solution, the priors' information added; NaN where left out): the share of a
+    channel's variance the fit takes out of its residual.
     """
 
     n_fingers: int
@@ -61,6 +66,9 @@ class InversionResult:
     bic_by_count: tuple[float, ...]
     nuisance: dict[str, float] = field(default_factory=dict)
     coupling: float = math.nan
+    # derived from the fit above; arrays, so left out of == (a result compares by its answer)
+    fitted: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False, repr=False)
+    leverage: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False, repr=False)
 
 
 @dataclass
@@ -86,15 +94,22 @@ class Fit:
 
 
 def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
-             sigma: Callable[[StateModel, np.ndarray, int], np.ndarray]) -> InversionResult:
+                 sigma: Callable[[StateModel, np.ndarray, int], np.ndarray],
+                 point_sigma: Callable[[StateModel, np.ndarray, int], np.ndarray] | None = None
+                 ) -> InversionResult:
     """The :class:`InversionResult` of the chosen fit: its fingers with their standard errors,
     the Cramér–Rao bound at the solution (:func:`ectskin.twin.bound.crb` of the model's Jacobian
     there, the nuisances estimated, the priors' information added); ``sigma(m, mu, w)`` is the
-    noise at the fitted readout mu."""
+    noise at the fitted readout mu. ``point_sigma``: the noise the standard errors of each
+    finger's point, force and height are the bound of instead (the readout's and the field's
+    model error, :mod:`ectskin.inversion.model_error`); the scales' and finger nuisances'
+    standard errors stay ``sigma``'s (what a person's pool reads)."""
     k = len(fit.fingers)
     ests: list[FingerEstimate] = []
+    mu = m.untouched + m.N @ fit.beta
+    hat = leverage(m.N, sigma(m, mu, w), {i: float(1.0 / pw**2)
+                                          for i, pw in enumerate(m.prior_w) if pw > 0})
     if k:
-        mu = m.untouched + m.N @ fit.beta
         cols, scale_cols = [], []
         g = 1.0 + fit.scales if fit.scales.size else np.ones(k)
         for j, (fi, mi, x) in enumerate(fit.fingers):
@@ -127,10 +142,13 @@ def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
         prior.update({n0 + i: float(1.0 / m.scale_w**2) for i in range(ns)})
         prior.update({n0 + ns + i: float(1.0 / mw**2) for i, mw in enumerate(mod_w)})
         interest = set(range(3 * k)) | set(range(n0, n0 + ns + nm))
-        b = crb(J, sigma(m, mu, w), prior_var=prior,
-                nuisance_cols=[c for c in range(J.shape[1]) if c not in interest])
+        nuisance_cols = [c for c in range(J.shape[1]) if c not in interest]
+        hat = leverage(J, sigma(m, mu, w), prior)
+        b = crb(J, sigma(m, mu, w), prior_var=prior, nuisance_cols=nuisance_cols)
+        point = b if point_sigma is None else crb(J, point_sigma(m, mu, w), prior_var=prior,
+                                                  nuisance_cols=nuisance_cols)
         for j, (fi, mi, x) in enumerate(fit.fingers):
-            se = b.std[3 * j: 3 * j + 3]
+            se = point.std[3 * j: 3 * j + 3]
             contact = MODES[mi] == "contact"
             h = 0.0 if contact else float(np.exp(x[2]))
             ests.append(FingerEstimate(
@@ -147,5 +165,18 @@ def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
         n_fingers=k, fingers=tuple(ests), log_likelihood=ll, bic=bics[k],
         converged=fit.converged, bic_by_count=tuple(bics),
         nuisance={n: float(v) for n, v in zip(m.nuisance_names, fit.beta)},
-        coupling=fit.rho,
+        coupling=fit.rho, fitted=mu, leverage=hat,
     )
+
+
+def leverage(J: np.ndarray, sigma: np.ndarray, prior_var: dict[int, float]) -> np.ndarray:
+    """The diagonal of the hat matrix W½ J (Jᵀ W J + P)⁻¹ Jᵀ W½ of a fit with Jacobian ``J``
+    (channels, parameters), noise ``sigma`` (W = σ⁻²) and Gaussian priors ``prior_var``
+    {column: variance} (P: their precisions): each channel's leverage, in [0, 1]."""
+    Jw = J / sigma[:, None]
+    A = Jw.T @ Jw
+    for c, var in prior_var.items():
+        if var > 0 and np.isfinite(var):
+            A[c, c] += 1.0 / var
+    X = np.linalg.lstsq(A, Jw.T, rcond=None)[0] if Jw.shape[1] else np.zeros((0, J.shape[0]))
+    return np.clip(np.einsum("ij,ji->i", Jw, X), 0.0, 1.0)

@@ -64,6 +64,8 @@ with a field, spread as the test frames; the one-standard-error rule chooses (th
 candidate whose mean point error is within one paired standard error of the lowest), and every
 candidate is scored on the test frames too (:mod:`ectskin.pipeline.contact_pick`; the result's
 ``choice``). A frame of a state without a field can only be answered by the learned model.
+The standard errors carry the field's model error (``bound_error``, the result's
+``model_error``: :mod:`ectskin.pipeline.inversion_error`).
 
 :func:`ectskin.pipeline.metrics.inversion_block` turns the step's metrics into metrics.json's
 ``inversion``.
@@ -96,6 +98,12 @@ from ectskin.pipeline.bound import state_key
 from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
 from ectskin.pipeline.contact_pick import CHOICE_FRAMES, RULE, contact_choice, load_learned
 from ectskin.pipeline.field import field_cache_dir
+from ectskin.pipeline.inversion_error import (
+    BOUND_ERROR_CHOICES,
+    MODEL_ERROR_FRAMES,
+    rows_frames,
+    with_model_error,
+)
 from ectskin.pipeline.metrics import beside
 from ectskin.pipeline.runner import StepRunner, digest
 from ectskin.pipeline.steps import run_settings
@@ -232,18 +240,11 @@ def invert_rows(inv: Inversion, rec: Recording, data: ContactData, rows: np.ndar
     if not np.array_equal(np.concatenate([rows[data.group[rows] == g] for g in groups])
                           if rows.size else rows, rows):
         raise EctskinError("invert_rows: rows must be sorted by trial, then frame")
-    readouts, states = [], []
-    for g in groups:
-        t = rec.trial(data.group_names[g])
-        frames = data.frame[rows[data.group[rows] == g]]
-        readouts.append(t.capacitance[frames])
-        states.append(np.broadcast_to(np.asarray(t.inflation, np.float64), (frames.size,
-                                                                             len(t.inflation))))
-    if not readouts:
+    if rows.size == 0:
         return results_to_arrays([]), np.zeros(0)
+    readouts, states = rows_frames(rec, data, rows)
     # one frame per fit (window 1), so the frames of all trials go together
-    results, seconds = fit_frames(inv, np.concatenate(readouts), np.concatenate(states),
-                                  seeds=seeds, workers=workers,
+    results, seconds = fit_frames(inv, readouts, states, seeds=seeds, workers=workers,
                                   person=data.group[rows].tolist() if person else None)
     return results_to_arrays(results), seconds
 
@@ -408,6 +409,7 @@ def inversion_step(
     choice: bool = False,
     two_fingers: str = "superposition",
     finger: str = "off",
+    bound_error: str = "validation",
 ) -> dict[str, Any]:
     """Step "inversion": OUT_DIR/inversion/metrics.json (module docstring); returns it.
 
@@ -430,6 +432,8 @@ def inversion_step(
     ``two_fingers``: the fit's two-finger model, "superposition" or "coupled"
     (:class:`~ectskin.inversion.Inversion`). ``finger``: "auto", "on" or "off", the person's
     finger fitted and pooled per trial (module docstring; the result's ``finger``).
+    ``bound_error``: "validation" or "off", the standard errors' model error estimated from the
+    validation frames' residuals (module docstring; the result's ``model_error``) or none.
     """
     if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
         raise EctskinError(f"inversion_step: max_frames must be an integer >= 1 or None, got "
@@ -445,6 +449,7 @@ def inversion_step(
     check_option("untouched", untouched, UNTOUCHED_CHOICES)
     check_option("two_fingers", two_fingers, TWO_FINGER_MODELS)
     check_option("finger", finger, FINGER_CHOICES)
+    check_option("bound_error", bound_error, BOUND_ERROR_CHOICES)
     for name, flag in (("press_check", press_check), ("choice", choice)):
         if not isinstance(flag, bool):
             raise EctskinError(f"inversion_step: {name} must be True or False, got {flag!r}")
@@ -471,6 +476,7 @@ def inversion_step(
         **({"two_fingers": two_fingers} if two_fingers != "superposition" else {}),
         **({"finger": finger, "finger_fields": [FINGER_FIELD_SPACING_MM, FINGER_FIELD_FORCE_NODES,
                                                 POOL_SD_FLOOR]} if finger != "off" else {}),
+        "bound_error": [bound_error, MODEL_ERROR_FRAMES],
     }
     if choice:  # the run's model and its baselines' seed are candidates' settings too
         settings.update(choice=True, choice_frames=CHOICE_FRAMES, choice_rule=RULE,
@@ -528,6 +534,12 @@ def inversion_step(
             if finger_pick["use"]:
                 inv = pooled
         person = bool(finger_pick["use"])
+        t1, vdata = time.perf_counter(), _dataset(rec, [n for n in val if has[n]])
+        vrows = _frames(vdata, False, MODEL_ERROR_FRAMES) if vdata is not None else None
+        model_error: dict[str, Any] = {"source": None, "why": f"bound_error={bound_error!r}"}
+        if bound_error == "validation":
+            inv, model_error = with_model_error(inv, rec, vdata, vrows, workers, person)
+        model_error["seconds"] = time.perf_counter() - t1
         data = _dataset(rec, [n for n in test if has[n]])
         n_without = sum(without.values())
         if data is None:
@@ -562,6 +574,7 @@ def inversion_step(
             frames_without_field=without, n_frames_without_field=n_without,
             share_without_field=(n_without / total) if total else None,
             n_test_trials=len(test), push=push_pick, finger=finger_pick,
+            model_error=model_error,
             settings={"window": 1, "kind": "absolute", "noise": to_jsonable(noise),
                       "push": push, "max_fingers": inv.max_fingers,
                       "finger_scale_sd": finger_scale_sd, "press_check": press_check,

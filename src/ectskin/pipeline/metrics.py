@@ -437,10 +437,12 @@ def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
     """metrics.json's ``inversion`` from the inversion step's metrics (``docs/reproduce.md``):
     its contact metrics (:data:`INVERSION_KEYS`), the count by true count, the two-finger frames
     scored apart (``two_finger``, without its per-trial list), force where its
-    standard error says it is observable, the time per frame, and per state its numbers beside
-    ContactNet's, the baselines' and the bound's at the same state's test frames, and the
-    contact model choice of the field states (``choice``, :mod:`ectskin.pipeline.contact_pick`;
-    None where the step made none); ``contact`` and ``bound``: metrics.json's blocks (or None)."""
+    standard error says it is observable, the share of force errors within 1 and 2 standard
+    errors (``force_coverage``) and the model error those carry (``model_error``), the time per
+    frame, and per state its numbers beside ContactNet's, the baselines' and the bound's at the
+    same state's test frames, and the contact model choice of the field states (``choice``,
+    :mod:`ectskin.pipeline.contact_pick`; None where the step made none); ``contact`` and
+    ``bound``: metrics.json's blocks (or None)."""
     timing = inv.get("timing") or {}
     fo = inv.get("force_observable") or {}
     near = beside(contact, inv)
@@ -468,6 +470,9 @@ def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
         "force_mae_n_observable": fo.get("force_mae_n"),
         "force_observable_share": fo.get("share"),
         "force_observable_threshold_n": fo.get("threshold_n"),
+        "force_coverage": {k: (inv.get("force") or {}).get(f"force_coverage_{k}")
+                           for k in ("1sigma", "2sigma")},
+        "model_error": inv.get("model_error"),
         "ms_per_frame_median": timing.get("ms_per_frame_median"),
         "ms_per_frame_p95": timing.get("ms_per_frame_p95"),
         "per_state": per_state,

@@ -110,10 +110,20 @@ def force_line(inv: Mapping[str, Any], bound: Mapping[str, Any] | None) -> str |
     thr = inv.get("force_observable_threshold_n") or 0.1
     if not isinstance(share, int | float):
         return None
-    text = (f"Force is observable (the fitted force's standard error, the bound at the solution, "
+    me = inv.get("model_error") or {}
+    se = "the bound at the solution"
+    if isinstance(me.get("r"), int | float) and isinstance(me.get("a_pf"), int | float):
+        se += (f" with the field's model error, {1000 * me['a_pf']:.2g} fF and "
+               f"{100 * me['r']:.2g} % of the signal, estimated from the validation fits' "
+               f"residuals")
+    text = (f"Force is observable (the fitted force's standard error, {se}, "
             f"below {thr:g} N) at {pct(share)} of the one-finger test frames"
             + (f"; there the inversion's force MAE is {_n(inv.get('force_mae_n_observable'))}"
                if isinstance(inv.get("force_mae_n_observable"), int | float) else ""))
+    cover = inv.get("force_coverage") or {}
+    if all(isinstance(cover.get(k), int | float) for k in ("1sigma", "2sigma")):
+        text += (f"; {pct(cover['1sigma'])} of the force errors lie within one standard error "
+                 f"and {pct(cover['2sigma'])} within two (a Gaussian's: 68 % and 95 %)")
     near = (bound or {}).get("force_observable_share_near_wires")
     away = (bound or {}).get("force_observable_share_away_from_wires")
     if isinstance(near, int | float) and isinstance(away, int | float):
