@@ -128,6 +128,13 @@ def test_the_force_error_bars_cover_with_the_estimated_model_error(analytic_fiel
     # the fits themselves are the same; only their standard errors differ
     np.testing.assert_array_equal([r.fingers[0].u_mm for r in plain],
                                   [r.fingers[0].u_mm for r in widened])
+    # the readout noise's point standard error stays, and is the plain one's
+    noise_se = [r.fingers[0].point_se_noise_mm for r in widened]
+    np.testing.assert_array_equal(noise_se, [r.fingers[0].point_se_noise_mm for r in plain])
+    np.testing.assert_allclose(noise_se, [np.hypot(r.fingers[0].u_se_mm, r.fingers[0].v_se_mm)
+                                          for r in plain], rtol=1e-12)
+    assert all(np.hypot(w.fingers[0].u_se_mm, w.fingers[0].v_se_mm) > n
+               for w, n in zip(widened, noise_se))
     assert cover["plain"][1] < 0.5
     assert 0.55 < cover["widened"][0] < 0.85 and cover["widened"][1] > 0.88
 

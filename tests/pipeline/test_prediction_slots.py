@@ -59,3 +59,17 @@ def test_the_best_located_press_takes_slot_0():
         assert slot(pred, i, 0) == ("front", (-16.1, 21.7))
     assert slot(pred, 0, 1) == ("front", (-19.6, 106.4))
     assert slot(pred, 2, 0) == ("back", (3.0, 50.0)) and pred[2, 2] == 1.0  # p_hover
+
+
+def test_the_readout_noises_standard_error_says_which_press_is_best_located():
+    """With a model error in the standard errors (``Inversion(bound_error=...)``) the real
+    finger's grows with its large signal and can pass a phantom's; ``point_se_noise_mm`` (the
+    readout noise's alone) keeps the order, and a NaN there sorts last."""
+    phantom = ("front", True, (-19.6, 106.4), 2.0, 0.0, (1.0, 1.2))
+    real = ("front", True, (-16.1, 21.7), 1.0, 0.0, (1.5, 1.8))  # widened past the phantom's
+    a = arrays([[phantom, real], [real, phantom], [phantom, real]])
+    assert slot(prediction_columns(a, FACES, EXTENT), 0, 0)[1] == (-19.6, 106.4)  # by uv_se_mm
+    a["point_se_noise_mm"] = np.array([[9.0, 0.2], [0.2, 9.0], [np.nan, 0.2]])
+    pred = prediction_columns(a, FACES, EXTENT)
+    for i in range(3):
+        assert slot(pred, i, 0) == ("front", (-16.1, 21.7))

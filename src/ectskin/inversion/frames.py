@@ -197,6 +197,7 @@ def results_to_arrays(results: Sequence[InversionResult]) -> dict[str, np.ndarra
         "uv_se_mm": np.full((n, SLOTS, 2), np.nan),
         "force_se_n": np.full((n, SLOTS), np.nan),
         "height_se_mm": np.full((n, SLOTS), np.nan),
+        "point_se_noise_mm": np.full((n, SLOTS), np.nan),
         "scale": np.full((n, SLOTS), np.nan),
         "scale_se": np.full((n, SLOTS), np.nan),
         "log_likelihood": np.array([r.log_likelihood for r in results], dtype=np.float64),
@@ -214,6 +215,7 @@ def results_to_arrays(results: Sequence[InversionResult]) -> dict[str, np.ndarra
             out["uv_se_mm"][i, k] = fe.u_se_mm, fe.v_se_mm
             out["force_se_n"][i, k] = fe.force_se_n
             out["height_se_mm"][i, k] = fe.height_se_mm
+            out["point_se_noise_mm"][i, k] = fe.point_se_noise_mm
             out["scale"][i, k] = fe.scale
             out["scale_se"][i, k] = fe.scale_se
     return out

@@ -21,7 +21,10 @@ class FingerEstimate:
     1 + a, its signal's fitted relative size, and its standard error (1 and 0 without
     ``finger_scale_sd``); ``modulus_ln`` ln(E / E0) and ``radius_ln`` ln(R / R0), its pulp's
     modulus and its fingertip's radius against the field's finger, and their standard errors
-    (0 and 0 without ``modulus`` / ``radius``, or hovering)."""
+    (0 and 0 without ``modulus`` / ``radius``, or hovering); ``point_se_noise_mm``
+    √(σ_u² + σ_v²) of the readout noise alone, which says how well the frame tells this finger's
+    point whatever ``bound_error`` adds to the standard errors above (which finger of a fit is
+    the best located: :func:`~ectskin.pipeline.inversion.prediction_columns`)."""
 
     face: str
     contact: bool
@@ -39,6 +42,7 @@ class FingerEstimate:
     modulus_ln_se: float = 0.0
     radius_ln: float = 0.0
     radius_ln_se: float = 0.0
+    point_se_noise_mm: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -156,6 +160,7 @@ def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
                 force_n=float(x[2]) if contact else 0.0, height_mm=h,
                 u_se_mm=float(se[0]), v_se_mm=float(se[1]),
                 force_se_n=float(se[2]) if contact else 0.0,
+                point_se_noise_mm=float(np.hypot(b.std[3 * j], b.std[3 * j + 1])),
                 height_se_mm=0.0 if contact else h * float(se[2]),
                 scale=float(g[j]), scale_se=float(b.std[3 * k + j]) if ns else 0.0,
                 **{f"{q}_ln{end}": v for i, (q, jj, e) in enumerate(extra) if jj == j

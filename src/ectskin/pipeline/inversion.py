@@ -152,12 +152,6 @@ def _field_of(fields: Mapping[tuple[float, ...], Any], state: Sequence[float]) -
     return None
 
 
-def _point_se(se_uv) -> float:
-    """√(σ_u² + σ_v²) of a fitted finger, +inf where the fit gave none (it sorts last)."""
-    v = float(np.hypot(*np.asarray(se_uv, dtype=np.float64)))
-    return v if np.isfinite(v) else np.inf
-
-
 def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
                        extent: Mapping[str, Any]) -> np.ndarray:
     """The inversion's answers (:func:`ectskin.inversion.results_to_arrays`, F frames) as
@@ -166,12 +160,13 @@ def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
 
     ``count``: the fitted fingers that press; ``p_contact``: 1 when one does; ``p_hover``: 1
     when none presses and one hovers at most ``HOVER_MAX_MM`` high. The pressing fingers take
-    the slots first, the best-located first (the least point standard error: a two-finger fit's
-    phantom, where the readouts hardly tell a point, must not stand for the finger on the
-    skin), then the hovering ones, the lowest first; a frame where none
-    presses gives slot 0 the point of the lowest hovering finger (the nearest to touching),
-    or, with no finger at all, the middle of the first face (an answer is needed wherever a
-    finger is on the skin, and that one is charged its full error).
+    the slots first, the best-located first (the least point standard error of the readout
+    noise, ``point_se_noise_mm`` where given: a two-finger fit's phantom, where the readouts
+    hardly tell a point, must not stand for the finger on the skin), then the hovering ones,
+    the lowest first; a frame where none presses gives slot 0 the point of the lowest hovering
+    finger (the nearest to touching), or, with no finger at all, the middle of the first face
+    (an answer is needed wherever a finger is on the skin, and that one is charged its full
+    error).
     ``sigma_mm``: the point's standard error, √(σ_u² + σ_v²); ``force_sigma_n``: the force's
     (0 where there is none: no force fitted); ``face``: the index in ``faces``.
     """
@@ -181,12 +176,17 @@ def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
     (u0, u1), (v0, v1) = extent[faces[0]]
     col = {name: i for i, name in enumerate(SLOT_COLUMNS)}
     face_of = {f: i for i, f in enumerate(faces)}
+    # the readout noise's point standard errors (a model error's grows most for large signals);
+    # +inf where the fit gave none (it sorts last)
+    located = (np.asarray(arrays["point_se_noise_mm"], dtype=np.float64)
+               if "point_se_noise_mm" in arrays else np.hypot(*np.moveaxis(arrays["uv_se_mm"], -1, 0)))
+    located = np.where(np.isfinite(located), located, np.inf)
     for i in range(n):
         fitted = [k for k in range(S) if arrays["face"][i, k]]
         # the best-located press first: a two-finger fit's phantom (a finger where the readouts
         # hardly tell its point, beyond the wire ends) never stands for the finger on the skin
         pressing = sorted((k for k in fitted if arrays["contact"][i, k]),
-                          key=lambda k: _point_se(arrays["uv_se_mm"][i, k]))
+                          key=lambda k: located[i, k])
         hovering = sorted((k for k in fitted if not arrays["contact"][i, k]),
                           key=lambda k: arrays["height_mm"][i, k])  # the lowest first
         pred[i, 0] = len(pressing)
