@@ -16,8 +16,8 @@ its residual, the channel's leverage h (the hat matrix's diagonal at the solutio
 hand's push and the person's finger): e is read as e / √(1 − h), whose variance is the
 channel's (exactly so where the weights are the variance's, the regression's HC2
 correction); :func:`estimate_model_error` fits the frames with an inversion and estimates it
-from their residuals. Readouts only: a recording without ground
-truth (a real skin) gives it as well as the twin.
+from their residuals. Readouts only: a recording without ground truth (a real skin) gives it
+as well as the twin.
 
 Each channel of each frame counts as one independent draw, which the model error is not (it is
 smooth over the skin and repeats between frames of a trial); the estimate is a variance, and

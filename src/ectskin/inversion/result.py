@@ -111,9 +111,10 @@ def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
     k = len(fit.fingers)
     ests: list[FingerEstimate] = []
     mu = m.untouched + m.N @ fit.beta
-    hat = leverage(m.N, sigma(m, mu, w), {i: float(1.0 / pw**2)
-                                          for i, pw in enumerate(m.prior_w) if pw > 0})
-    if k:
+    nuisance_prior = {i: float(1.0 / pw**2) for i, pw in enumerate(m.prior_w) if pw > 0}
+    if not k:
+        hat = leverage(m.N, sigma(m, mu, w), nuisance_prior)
+    else:
         cols, scale_cols = [], []
         g = 1.0 + fit.scales if fit.scales.size else np.ones(k)
         for j, (fi, mi, x) in enumerate(fit.fingers):
@@ -142,13 +143,14 @@ def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
         J = np.concatenate(cols, axis=1)
         n0 = J.shape[1]
         J = np.concatenate([J] + scale_cols[:ns] + mod_cols + [m.N], axis=1)
-        prior = {n0 + ns + nm + i: float(1.0 / pw**2) for i, pw in enumerate(m.prior_w) if pw > 0}
+        prior = {n0 + ns + nm + i: var for i, var in nuisance_prior.items()}
         prior.update({n0 + i: float(1.0 / m.scale_w**2) for i in range(ns)})
         prior.update({n0 + ns + i: float(1.0 / mw**2) for i, mw in enumerate(mod_w)})
         interest = set(range(3 * k)) | set(range(n0, n0 + ns + nm))
         nuisance_cols = [c for c in range(J.shape[1]) if c not in interest]
-        hat = leverage(J, sigma(m, mu, w), prior)
-        b = crb(J, sigma(m, mu, w), prior_var=prior, nuisance_cols=nuisance_cols)
+        noise = sigma(m, mu, w)
+        hat = leverage(J, noise, prior)
+        b = crb(J, noise, prior_var=prior, nuisance_cols=nuisance_cols)
         point = b if point_sigma is None else crb(J, point_sigma(m, mu, w), prior_var=prior,
                                                   nuisance_cols=nuisance_cols)
         for j, (fi, mi, x) in enumerate(fit.fingers):

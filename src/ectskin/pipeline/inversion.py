@@ -534,12 +534,12 @@ def inversion_step(
             if finger_pick["use"]:
                 inv = pooled
         person = bool(finger_pick["use"])
-        t1, vdata = time.perf_counter(), _dataset(rec, [n for n in val if has[n]])
-        vrows = _frames(vdata, False, MODEL_ERROR_FRAMES) if vdata is not None else None
         model_error: dict[str, Any] = {"source": None, "why": f"bound_error={bound_error!r}"}
         if bound_error == "validation":
+            t1, vdata = time.perf_counter(), _dataset(rec, [n for n in val if has[n]])
+            vrows = _frames(vdata, False, MODEL_ERROR_FRAMES) if vdata is not None else None
             inv, model_error = with_model_error(inv, rec, vdata, vrows, workers, person)
-        model_error["seconds"] = time.perf_counter() - t1
+            model_error["seconds"] = time.perf_counter() - t1
         data = _dataset(rec, [n for n in test if has[n]])
         n_without = sum(without.values())
         if data is None:
