@@ -151,3 +151,7 @@ def test_residuals_are_the_frame_less_the_fit(analytic_field):
     np.testing.assert_allclose(s[0], noise_pf(y[0], ReadoutConfig()))
     with pytest.raises(EctskinError, match="one of each per frame"):
         residuals(inv, y, STATE, res + res)
+    # a bare number is the one-chamber state; a state array of the wrong rank is named
+    np.testing.assert_array_equal(residuals(inv, y, 0.0, res)[0], e)
+    with pytest.raises(EctskinError, match="states must be"):
+        residuals(inv, y, np.zeros((1, 1, 1)), res)

@@ -126,8 +126,11 @@ def residuals(inversion: Any, readouts: Any, states: Any, results: Sequence[Any]
     y = np.asarray(readouts, dtype=np.float64)
     if y.ndim != 2:
         raise EctskinError(f"residuals: readouts must be (frames, channels), got shape {y.shape}")
-    st = np.asarray(states, dtype=np.float64)
-    st = np.broadcast_to(st, (y.shape[0], st.shape[-1])) if st.ndim == 1 else st
+    st = np.atleast_1d(np.asarray(states, dtype=np.float64))
+    st = np.broadcast_to(st, (y.shape[0], st.size)) if st.ndim == 1 else st
+    if st.ndim != 2:
+        raise EctskinError(f"residuals: states must be one inflation state or one per frame "
+                           f"(frames, chambers), got shape {st.shape}")
     if st.shape[0] != y.shape[0] or len(results) != y.shape[0]:
         raise EctskinError(f"residuals: {y.shape[0]} frames, {st.shape[0]} states and "
                            f"{len(results)} results: one of each per frame")

@@ -10,7 +10,7 @@ import numpy as np
 
 from ectskin.inversion.finger_nuisance import finger_column
 from ectskin.inversion.model import MODES, StateModel
-from ectskin.twin.bound import crb
+from ectskin.twin.bound import crb, fisher_information
 
 
 @dataclass(frozen=True)
@@ -180,8 +180,8 @@ def leverage(J: np.ndarray, sigma: np.ndarray, prior_var: dict[int, float]) -> n
     """The diagonal of the hat matrix W½ J (Jᵀ W J + P)⁻¹ Jᵀ W½ of a fit with Jacobian ``J``
     (channels, parameters), noise ``sigma`` (W = σ⁻²) and Gaussian priors ``prior_var``
     {column: variance} (P: their precisions): each channel's leverage, in [0, 1]."""
+    A = fisher_information(J, sigma)  # Jᵀ W J, its inputs checked
     Jw = J / sigma[:, None]
-    A = Jw.T @ Jw
     for c, var in prior_var.items():
         if var > 0 and np.isfinite(var):
             A[c, c] += 1.0 / var
