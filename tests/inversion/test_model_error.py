@@ -16,7 +16,9 @@ import pytest
 
 from ectskin._check import EctskinError
 from ectskin.inversion import Inversion, estimate_model_error, fit_frames
-from ectskin.inversion.model_error import ml_model_error, residuals
+from ectskin.inversion.model_error import RunningModelError, ml_model_error, residuals
+from ectskin.inversion.result import sandwich
+from ectskin.twin.bound import crb
 from ectskin.twin.readout import ReadoutConfig, noise_pf, readout
 
 STATE = (0.0,)
@@ -155,3 +157,68 @@ def test_residuals_are_the_frame_less_the_fit(analytic_field):
     np.testing.assert_array_equal(residuals(inv, y, 0.0, res)[0], e)
     with pytest.raises(EctskinError, match="states must be"):
         residuals(inv, y, np.zeros((1, 1, 1)), res)
+
+
+def test_the_running_estimate_is_the_batch_estimate_of_its_window():
+    """By the batch estimator: the running estimate appears after ``first`` frames, is renewed
+    after every ``every`` more, and is each time :func:`ml_model_error` of exactly the last
+    ``window`` frames (an off-by-one in the window or the schedule changes the numbers)."""
+    e, s, d = draws(3e-4, 0.02, n=260, seed=3)
+    h = np.random.default_rng(4).uniform(0.0, 0.6, e.shape)
+    run = RunningModelError(first=100, every=70, window=150)
+    made = [run.add(e[i], s[i], d[i], h[i]) for i in range(260)]
+    assert [i for i, m in enumerate(made) if m] == [99, 169, 239]
+    want = ml_model_error(e[240 - 150:240], s[240 - 150:240], d[240 - 150:240],
+                          h[240 - 150:240])
+    assert run.estimate == want and run.n_added == 260
+    assert run.estimate.r == pytest.approx(0.02, rel=0.2)
+    first = RunningModelError(first=100, every=70, window=150)
+    for i in range(100):
+        first.add(e[i], s[i], d[i], h[i])
+    assert first.estimate == ml_model_error(e[:100], s[:100], d[:100], h[:100])
+    first.reset()
+    assert first.estimate is None and first.n_added == 0
+
+
+def test_the_running_estimate_waits_for_a_channel_and_names_bad_frames():
+    run = RunningModelError(first=2, every=1, window=5)
+    nan = np.full(4, np.nan)
+    assert not run.add(nan, nan, nan, nan) and not run.add(nan, nan, nan, nan)
+    assert run.estimate is None  # every channel masked so far
+    with pytest.raises(EctskinError, match=r"channels \(4,\), got shapes"):
+        run.add(np.zeros(3), np.ones(3), np.zeros(3), np.zeros(3))
+    with pytest.raises(EctskinError, match="window"):
+        RunningModelError(first=10, window=5)
+    with pytest.raises(EctskinError, match="every must be"):
+        RunningModelError(every=0)
+
+
+def test_the_sandwich_is_the_weighted_fits_own_scatter():
+    """By simulation: a linear fit weighted by σ of readouts that scatter by a wider, uneven
+    spread, with a Gaussian prior on one column. The sandwich's standard errors are the scatter
+    of the fitted parameters over many draws (within the Monte Carlo error), exceed the bound
+    of the spread alone (which only weights by the spread reach), and equal the plain bound
+    where the spread is σ."""
+    rng = np.random.default_rng(5)
+    J = rng.normal(size=(28, 5))
+    sigma = rng.uniform(0.5, 1.5, 28)
+    spread = sigma * rng.uniform(1.0, 4.0, 28)
+    prior = {4: 0.3**2}
+    cols = [0, 1, 2]
+    ok = np.ones(3, bool)
+    got = sandwich(J, sigma, spread, prior, cols, ok)
+    # the fit: weighted least squares with the prior as one more row, over 20 000 draws
+    theta = rng.normal(size=5)
+    A = np.vstack([J / sigma[:, None], np.eye(5)[4] / 0.3])
+    draws = 20000
+    y = J @ theta + rng.normal(size=(draws, 28)) * spread
+    z = np.hstack([y / sigma, np.full((draws, 1), theta[4] / 0.3)
+                   + rng.normal(size=(draws, 1))])  # the prior's centre scatters by its sd
+    fits = np.linalg.lstsq(A, z.T, rcond=None)[0].T
+    np.testing.assert_allclose(fits[:, cols].std(axis=0), got, rtol=0.03)
+    gls = crb(J, spread, prior_var=prior, nuisance_cols=[3, 4]).std
+    assert np.all(got > gls)
+    np.testing.assert_allclose(sandwich(J, sigma, sigma, prior, cols, ok),
+                               crb(J, sigma, prior_var=prior, nuisance_cols=[3, 4]).std,
+                               rtol=1e-9)
+    assert np.isinf(sandwich(J, sigma, spread, prior, cols, np.array([True, False, True]))[1])

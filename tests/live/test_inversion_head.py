@@ -19,14 +19,20 @@ import pytest
 
 from ectskin._check import EctskinError
 from ectskin.cli import main
-from ectskin.inversion import Inversion
+from ectskin.inversion import Inversion, fit_frames
 from ectskin.inversion import fit as fit_module
+from ectskin.inversion.model_error import ml_model_error, residuals
 from ectskin.io.hdf5 import read_recording, write_recording
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import default_layout
 from ectskin.live import inversion_head
 from ectskin.live.engine import LiveEngine
-from ectskin.live.inversion_head import InversionHead, load_fields
+from ectskin.live.inversion_head import (
+    BOUND_ERROR_EVERY,
+    BOUND_ERROR_FIRST,
+    InversionHead,
+    load_fields,
+)
 from ectskin.live.output import InversionFrame, JsonLinesWriter, Output, status_line
 from ectskin.live.sources import ReplaySource
 from ectskin.twin.field import ResponseField
@@ -595,3 +601,101 @@ def test_cli_live_pools_the_person_with_the_finger_fields(fields, field_dirs, tm
     assert frames == list(range(1, 11))
     assert main(argv[:-4] + ["--finger-fields", str(tmp_path)]) == 2
     assert "--finger-fields is where --inversion-person reads" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------ the standard errors' model error
+#: the share of each channel's signal the tiny field does not know in these frames, drawn per
+#: frame (the references: the batch estimate of cold offline fits' residuals, and those frames'
+#: standard errors with that floor; the labels only score the coverage)
+SHARE = 0.03
+N = BOUND_ERROR_FIRST + BOUND_ERROR_EVERY + 40
+
+
+def _error_frames(field, n: int, seed: int):
+    rng = np.random.default_rng(seed)
+    (u0, u1), (v0, v1) = WINDOW
+    truth = np.column_stack([rng.uniform(u0 + 2, u1 - 2, n), rng.uniform(v0 + 2, v1 - 2, n),
+                             rng.uniform(0.4, 1.6, n)])
+    y = []
+    for u, v, f in truth:
+        d = field.delta("front", u, v, f, 0.0)
+        c = field.untouched + d * (1 + SHARE * rng.standard_normal(d.shape))
+        y.append(c + rng.standard_normal(c.shape) * NOISE.resolution_pf)
+    return np.array(y), truth
+
+
+def test_the_session_learns_the_model_error_and_the_standard_errors_carry_it(fields):
+    field = fields[REST]
+    y, truth = _error_frames(field, N, seed=11)
+    inv = Inversion({REST: field}, NOISE, max_fingers=1)
+    plain = InversionHead(inv, LAYOUT, warm=False)
+    head = InversionHead(inv, LAYOUT, warm=False, bound_error="session")
+    got = [head(y[i], field.untouched, REST) for i in range(N)]
+    base = [plain(y[i], field.untouched, REST) for i in range(N)]
+    # the reference: cold offline fits, their residuals, the batch estimate
+    offline, _ = fit_frames(inv, y, REST)
+    e, s, d, h = residuals(inv, y, REST, offline)
+    first = ml_model_error(e[:BOUND_ERROR_FIRST], s[:BOUND_ERROR_FIRST], d[:BOUND_ERROR_FIRST],
+                           h[:BOUND_ERROR_FIRST])
+    k = BOUND_ERROR_FIRST + BOUND_ERROR_EVERY
+    second = ml_model_error(e[:k], s[:k], d[:k], h[:k])
+    assert first.r == pytest.approx(SHARE, rel=0.3)
+    for i in range(N):
+        want = None if i < BOUND_ERROR_FIRST else first if i < k else second
+        g, b = got[i], base[i]
+        if want is None:
+            assert g.model_error is None
+        else:
+            assert g.model_error == {"a_pf": want.a_pf, "r": want.r, "frames": want.n_frames}
+        # the fits are the plain head's; the standard errors those of the floor in use
+        assert (g.fingers[0].u_mm, g.fingers[0].force_n) == (b.fingers[0].u_mm, b.fingers[0].force_n)
+        ref = inv if want is None else inv.with_bound_error(want.floor)
+        assert g.fingers[0].force_se_n == pytest.approx(ref.fit(y[i], REST).fingers[0].force_se_n,
+                                                        rel=1e-9)
+    # after the first estimate the force's error bars cover; the noise's alone do not
+    late = slice(BOUND_ERROR_FIRST, N)
+    press = np.array([o.fingers[0].contact for o in got[late]])
+    assert press.mean() > 0.9
+
+    def cover(outs):
+        f = np.array([[o.fingers[0].force_n, o.fingers[0].force_se_n] for o in outs[late]])
+        z = np.abs(f[press, 0] - truth[late][press, 2]) / f[press, 1]
+        return np.mean(z < 1), np.mean(z < 2)
+
+    assert cover(base)[1] < 0.6
+    assert 0.55 < cover(got)[0] < 0.85 and cover(got)[1] > 0.88
+    assert head.meta()["bound_error"] == "session"
+
+
+def test_a_known_floor_is_used_from_the_first_frame_and_bad_ones_are_named(fields):
+    field = fields[REST]
+    y, _ = _error_frames(field, 3, seed=12)
+    inv = Inversion({REST: field}, NOISE, max_fingers=1)
+    head = InversionHead(inv, LAYOUT, bound_error=(2e-4, 0.01))
+    out = head(y[0], field.untouched, REST)
+    assert out.model_error == {"a_pf": 2e-4, "r": 0.01, "frames": None}
+    assert out.fingers[0].force_se_n == inv.with_bound_error((2e-4, 0.01)).fit(
+        y[0], REST).fingers[0].force_se_n
+    assert head.meta()["bound_error"] == [2e-4, 0.01]
+    with pytest.raises(EctskinError, match="bound_error"):
+        InversionHead(inv, LAYOUT, bound_error=(-1.0, 0.0))
+    with pytest.raises(EctskinError, match="allowed values"):
+        InversionHead(inv, LAYOUT, bound_error="always")
+
+
+def test_cli_live_takes_a_floor_and_names_a_bad_one(fields, field_dirs, tmp_path, capsys):
+    src = write_recording(_recording(fields, [("press", REST, slide(6))]), tmp_path / "in.h5")
+    jsonl = tmp_path / "out.jsonl"
+    argv = ["live", "--source", f"replay:{src}", "--speed", "inf", "--policy", "block",
+            "--fields", str(field_dirs), "--reference-frames", "6", "--jsonl", str(jsonl)]
+    assert main(argv + ["--inversion-bound-error", "0.0002,0.01"]) == 0
+    msgs = [json.loads(x)["inversion"] for x in jsonl.read_text().splitlines()]
+    fitted = [m for m in msgs if m is not None]
+    assert fitted and all(m["model_error"] == {"a_pf": 2e-4, "r": 0.01, "frames": None}
+                          for m in fitted)
+    # the default learns from the session: the noise alone before its first estimate
+    assert main(argv[:-1] + [str(tmp_path / "b.jsonl")]) == 0
+    msgs = [json.loads(x)["inversion"] for x in (tmp_path / "b.jsonl").read_text().splitlines()]
+    assert all(m["model_error"] is None for m in msgs if m is not None)
+    assert main(argv[:-1] + [str(tmp_path / "c.jsonl"), "--inversion-bound-error", "1,x"]) == 2
+    assert "--inversion-bound-error must be session, off or A,R" in capsys.readouterr().err

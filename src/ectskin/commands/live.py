@@ -26,7 +26,13 @@ from ectskin.commands._options import add_overwrite
 from ectskin.dashboard import serve
 from ectskin.layout import SensorLayout, default_layout, load_layout
 from ectskin.live.engine import POLICIES, LiveEngine
-from ectskin.live.inversion_head import PERSONS, READOUTS, InversionHead, load_fields
+from ectskin.live.inversion_head import (
+    BOUND_ERROR_FIRST,
+    PERSONS,
+    READOUTS,
+    InversionHead,
+    load_fields,
+)
 from ectskin.live.output import JsonLinesWriter, status_line
 from ectskin.live.recorder import Recorder
 from ectskin.live.reference import reference_line
@@ -140,6 +146,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "(session), a new one at each trial of a replay (trial), or none (off, default). Needs "
         "coarse finger fields of the states: read from --finger-fields, built there first "
         "where missing (minutes)",
+    )
+    p.add_argument(
+        "--inversion-bound-error",
+        default="session",
+        metavar="session|off|A,R",
+        help="--fields: the model error the standard errors of points, forces and heights "
+        "carry: learnt from the session's own fits, no labels (session, default: the noise "
+        f"alone for the first {BOUND_ERROR_FIRST} fitted frames), none (off: the readout "
+        "noise alone, too small on a real skin), or a known floor A pF and share R of the "
+        "signal (the reproduction's inversion.model_error)",
     )
     p.add_argument(
         "--finger-fields",
@@ -288,6 +304,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.fields and (args.inversion_person != "off" or args.finger_fields is not None):
         raise EctskinError("--inversion-person and --finger-fields pool the inversion's person's "
                            "finger: give --fields")
+    args.inversion_bound_error = _bound_error(args.inversion_bound_error)
     if args.finger_fields is not None and args.inversion_person == "off":
         raise EctskinError("--finger-fields is where --inversion-person reads the finger fields: "
                            "give --inversion-person session or trial")
@@ -389,7 +406,22 @@ def _inversion(args: argparse.Namespace, fields, layout: SensorLayout) -> Invers
         press_check=args.inversion_press_check,
         finger_scale_sd="reproduction" if sd is None else sd,
         finger_tables=tables, person=args.inversion_person,
+        bound_error=args.inversion_bound_error,
     )
+
+
+def _bound_error(text: str) -> str | tuple[float, float]:
+    """``--inversion-bound-error``: "session", "off" or "A,R" (two numbers >= 0)."""
+    if text in ("session", "off"):
+        return text
+    try:
+        a, r = (float(x) for x in text.split(","))
+    except ValueError:
+        a = r = float("nan")
+    if not (0 <= a < float("inf") and 0 <= r < float("inf")):
+        raise EctskinError(f"--inversion-bound-error must be session, off or A,R (a floor A pF "
+                           f"and a share R of the signal, numbers >= 0), got {text!r}")
+    return a, r
 
 
 def _run(args: argparse.Namespace, models: dict, ref_markers, fields=None) -> int:

@@ -14,7 +14,7 @@
 from ectskin.inversion.fit import FingerEstimate, Inversion, InversionResult
 from ectskin.inversion.frames import fit_frames, invert_recording, results_to_arrays
 from ectskin.inversion.model import FieldLike, StateModel, push_basis
-from ectskin.inversion.model_error import ModelError, estimate_model_error
+from ectskin.inversion.model_error import ModelError, RunningModelError, estimate_model_error
 from ectskin.inversion.person import FingerPool, pool_fingers
 from ectskin.inversion.seed import FingerGuess
 
@@ -27,6 +27,7 @@ __all__ = [
     "InversionResult",
     "ModelError",
     "StateModel",
+    "RunningModelError",
     "estimate_model_error",
     "fit_frames",
     "invert_recording",

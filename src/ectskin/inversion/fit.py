@@ -43,8 +43,9 @@ superposition of two fingers, the twin's per-channel drift. Zero by default (the
 alone; then the standard errors are the bound).
 
 ``bound_error`` is such a floor for the fingers' points', forces' and heights' standard errors
-only, the fits unchanged: (a, r) estimated from the fits' residuals, no labels
-(:mod:`ectskin.inversion.model_error`).
+only, the fits and their weights unchanged (the standard errors are the fit's scatter as it
+was weighted: :func:`~ectskin.inversion.result.sandwich`): (a, r) estimated from the fits'
+residuals, no labels (:mod:`ectskin.inversion.model_error`).
 
 **The untouched readout** (``untouched``): c_u may be the skin's own measured untouched
 readout of each state instead of the field's (the fingers' signals stay the field's).

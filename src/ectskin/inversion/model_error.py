@@ -28,6 +28,7 @@ checked by their coverage on labelled frames (the reproduction's ``force.force_c
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -117,12 +118,12 @@ def ml_model_error(residual: Any, sigma: Any, signal: Any, leverage: Any = None)
     )
 
 
-def residuals(inversion: Any, readouts: Any, states: Any, results: Sequence[Any]
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def residuals(inversion: Any, readouts: Any, states: Any, results: Sequence[Any],
+              kind: str = "absolute") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(residual, σ, d, h) (frames, channels) of ``results``, the fits of ``readouts``
     (frames, channels) pF at ``states`` (one state, or one per frame) by ``inversion``, one
-    frame each (window 1, absolute readouts): y − fitted, the readout noise at y, y − c_u (pF)
-    and the fit's leverage."""
+    frame each (window 1; ``kind``: "absolute" or "difference" readouts, as the fits had them):
+    y − fitted, the readout noise at y, y − c_u (pF) and the fit's leverage."""
     y = np.asarray(readouts, dtype=np.float64)
     if y.ndim != 2:
         raise EctskinError(f"residuals: readouts must be (frames, channels), got shape {y.shape}")
@@ -142,7 +143,7 @@ def residuals(inversion: Any, readouts: Any, states: Any, results: Sequence[Any]
             raise EctskinError(f"residuals: result {i} holds no fitted readout and leverage of "
                                f"{y.shape[1]} channels (got shapes {fitted.shape}, {hat.shape})")
         m = inversion.model(tuple(st[i]))
-        obs, _ = inversion.observed(y[i], tuple(st[i]))
+        obs, _ = inversion.observed(y[i], tuple(st[i]), kind)
         e[i] = obs - fitted
         s[i] = m.sigma(obs, 1)
         d[i] = obs - m.untouched
@@ -163,4 +164,57 @@ def estimate_model_error(inversion: Any, readouts: Any, states: Any,
     return ml_model_error(*residuals(inversion, readouts, states, results))
 
 
-__all__ = ["ModelError", "estimate_model_error", "ml_model_error", "residuals"]
+class RunningModelError:
+    """The model error of a stream's fits, learnt as the frames come (no labels): the residuals
+    (:func:`residuals`) of the last ``window`` frames given to :meth:`add`, estimated
+    (:func:`ml_model_error`) once ``first`` frames have come and again after every ``every``
+    more; :attr:`estimate` is the latest (None before the first).
+
+    A live session's standard errors carry it (``ectskin live --inversion-bound-error
+    session``): its own skin, person and hand, whatever the field's mesh leaves. The window
+    follows a skin that drifts or a hand that changes; each estimate is a few ms."""
+
+    def __init__(self, first: int = 100, every: int = 100, window: int = 1000) -> None:
+        for name, v in (("first", first), ("every", every), ("window", window)):
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise EctskinError(f"RunningModelError: {name} must be an integer >= 1 (frames), "
+                                   f"got {v!r}")
+        if window < first:
+            raise EctskinError(f"RunningModelError: window ({window}) must hold the first "
+                               f"estimate's {first} frames")
+        self.first, self.every, self.window = first, every, window
+        self._rows: deque[np.ndarray] = deque(maxlen=window)
+        self._since = 0
+        self.n_added = 0
+        self.estimate: ModelError | None = None
+
+    def add(self, residual: Any, sigma: Any, signal: Any, leverage: Any) -> bool:
+        """One frame's (residual, σ, d, h) (channels,) (:func:`residuals`' rows; NaN: a channel
+        left out); whether it made a new :attr:`estimate`."""
+        parts = [np.asarray(x, dtype=np.float64) for x in (residual, sigma, signal, leverage)]
+        want = (self._rows[0].shape[1],) if self._rows else parts[0].shape
+        if len(want) != 1 or any(x.shape != want for x in parts):
+            raise EctskinError(f"RunningModelError.add: residual, sigma, signal and leverage must "
+                               f"each be one frame's channels {want}, got shapes "
+                               f"{[x.shape for x in parts]}")
+        self._rows.append(np.stack(parts))
+        self.n_added += 1
+        self._since += 1
+        if self._since < (self.every if self.estimate is not None else self.first):
+            return False
+        stack = np.stack(self._rows, axis=1)  # (4, frames, channels)
+        if not np.isfinite(stack).all(axis=0).any():
+            return False  # every channel masked so far: the next frames may bring some
+        self.estimate = ml_model_error(*stack)
+        self._since = 0
+        return True
+
+    def reset(self) -> None:
+        """Forget every frame and the estimate (another skin, another session)."""
+        self._rows.clear()
+        self._since = self.n_added = 0
+        self.estimate = None
+
+
+__all__ = ["ModelError", "RunningModelError", "estimate_model_error", "ml_model_error",
+           "residuals"]

@@ -104,10 +104,11 @@ def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
     """The :class:`InversionResult` of the chosen fit: its fingers with their standard errors,
     the Cramér–Rao bound at the solution (:func:`ectskin.twin.bound.crb` of the model's Jacobian
     there, the nuisances estimated, the priors' information added); ``sigma(m, mu, w)`` is the
-    noise at the fitted readout mu. ``point_sigma``: the noise the standard errors of each
-    finger's point, force and height are the bound of instead (the readout's and the field's
-    model error, :mod:`ectskin.inversion.model_error`); the scales' and finger nuisances'
-    standard errors stay ``sigma``'s (what a person's pool reads)."""
+    noise at the fitted readout mu. ``point_sigma``: the spread of the readouts (the
+    readout's noise and the field's model error, :mod:`ectskin.inversion.model_error`) that the
+    standard errors of each finger's point, force and height carry instead, the fit weighted by
+    ``sigma`` as it was (:func:`sandwich`); the scales' and finger nuisances' standard errors
+    stay ``sigma``'s (what a person's pool reads)."""
     k = len(fit.fingers)
     ests: list[FingerEstimate] = []
     mu = m.untouched + m.N @ fit.beta
@@ -151,10 +152,10 @@ def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
         noise = sigma(m, mu, w)
         hat = leverage(J, noise, prior)
         b = crb(J, noise, prior_var=prior, nuisance_cols=nuisance_cols)
-        point = b if point_sigma is None else crb(J, point_sigma(m, mu, w), prior_var=prior,
-                                                  nuisance_cols=nuisance_cols)
+        point = b.std if point_sigma is None else sandwich(J, noise, point_sigma(m, mu, w),
+                                                          prior, sorted(interest), b.resolved)
         for j, (fi, mi, x) in enumerate(fit.fingers):
-            se = point.std[3 * j: 3 * j + 3]
+            se = point[3 * j: 3 * j + 3]
             contact = MODES[mi] == "contact"
             h = 0.0 if contact else float(np.exp(x[2]))
             ests.append(FingerEstimate(
@@ -174,6 +175,26 @@ def build_result(m: StateModel, fit: Fit, w: int, ll: float, bics: list[float],
         nuisance={n: float(v) for n, v in zip(m.nuisance_names, fit.beta)},
         coupling=fit.rho, fitted=mu, leverage=hat,
     )
+
+
+def sandwich(J: np.ndarray, sigma: np.ndarray, spread: np.ndarray, prior_var: dict[int, float],
+             cols: list[int], resolved: np.ndarray) -> np.ndarray:
+    """The standard errors of the parameters ``cols`` of a fit weighted by ``sigma`` (W = σ⁻²)
+    whose readouts scatter by ``spread`` (V = spread², the noise and the model error) instead:
+    √diag(A⁻¹ B A⁻¹), A = Jᵀ W J + P, B = Jᵀ W V W J + P (P the priors' precisions, the priors
+    as pseudo-observations of their own variance), the fit's covariance as it was weighted
+    (the sandwich; the bound of ``spread`` alone, Jᵀ V⁻¹ J, is its least, reached only where
+    the weights are V's). Inf where the plain bound has the column ``resolved`` False."""
+    A = fisher_information(J, sigma)
+    Jv = J * (spread / sigma**2)[:, None]
+    B = Jv.T @ Jv
+    for c, var in prior_var.items():
+        if var > 0 and np.isfinite(var):
+            A[c, c] += 1.0 / var
+            B[c, c] += 1.0 / var
+    Ai = np.linalg.pinv(A, rcond=1e-13, hermitian=True)[cols]
+    std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Ai, B, Ai), 0.0))
+    return np.where(resolved, std, np.inf)
 
 
 def leverage(J: np.ndarray, sigma: np.ndarray, prior_var: dict[int, float]) -> np.ndarray:

@@ -54,6 +54,17 @@ force or height, and their standard errors; the count's BIC) into the output.
   trials are each one person's, as the twin's are); ``"off"``: each frame with the
   population's prior. The pool rides in the message (:class:`~ectskin.live.output.
   InversionFrame` ``finger``).
+* **The standard errors' model error** (``bound_error``): the field does not describe a skin
+  to its noise (its mesh, the person's fingertip, the hand), so the readout noise alone makes
+  standard errors that are too small (:mod:`ectskin.inversion.model_error`). ``"session"``
+  learns the floor (a, r) from the stream's own fits, no labels: the residuals of the last
+  :data:`BOUND_ERROR_WINDOW` fitted frames, estimated once :data:`BOUND_ERROR_FIRST` have
+  come and again every :data:`BOUND_ERROR_EVERY` (:class:`ectskin.inversion.
+  RunningModelError`); from then on each frame's points', forces' and heights' standard
+  errors carry it (:meth:`Inversion.with_bound_error <ectskin.inversion.Inversion.
+  with_bound_error>`; the fits are unchanged). A pair (a pF, r) gives a known floor (the
+  reproduction's ``inversion.model_error`` of the same skin); ``"off"``: the noise alone. The
+  floor in use rides in the message (``model_error``).
 
 :func:`load_fields` reads the fields: a field folder or ``field.npz`` each, or a folder of
 cached fields (the field cache of :mod:`ectskin.twin.field_build`: one folder per field).
@@ -84,6 +95,11 @@ if TYPE_CHECKING:
 READOUTS = ("reference", "absolute", "difference")
 #: whose finger the frames are (module docstring): one person per stream, per trial, or none pooled
 PERSONS = ("off", "session", "trial")
+#: the standard errors' model error (module docstring): none, learnt from the session's fits
+BOUND_ERRORS = ("off", "session")
+#: ``bound_error="session"``: the fitted frames before the first estimate, between estimates,
+#: and the most the estimate reads (:class:`ectskin.inversion.RunningModelError`)
+BOUND_ERROR_FIRST, BOUND_ERROR_EVERY, BOUND_ERROR_WINDOW = 100, 100, 1000
 #: ``finger_scale_sd``'s default in :meth:`InversionHead.from_fields`: the reproduction's,
 #: :data:`ectskin.inversion.fit.FINGER_SCALE_SD` (imported there: see below)
 REPRODUCTION = "reproduction"
@@ -153,6 +169,8 @@ class InversionHead:
         "reference"); None: none (then "reference" is refused).
     person : "off", "session" or "trial": the person's finger pooled over the frames (module
         docstring); needs ``inversion`` built with finger tables.
+    bound_error : "off", "session" or (a pF, r): the standard errors' model error (module
+        docstring).
     """
 
     key, what, reference, window = "inversion", "physical inversion", "touch", 1
@@ -169,8 +187,10 @@ class InversionHead:
         fields: Mapping[tuple[float, ...], Any] | None = None,
         rebuild: Callable[[tuple[float, ...], np.ndarray], Inversion] | None = None,
         person: str = "off",
+        bound_error: str | tuple[float, float] = "off",
     ) -> None:
-        from ectskin.inversion import FingerPool, Inversion
+        from ectskin.inversion import FingerPool, Inversion, RunningModelError
+        from ectskin.inversion.noise import check_floor
 
         what = self.what
         if not isinstance(inversion, Inversion):
@@ -201,6 +221,19 @@ class InversionHead:
                 "none: build it with finger tables (InversionHead.from_fields(finger_tables=...), "
                 "ectskin live --inversion-person)"
             )
+        self.learn = None
+        self.floor: tuple[float, float] | None = None
+        if isinstance(bound_error, str):
+            if bound_error not in BOUND_ERRORS:
+                raise EctskinError(f"Invalid value for 'bound_error': allowed values are "
+                                   f"{list(BOUND_ERRORS)} or (a pF, r); got {bound_error!r}")
+            if bound_error == "session":
+                self.learn = RunningModelError(BOUND_ERROR_FIRST, BOUND_ERROR_EVERY,
+                                               BOUND_ERROR_WINDOW)
+        else:
+            self.floor = check_floor("bound_error", bound_error)
+        self.bound_error = bound_error
+        self._widened: dict[int, tuple[Inversion, Inversion]] = {}
         self.inversion = inversion
         self.layout = layout
         self.person = person
@@ -374,14 +407,21 @@ class InversionHead:
         y = np.where(np.isfinite(y), y, np.nan)  # a channel without a usable value is masked
         warm = self._last if self.warm and self._last_state == state else None
         prior = None if self.pool is None else self.pool.prior()
+        learnt = None if self.learn is None else self.learn.estimate  # before this frame
+        floor = self.floor if learnt is None else learnt.floor
+        fitting = inversion if floor is None else self._with_floor(inversion, floor)
         t0 = time.perf_counter()
         try:
-            r = inversion.fit(y, state, kind=kind, warm=warm, finger=prior)
+            r = fitting.fit(y, state, kind=kind, warm=warm, finger=prior)
         finally:
             self._last = None  # a failed fit starts the next one cold
         ms = (time.perf_counter() - t0) * 1e3
         if r.n_fingers:
             self._last, self._last_state = r, state
+        if self.learn is not None:
+            from ectskin.inversion.model_error import residuals
+
+            self.learn.add(*(x[0] for x in residuals(inversion, y[None], state, [r], kind)))
         finger = None
         if self.pool is not None:
             self.pool.add(r, prior)
@@ -391,7 +431,19 @@ class InversionHead:
             state=state, n_fingers=r.n_fingers, fingers=r.fingers,
             bic_by_count=r.bic_by_count, converged=r.converged, warm=warm is not None,
             fit_ms=ms, finger=finger,
+            model_error=None if floor is None else {
+                "a_pf": floor[0], "r": floor[1],
+                "frames": None if learnt is None else learnt.n_frames},
         )
+
+    def _with_floor(self, inversion: Inversion, floor: tuple[float, float]) -> Inversion:
+        """``inversion`` with the standard errors' floor ``floor`` (kept per inversion while
+        the floor stays)."""
+        got = self._widened.get(id(inversion))
+        if got is None or got[0] is not inversion or got[1].bound_error != floor:
+            got = (inversion, inversion.with_bound_error(floor))
+            self._widened[id(inversion)] = got
+        return got[1]
 
     def new_person(self) -> None:
         """Another person's finger from the next frame on: the pool starts again (module
@@ -464,6 +516,8 @@ class InversionHead:
             "warm": self.warm,
             "person": self.person,
             "finger_nuisances": list(inv.finger_prior_sd),
+            "bound_error": (self.bound_error if isinstance(self.bound_error, str)
+                            else list(self.floor or ())),
         }
 
 

@@ -91,7 +91,9 @@ class InversionFrame:
     ``converged``; whether it started ``warm`` from the previous frame's answer; ``fit_ms``
     the fit's wall time; ``finger``: the person's finger pooled so far, this frame included
     (``{"modulus_ln": [centre, sd], "radius_ln": [centre, sd], "frames": n}``, the nuisances
-    fitted; ln of the ratio to the field's finger), None where the head pools none."""
+    fitted; ln of the ratio to the field's finger), None where the head pools none;
+    ``model_error``: the floor the standard errors carry (``{"a_pf", "r", "frames"}``, frames:
+    how many fitted frames estimated it, None for a given floor), None: the noise alone."""
 
     state: tuple[float, ...]
     n_fingers: int
@@ -101,11 +103,12 @@ class InversionFrame:
     warm: bool
     fit_ms: float
     finger: dict[str, Any] | None = None
+    model_error: dict[str, Any] | None = None
 
     def to_json_dict(self) -> dict[str, Any]:
         """``{"state", "n_fingers", "fingers": [{"face", "contact", "u_mm", "v_mm", "force_n",
         "height_mm", "u_se_mm", "v_se_mm", "force_se_n", "height_se_mm"}], "bic_by_count",
-        "converged", "warm", "fit_ms", "finger"}`` (non-finite → None)."""
+        "converged", "warm", "fit_ms", "finger", "model_error"}`` (non-finite → None)."""
         return {
             "state": [float(v) for v in self.state],
             "n_fingers": int(self.n_fingers),
@@ -121,6 +124,9 @@ class InversionFrame:
             "finger": None if self.finger is None else {
                 k: int(v) if k == "frames" else [_number(x) for x in v]
                 for k, v in self.finger.items()},
+            "model_error": None if self.model_error is None else {
+                k: v if v is None or k == "frames" else _number(v)
+                for k, v in self.model_error.items()},
         }
 
 

@@ -7,7 +7,7 @@ cover a fraction of its errors. With ``bound_error="validation"`` (the default o
 :data:`MODEL_ERROR_FRAMES` frames of the validation trials (every frame, spread as the test
 frames), the maximum-likelihood floor (a, r) of their residuals is estimated
 (:func:`ectskin.inversion.estimate_model_error`: readouts only, no labels), and the test frames'
-points', forces' and heights' standard errors are the bound with it
+points', forces' and heights' standard errors carry it
 (:meth:`~ectskin.inversion.Inversion.with_bound_error`; the fits are unchanged). The step's
 ``force_observable`` (force standard error below 0.1 N) is then where force can be known
 through this field, and ``force.force_coverage_*`` says how far the standard errors hold.
