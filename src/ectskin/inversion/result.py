@@ -192,7 +192,10 @@ def sandwich(J: np.ndarray, sigma: np.ndarray, spread: np.ndarray, prior_var: di
         if var > 0 and np.isfinite(var):
             A[c, c] += 1.0 / var
             B[c, c] += 1.0 / var
-    Ai = np.linalg.pinv(A, rcond=1e-13, hermitian=True)[cols]
+    try:  # the rows of A⁻¹ asked for (A is the fit's information: symmetric, positive)
+        Ai = np.linalg.solve(A, np.eye(A.shape[0])[:, cols]).T
+    except np.linalg.LinAlgError:  # singular: the unresolved columns are inf below
+        Ai = np.linalg.pinv(A, rcond=1e-13, hermitian=True)[cols]
     std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Ai, B, Ai), 0.0))
     return np.where(resolved, std, np.inf)
 

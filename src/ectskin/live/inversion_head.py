@@ -418,10 +418,10 @@ class InversionHead:
         ms = (time.perf_counter() - t0) * 1e3
         if r.n_fingers:
             self._last, self._last_state = r, state
-        if self.learn is not None:
-            from ectskin.inversion.model_error import residuals
-
-            self.learn.add(*(x[0] for x in residuals(inversion, y[None], state, [r], kind)))
+        if self.learn is not None:  # this frame's residuals (model_error.residuals' row)
+            m = inversion.model(state)
+            obs, _ = inversion.observed(y, state, kind)
+            self.learn.add(obs - r.fitted, m.sigma(obs, 1), obs - m.untouched, r.leverage)
         finger = None
         if self.pool is not None:
             self.pool.add(r, prior)
