@@ -149,11 +149,13 @@ def test_with_no_press_the_lowest_hovering_finger_takes_slot_0(analytic_field):
     assert pred[0, 0] == 0 and pred[0, 2] == 1  # none presses; one hovers below 15 mm
 
 
-def test_the_press_check_prefers_pressing_within_contact_bias_times_chi2_per_dof(analytic_field):
+def test_the_press_check_prefers_pressing_within_contact_bias_times_chi2_per_dof(analytic_field,
+                                                                               monkeypatch):
     """The rule itself, on the fit of a finger hovering 1.5 mm high (above the field's lowest
     height) with its χ² set by hand to c, with the pressing refit's χ² p = c (1 + 3/dof)
     (dof: channels less the hovering fit's parameters): ``contact_bias`` 3.5 keeps the
-    pressing fit, 2.5 the hovering one."""
+    pressing fit, 2.5 the hovering one. The refit is the one at the hovering point: the start
+    at a pressing node where that one fails (the next test) is left out here."""
 
     y = analytic_field.readout("front", 0.0, 30.0, 0.0, 1.5)
     for bias, pressing in [(3.5, True), (2.5, False)]:
@@ -161,6 +163,7 @@ def test_the_press_check_prefers_pressing_within_contact_bias_times_chi2_per_dof
         m = inv.model(STATE)
         sigma = inv._sigma(m, y, 1)
         delta = y - m.untouched
+        monkeypatch.setattr(m.table, "starts", lambda *a, **k: [])
         hover = inv._fit_fingers(m, delta, sigma, [(0, 1, np.array([0.0, 30.0, np.log(2.0)]))])
         assert hover.fingers[0][2][2] > np.log(0.5) + 0.01  # not at the lowest height
         alt = inv._fit_fingers(m, delta, sigma, [(0, 0, np.array([*hover.fingers[0][2][:2], 0.3]))])
@@ -169,3 +172,31 @@ def test_the_press_check_prefers_pressing_within_contact_bias_times_chi2_per_dof
         assert c / dof > 1
         got = inv._pressing(m, delta, sigma, replace(hover, chi2=c))
         assert (got.fingers[0][1] == 0) is pressing
+
+
+@pytest.mark.parametrize("du, dv", [(-20, -30), (-20, 30), (-12, 30), (12, -30), (12, 30),
+                                    (20, -30)])
+def test_where_pressing_at_the_hovering_point_fails_the_check_starts_at_the_pressing_node(
+        analytic_field, du, dv):
+    """The rule's other half, on a hovering finger far from a press (the search's hover on a
+    two-finger frame can be, the other finger's signal taking up the rest), its χ² set by hand
+    to 1 000: refitted pressing from its own point, LM stops at a local minimum of χ² 4e4-1e5
+    at the window's edge, which fails the check (the hovering finger stayed so before); from
+    the pressing node nearest the frame, the press comes back to the optimiser's tolerance and
+    passes it."""
+    from ectskin.inversion.model import MODES
+    from ectskin.inversion.result import Fit
+
+    inv = Inversion({STATE: analytic_field}, max_fingers=1, press_check=True)
+    m = inv.model(STATE)
+    y = analytic_field.readout("front", 4.0, 40.0, 1.2, 0.0)
+    delta, sigma = y - m.untouched, inv._sigma(m, y, 1)
+    x = np.array([np.clip(4.0 + du, -17, 17), np.clip(40.0 + dv, 3, 57), np.log(5.0)])
+    hover = Fit([(0, MODES.index("hover"), x)], np.zeros(m.N.shape[1]), 1e3, True)
+    near = inv._fit_fingers(m, delta, sigma, [(0, MODES.index("contact"),
+                                               np.array([*x[:2], 0.3]))])
+    assert near.chi2 > 2e4  # the case stays a case: pressing at the hovering point fails
+    got = inv._pressing(m, delta, sigma, hover)
+    (_, mode, xx), = got.fingers
+    assert MODES[mode] == "contact"
+    np.testing.assert_allclose(xx, [4.0, 40.0, 1.2], atol=1e-3)

@@ -6,13 +6,11 @@ For a frame y (n_pairs,) pF of a known state (the model of :mod:`ectskin.inversi
 2. **One finger**: a coarse search over the node table (the noise-weighted distance of the
    frame, projected off the nuisance columns, to every node's signal, one matrix-vector
    product), then Levenberg–Marquardt (MINPACK's ``lmder``, the analytic Jacobian
-   ∂Δ/∂(u, v, s) of the field and the nuisance columns) over (u, v, s, β)
-   from the nearest node of each face and mode, best first; the face and the mode (pressing or
-   hovering) are those of the start. The field's ranges bound (u, v, s) (``_fit_fingers``).
+   ∂Δ/∂(u, v, s) of the field and the nuisance columns) over (u, v, s, β) from the nearest
+   node of each face and mode, best first; the face and the mode are those of the start. The field's ranges bound (u, v, s) (``_fit_fingers``).
    ``lmder`` is called through ``scipy.optimize.leastsq``: the algorithm and options of
    ``least_squares(method="lm")``, the same iterates, without that wrapper's cost per call
-   (about 0.2 ms per fit); its warning when a fit runs out of evaluations is silenced (the
-   result's ``converged`` says so).
+   (0.2 ms a fit); its warning when a fit runs out of evaluations is silenced (``converged``).
 3. **Two fingers**: a coarse search over pairs of nodes (:meth:`NodeTable.pairs`), the
    one-finger solution with the node nearest what it leaves (y − c_u − Δ₁), and with
    ``scaled_pairs`` the best pair with each node's signal scaled by its best factor (two
@@ -51,9 +49,10 @@ residuals, no labels (:mod:`ectskin.inversion.model_error`).
 readout of each state instead of the field's (the fingers' signals stay the field's).
 
 **Pressing or hovering** (``press_check``): after the count is chosen, each hovering finger of
-the chosen fit is refitted pressing and kept so when that fits within ``contact_bias`` times
-the frame's χ² per degree of freedom of the hovering fit, or when it hovers at the field's
-lowest height (docs/inversion.md).
+the chosen fit is refitted pressing at its point and kept so when that fits within
+``contact_bias`` times the frame's χ² per degree of freedom of the hovering fit, or when it
+hovers at the field's lowest height; where it does not, from the pressing node nearest what
+the other fingers leave, kept where that fits better than hovering (docs/inversion.md).
 
 **The finger's size** (``finger_scale_sd``): a bigger or softer fingertip than the field's
 couples more at every channel alike (∂C/∂R ≈ κ ΔC, :mod:`ectskin.twin.bound_field`), so each
@@ -541,8 +540,7 @@ class Inversion:
         return out[: self.starts + 1]
 
     def _pressing(self, m: StateModel, delta: np.ndarray, sigma: np.ndarray, fit: Fit) -> Fit:
-        """``fit`` with each hovering finger refitted pressing, in turn, where that fits about
-        as well (``press_check``)."""
+        """``fit`` with each hovering finger refitted pressing, in turn (``press_check``)."""
         lo_f = float(m.field.spec.force_range_n[0])
         for j, (fi, mi, x) in enumerate(fit.fingers):
             if MODES[mi] != "hover":
@@ -551,9 +549,21 @@ class Inversion:
             start[j] = (fi, MODES.index("contact"), np.array([x[0], x[1], lo_f]))
             alt = self._fit_fingers(m, delta, sigma, start, self.coupled)
             dof = max(1, m.n_pairs - fit.n_params)
+            tol = self.contact_bias * max(1.0, fit.chi2 / dof)
             # at the field's lowest height the fit would go lower still: the finger touches
             pinned = x[2] <= m.bounds[(m.faces[fi], "hover")][0][2] + PINNED_LN_H
-            if pinned or alt.chi2 <= fit.chi2 + self.contact_bias * max(1.0, fit.chi2 / dof):
+            if not pinned and alt.chi2 > fit.chi2 + tol:
+                # pressing there does not fit: from the pressing node nearest what the others
+                # leave, kept where it fits better than hovering (it moves the finger: no bias)
+                t, press = m.table, MODES.index("contact")
+                rest = delta - sum((m.signal(m.faces[a], MODES[b], y)[0] for i, (a, b, y)
+                                    in enumerate(fit.fingers) if i != j), np.zeros_like(delta))
+                for i in [n for n in t.starts(rest, len(t.groups), m.scale_w)
+                          if t.mode[n] == press][:1]:
+                    alt = self._fit_fingers(m, delta, sigma, start[:j] + [
+                        (int(t.face[i]), press, t.x[i].copy())] + start[j + 1:], self.coupled)
+                    tol = 0.0
+            if pinned or alt.chi2 <= fit.chi2 + tol:
                 fit = alt
         return fit
 
