@@ -7,15 +7,15 @@ For a frame y (n_pairs,) pF of a known state (the model of :mod:`ectskin.inversi
    frame, projected off the nuisance columns, to every node's signal, one matrix-vector
    product), then Levenberg–Marquardt (MINPACK's ``lmder``, the analytic Jacobian
    ∂Δ/∂(u, v, s) of the field and the nuisance columns) over (u, v, s, β) from the nearest
-   node of each face and mode, best first; the face and the mode are those of the start. The field's ranges bound (u, v, s) (``_fit_fingers``).
+   node of each face and mode, best first; the face and the mode are those of the start, the
+   field's ranges bound (u, v, s) (``_fit_fingers``).
    ``lmder`` is called through ``scipy.optimize.leastsq``: the algorithm and options of
    ``least_squares(method="lm")``, the same iterates, without that wrapper's cost per call
    (0.2 ms a fit); its warning when a fit runs out of evaluations is silenced (``converged``).
 3. **Two fingers**: a coarse search over pairs of nodes (:meth:`NodeTable.pairs`), the
    one-finger solution with the node nearest what it leaves (y − c_u − Δ₁), and with
-   ``scaled_pairs`` the best pair with each node's signal scaled by its best factor (two
-   fingers screen each other); from each, one fit of both fingers and β together (and their
-   coupling ρ with ``two_fingers="coupled"``).
+   ``scaled_pairs`` the best pair with each node's signal scaled by its best factor (fingers
+   screen each other); from each, one fit of both and β (and ρ, ``two_fingers="coupled"``).
 
 Counts and starts are tried in turn while the fits so far do not explain the frame within the
 noise (the gate, ``gate_p``): a one-finger frame costs one fit, a two-finger frame two.
