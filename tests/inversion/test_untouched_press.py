@@ -174,29 +174,31 @@ def test_the_press_check_prefers_pressing_within_contact_bias_times_chi2_per_dof
         assert (got.fingers[0][1] == 0) is pressing
 
 
-@pytest.mark.parametrize("du, dv", [(-20, -30), (-20, 30), (-12, 30), (12, -30), (12, 30),
-                                    (20, -30)])
+@pytest.mark.parametrize("u, v", [(-17, 3), (-17, 50), (-17, 57), (0, 3), (0, 57), (10, 3),
+                                  (17, 3), (17, 50), (17, 57)])
 def test_where_pressing_at_the_hovering_point_fails_the_check_starts_at_the_pressing_node(
-        analytic_field, du, dv):
-    """The rule's other half, on a hovering finger far from a press (the search's hover on a
-    two-finger frame can be, the other finger's signal taking up the rest), its χ² set by hand
-    to 1 000: refitted pressing from its own point, LM stops at a local minimum of χ² 4e4-1e5
-    at the window's edge, which fails the check (the hovering finger stayed so before); from
-    the pressing node nearest the frame, the press comes back to the optimiser's tolerance and
-    passes it."""
+        analytic_field, u, v):
+    """The rule's other half, on a two-finger frame whose fit has the second finger hovering far
+    from its press (the search's hover can lie there, the first finger's signal taking up the
+    rest), its χ² set by hand to 1 000: refitted pressing from its own point, LM stops at a
+    local minimum of χ² above 2e4, which fails the check (the finger stayed hovering before);
+    from the pressing node nearest what the first finger leaves, both presses come back to the
+    optimiser's tolerance, and that fit is kept."""
     from ectskin.inversion.model import MODES
     from ectskin.inversion.result import Fit
 
-    inv = Inversion({STATE: analytic_field}, max_fingers=1, press_check=True)
+    inv = Inversion({STATE: analytic_field}, max_fingers=2, press_check=True)
     m = inv.model(STATE)
-    y = analytic_field.readout("front", 4.0, 40.0, 1.2, 0.0)
+    a, b = (-8.0, 12.0, 1.0), (4.0, 40.0, 1.2)
+    y = (analytic_field.readout("front", *a, 0.0) + analytic_field.readout("front", *b, 0.0)
+         - analytic_field.untouched)
     delta, sigma = y - m.untouched, inv._sigma(m, y, 1)
-    x = np.array([np.clip(4.0 + du, -17, 17), np.clip(40.0 + dv, 3, 57), np.log(5.0)])
-    hover = Fit([(0, MODES.index("hover"), x)], np.zeros(m.N.shape[1]), 1e3, True)
-    near = inv._fit_fingers(m, delta, sigma, [(0, MODES.index("contact"),
-                                               np.array([*x[:2], 0.3]))])
+    press, hover = MODES.index("contact"), MODES.index("hover")
+    x = np.array([u, v, np.log(5.0)])
+    fit = Fit([(0, press, np.array(a)), (0, hover, x)], np.zeros(m.N.shape[1]), 1e3, True)
+    near = inv._fit_fingers(m, delta, sigma, [(0, press, np.array(a)),
+                                              (0, press, np.array([*x[:2], 0.3]))])
     assert near.chi2 > 2e4  # the case stays a case: pressing at the hovering point fails
-    got = inv._pressing(m, delta, sigma, hover)
-    (_, mode, xx), = got.fingers
-    assert MODES[mode] == "contact"
-    np.testing.assert_allclose(xx, [4.0, 40.0, 1.2], atol=1e-3)
+    got = inv._pressing(m, delta, sigma, fit)
+    assert [MODES[mode] for _, mode, _ in got.fingers] == ["contact", "contact"]
+    np.testing.assert_allclose([xx for *_, xx in got.fingers], [a, b], atol=1e-3)

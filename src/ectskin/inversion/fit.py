@@ -51,8 +51,8 @@ readout of each state instead of the field's (the fingers' signals stay the fiel
 **Pressing or hovering** (``press_check``): after the count is chosen, each hovering finger of
 the chosen fit is refitted pressing at its point and kept so when that fits within
 ``contact_bias`` times the frame's χ² per degree of freedom of the hovering fit, or when it
-hovers at the field's lowest height; where it does not, from the pressing node nearest what
-the other fingers leave, kept where that fits better than hovering (docs/inversion.md).
+hovers at the field's lowest height; where not (two fingers), from the pressing node nearest
+what the other leaves, kept where that fits better than hovering (docs/inversion.md).
 
 **The finger's size** (``finger_scale_sd``): a bigger or softer fingertip than the field's
 couples more at every channel alike (∂C/∂R ≈ κ ΔC, :mod:`ectskin.twin.bound_field`), so each
@@ -552,9 +552,9 @@ class Inversion:
             tol = self.contact_bias * max(1.0, fit.chi2 / dof)
             # at the field's lowest height the fit would go lower still: the finger touches
             pinned = x[2] <= m.bounds[(m.faces[fi], "hover")][0][2] + PINNED_LN_H
-            if not pinned and alt.chi2 > fit.chi2 + tol:
-                # pressing there does not fit: from the pressing node nearest what the others
-                # leave, kept where it fits better than hovering (it moves the finger: no bias)
+            if not pinned and len(fit.fingers) > 1 and alt.chi2 > fit.chi2 + tol:
+                # pressing there does not fit: from the pressing node nearest what the other
+                # leaves, kept where it fits better than hovering (it moves the finger: no bias)
                 t, press = m.table, MODES.index("contact")
                 rest = delta - sum((m.signal(m.faces[a], MODES[b], y)[0] for i, (a, b, y)
                                     in enumerate(fit.fingers) if i != j), np.zeros_like(delta))
