@@ -222,3 +222,5 @@ def test_the_sandwich_is_the_weighted_fits_own_scatter():
                                crb(J, sigma, prior_var=prior, nuisance_cols=[3, 4]).std,
                                rtol=1e-9)
     assert np.isinf(sandwich(J, sigma, spread, prior, cols, np.array([True, False, True]))[1])
+    with pytest.raises(EctskinError, match="prior variances must be > 0"):
+        sandwich(J, sigma, spread, {4: 0.0}, cols, ok)

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ectskin._check import EctskinError
 from ectskin.inversion.finger_nuisance import finger_column
 from ectskin.inversion.model import MODES, StateModel
 from ectskin.twin.bound import crb, fisher_information
@@ -184,7 +185,10 @@ def sandwich(J: np.ndarray, sigma: np.ndarray, spread: np.ndarray, prior_var: di
     √diag(A⁻¹ B A⁻¹), A = Jᵀ W J + P, B = Jᵀ W V W J + P (P the priors' precisions, the priors
     as pseudo-observations of their own variance), the fit's covariance as it was weighted
     (the sandwich; the bound of ``spread`` alone, Jᵀ V⁻¹ J, is its least, reached only where
-    the weights are V's). Inf where the plain bound has the column ``resolved`` False."""
+    the weights are V's). Inf where the plain bound has the column ``resolved`` False.
+    ``prior_var``: {column: variance > 0}, inf for none (a known column is left out of ``J``)."""
+    if any(not var > 0 for var in prior_var.values()):
+        raise EctskinError(f"sandwich: prior variances must be > 0, got {prior_var}")
     A = fisher_information(J, sigma)
     Jv = J * (spread / sigma**2)[:, None]
     B = Jv.T @ Jv
