@@ -189,13 +189,9 @@ def sandwich(J: np.ndarray, sigma: np.ndarray, spread: np.ndarray, prior_var: di
     ``prior_var``: {column: variance > 0}, inf for none (a known column is left out of ``J``)."""
     if any(not var > 0 for var in prior_var.values()):
         raise EctskinError(f"sandwich: prior variances must be > 0, got {prior_var}")
-    A = fisher_information(J, sigma)
+    A = _information(J, sigma, prior_var)
     Jv = J * (spread / sigma**2)[:, None]
-    B = Jv.T @ Jv
-    for c, var in prior_var.items():
-        if var > 0 and np.isfinite(var):
-            A[c, c] += 1.0 / var
-            B[c, c] += 1.0 / var
+    B = _information(Jv, np.ones(J.shape[0]), prior_var)
     try:  # the rows of A⁻¹ asked for (A is the fit's information: symmetric, positive)
         Ai = np.linalg.solve(A, np.eye(A.shape[0])[:, cols]).T
     except np.linalg.LinAlgError:  # singular: the unresolved columns are inf below
@@ -208,10 +204,17 @@ def leverage(J: np.ndarray, sigma: np.ndarray, prior_var: dict[int, float]) -> n
     """The diagonal of the hat matrix W½ J (Jᵀ W J + P)⁻¹ Jᵀ W½ of a fit with Jacobian ``J``
     (channels, parameters), noise ``sigma`` (W = σ⁻²) and Gaussian priors ``prior_var``
     {column: variance} (P: their precisions): each channel's leverage, in [0, 1]."""
-    A = fisher_information(J, sigma)  # Jᵀ W J, its inputs checked
+    A = _information(J, sigma, prior_var)
     Jw = J / sigma[:, None]
+    X = np.linalg.lstsq(A, Jw.T, rcond=None)[0] if Jw.shape[1] else np.zeros((0, J.shape[0]))
+    return np.clip(np.einsum("ij,ji->i", Jw, X), 0.0, 1.0)
+
+
+def _information(J: np.ndarray, sigma: np.ndarray, prior_var: dict[int, float]) -> np.ndarray:
+    """Jᵀ W J + P (:func:`~ectskin.twin.bound.fisher_information`, its inputs checked) with the
+    precisions P of the finite priors ``prior_var`` {column: variance > 0} on its diagonal."""
+    A = fisher_information(J, sigma)
     for c, var in prior_var.items():
         if var > 0 and np.isfinite(var):
             A[c, c] += 1.0 / var
-    X = np.linalg.lstsq(A, Jw.T, rcond=None)[0] if Jw.shape[1] else np.zeros((0, J.shape[0]))
-    return np.clip(np.einsum("ij,ji->i", Jw, X), 0.0, 1.0)
+    return A

@@ -233,7 +233,6 @@ class InversionHead:
         else:
             self.floor = check_floor("bound_error", bound_error)
         self.bound_error = bound_error
-        self._widened: dict[int, tuple[Inversion, Inversion]] = {}
         self.inversion = inversion
         self.layout = layout
         self.person = person
@@ -409,7 +408,7 @@ class InversionHead:
         prior = None if self.pool is None else self.pool.prior()
         learnt = None if self.learn is None else self.learn.estimate  # before this frame
         floor = self.floor if learnt is None else learnt.floor
-        fitting = inversion if floor is None else self._with_floor(inversion, floor)
+        fitting = inversion if floor is None else inversion.with_bound_error(floor)
         t0 = time.perf_counter()
         try:
             r = fitting.fit(y, state, kind=kind, warm=warm, finger=prior)
@@ -435,15 +434,6 @@ class InversionHead:
                 "a_pf": floor[0], "r": floor[1],
                 "frames": None if learnt is None else learnt.n_frames},
         )
-
-    def _with_floor(self, inversion: Inversion, floor: tuple[float, float]) -> Inversion:
-        """``inversion`` with the standard errors' floor ``floor`` (kept per inversion while
-        the floor stays)."""
-        got = self._widened.get(id(inversion))
-        if got is None or got[0] is not inversion or got[1].bound_error != floor:
-            got = (inversion, inversion.with_bound_error(floor))
-            self._widened[id(inversion)] = got
-        return got[1]
 
     def new_person(self) -> None:
         """Another person's finger from the next frame on: the pool starts again (module
