@@ -5,7 +5,14 @@ depend on) and its *outputs* (files or folders in the output folder). ``OUT_DIR/
 records per step the settings it ran with, whether it finished and how long it took::
 
     {"format": "ectskin.reproduce", "version": 1, "ectskin": "0.1.0",
-     "steps": {"simulate": {"settings": {...}, "done": true, "seconds": 27.3}, ...}}
+     "steps": {"simulate": {"settings": {...}, "code": "4f8cf75a1b2c", "done": true,
+                            "seconds": 27.3}, ...}}
+
+``code`` is the code that ran the step (:func:`code_version`: the commit of the source
+checkout, with a hash of its uncommitted changes). A step is keyed by its settings, not by the
+code, so a step that other code made is still reused, with a warning that names both: a
+change of the code that changes a step's results (a better fit, say) leaves its old results in
+place until ``--overwrite`` or another output folder redoes it.
 
 :meth:`StepRunner.step` then decides:
 
@@ -28,10 +35,12 @@ import json
 import logging
 import multiprocessing
 import shutil
+import subprocess
 import time
 from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -56,6 +65,33 @@ def digest(obj: Any) -> str:
     """A short hash of ``obj``'s JSON text (16 hex digits), e.g. of a data step's settings."""
     text = json.dumps(plain(obj), sort_keys=True)
     return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
+
+
+def _git(where: Path, *args: str) -> str:
+    out = subprocess.run(["git", "-C", str(where), *args], capture_output=True, text=True,
+                         timeout=30, check=True)
+    return out.stdout
+
+
+#: ectskin's package folder, whose code :func:`code_version` names
+PACKAGE_DIR = Path(__file__).resolve().parents[1]
+
+
+@lru_cache(maxsize=4)
+def code_version(where: Path = PACKAGE_DIR) -> str:
+    """The code in ``where`` (ectskin's package folder): its git commit (12 hex digits) when
+    it lies in a git checkout that tracks it, followed by "+" and a short hash of the
+    uncommitted changes under it where there are any; otherwise "ectskin VERSION" (an
+    installed package)."""
+    try:
+        _git(where, "ls-files", "--error-unmatch", "__init__.py")  # tracked here, not a copy
+        head = _git(where, "rev-parse", "--short=12", "HEAD").strip()
+        diff = _git(where, "diff", "HEAD", "--", ".")
+    except (OSError, subprocess.SubprocessError):
+        return f"ectskin {__version__}"
+    if not diff:
+        return head
+    return f"{head}+{hashlib.blake2b(diff.encode(), digest_size=4).hexdigest()}"
 
 
 def _flatten(d: Any, prefix: str = "") -> dict[str, Any]:
@@ -109,7 +145,7 @@ class StepState:
         return bool(s.get("done")) and s.get("settings") == plain(settings)
 
     def start(self, step: str, settings: Mapping[str, Any]) -> None:
-        self.steps[step] = {"settings": plain(settings), "done": False}
+        self.steps[step] = {"settings": plain(settings), "code": code_version(), "done": False}
         self.save()
 
     def finish(self, step: str, seconds: float, **info: Any) -> None:
@@ -165,6 +201,13 @@ class StepRunner:
             self.timings[name] = float(self.state.steps[name].get("seconds", 0.0))
             self.reused.append(name)
             log.info("%s: reusing the finished step (%s)", name, self._names(existing))
+            made, now = self.state.steps[name].get("code"), code_version()
+            if made != now:
+                log.warning(
+                    "%s: reused, but made by other code (%s; this is %s): its results are "
+                    "that code's; --overwrite or another output folder redoes it", name,
+                    made or "unrecorded", now,
+                )
             return False
         old = self.state.settings(name)
         resumable = old == settings  # interrupted with the same settings: resume in place
