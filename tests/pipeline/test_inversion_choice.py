@@ -160,7 +160,8 @@ def test_a_model_better_by_less_than_one_paired_se_gives_way_to_the_inversion(wo
     val_near = _rule_holds(near)
     assert val_near["inversion"] == pytest.approx(inv, rel=1e-12)  # the same frames, the same fit
     assert near["best"] == "contactnet"
-    assert val_near["contactnet"] == pytest.approx(inv - 0.5 * se, abs=1e-6)
+    # (the points pass through float32 on the way: its step at ~37 mm is 3.8e-6)
+    assert val_near["contactnet"] == pytest.approx(inv - 0.5 * se, abs=1e-5)
     assert near["candidates"]["inversion"]["val_se_to_best_mm"] == pytest.approx(se, rel=1e-6)
     assert near["candidates"]["inversion"]["within_one_se"] is True
     assert near["selected"] == "inversion"

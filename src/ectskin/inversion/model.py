@@ -9,9 +9,10 @@ For one sensor state (an inflation vector) a frame's n_pairs readouts y (pF) are
   differs from the field's mesh by far more than the noise, and Δ stays the field's);
 * Δ: one finger's signal, the response field's readout less c_u. ``mode`` is "contact" (the
   finger presses, s = its force F in N) or "hover" (force 0, s = ln h of its height h in mm: the
-  field interpolates in ln h, so the fit does too). Two fingers add their signals
-  (superposition; the twin's two fingers are one grounded conductor, so this is an
-  approximation whose error grows as the fingers come close);
+  field interpolates in ln h, so the fit does too; above the field's top height the top's
+  pattern shrinking at its own rate, :mod:`ectskin.inversion.far`). Two fingers add their
+  signals and a coupling (:mod:`ectskin.inversion.coupling`: the twin's two fingers are one
+  grounded conductor);
 * N (n_pairs, m): linear nuisance columns, β their unknown coefficients: the hand's push (a
   per-state basis from direct solves, :func:`push_basis`) and the readout's drift, a common
   gain (the column c_u: the excitation, the amplifier's gain and the permittivity's temperature
@@ -28,8 +29,8 @@ every node is one matrix-vector product).
 Fields: a :class:`~ectskin.twin.field.ResponseField` is evaluated through tensor-product
 B-splines built here from its public node values with the field's own construction (identical
 values, checked by the tests, without the field's per-call checks, which cost more than the
-evaluation); any other object with the field's interface (:class:`FieldLike`) through its
-``readout`` and ``jacobian``.
+evaluation); any other object with the field's interface
+(:class:`~ectskin.inversion.field_like.FieldLike`) through its ``readout`` and ``jacobian``.
 """
 
 from __future__ import annotations
@@ -39,13 +40,14 @@ import copy
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
 
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
 from ectskin._check import EctskinError
 from ectskin.inversion.coupling import correction, electrode_pairs, rank_one
+from ectskin.inversion.far import HOVER_REACH, far_factor, far_nodes, far_signal
+from ectskin.inversion.field_like import FieldLike
 from ectskin.twin.bound import DEFAULT_PUSH_LOADS
 from ectskin.twin.field import ResponseField
 from ectskin.twin.mechanics import Handling, Touch
@@ -63,52 +65,6 @@ PAIR_SCALE_MIN = 0.3
 PAIR_SCALE_RIDGE = 1.0
 #: the drift columns there are
 DRIFT_TERMS = ("gain", "offset")
-
-
-class FieldSpecLike(Protocol):
-    """What the inversion reads of a field's spec."""
-
-    @property
-    def inflation_ml(self) -> tuple[float, ...]: ...
-
-    @property
-    def force_range_n(self) -> tuple[float, float]: ...
-
-    @property
-    def height_range_mm(self) -> tuple[float, float]: ...
-
-    def extent(self, face: str) -> tuple[tuple[float, float], tuple[float, float]]: ...
-
-
-class FieldLike(Protocol):
-    """The interface of :class:`~ectskin.twin.field.ResponseField` that the inversion uses (an
-    analytic model with the same methods plugs in)."""
-
-    @property
-    def spec(self) -> Any: ...
-
-    @property
-    def faces(self) -> tuple[str, ...]: ...
-
-    @property
-    def n_pairs(self) -> int: ...
-
-    @property
-    def untouched(self) -> np.ndarray: ...
-
-    @property
-    def forces_n(self) -> np.ndarray: ...
-
-    @property
-    def heights_mm(self) -> np.ndarray: ...
-
-    def grid(self, face: str) -> tuple[np.ndarray, np.ndarray]: ...
-
-    def node_values(self, face: str, part: str = "contact") -> np.ndarray: ...
-
-    def readout(self, face: str, u_mm: Any, v_mm: Any, force_n: Any, height_mm: Any = 0.0) -> np.ndarray: ...
-
-    def jacobian(self, face: str, u_mm: Any, v_mm: Any, force_n: Any, height_mm: Any = 0.0) -> np.ndarray: ...
 
 
 # ---------------------------------------------------------------------------- one finger's signal
@@ -468,13 +424,15 @@ class StateModel:
         lo_f, hi_f = (float(a) for a in spec.force_range_n)
         self.bounds: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
         self._signals: dict[tuple[str, str], Signal] = {}
+        self.hover_top = math.inf  # ln of the field's top height (none: no hover part)
         for face in self.faces:
             (ulo, uhi), (vlo, vhi) = spec.extent(face)
             for mode in self.modes:
                 if mode == "contact":
                     slo, shi = lo_f, hi_f
-                else:
+                else:  # above the field's top too (:mod:`ectskin.inversion.far`)
                     slo, shi = (float(a) for a in np.log(spec.height_range_mm))
+                    self.hover_top, shi = shi, shi + math.log(HOVER_REACH)
                 self.bounds[(face, mode)] = (np.array([ulo, vlo, slo]), np.array([uhi, vhi, shi]))
                 make = spline_signal if isinstance(field, ResponseField) else generic_signal
                 self._signals[(face, mode)] = make(field, face, mode)  # type: ignore[arg-type]
@@ -501,6 +459,8 @@ class StateModel:
             delta = np.asarray(self.field.node_values(face, mode), dtype=np.float64)
             g = rank_one(delta - np.asarray(self.field.untouched, dtype=np.float64), self.pairs)
             self._factors[key] = tensor_spline(u, v, s, lo, hi, g)
+        if mode == "hover" and x[2] > self.hover_top:
+            return far_factor(self._factors[key], self._signals[key], self.hover_top, x)
         return self._factors[key](x)
 
     def coupling(self, keys: list[tuple[str, str]], xs: list[np.ndarray], rho: float
@@ -518,6 +478,8 @@ class StateModel:
 
     def signal(self, face: str, mode: str, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Δ (n_pairs,) and ∂Δ/∂(u, v, s) (n_pairs, 3) of one finger at ``x`` = (u, v, s)."""
+        if mode == "hover" and x[2] > self.hover_top:
+            return far_signal(self._signals[(face, mode)], self.hover_top, x)
         return self._signals[(face, mode)](x)
 
     def masked(self, ok: np.ndarray) -> StateModel:
@@ -563,13 +525,16 @@ class StateModel:
             u, v = self.field.grid(face)
             for mi, mode in enumerate(self.modes):
                 vals = np.asarray(self.field.node_values(face, mode), dtype=np.float64)
-                vals = vals[..., self.channels]
+                d = vals[..., self.channels] - self.field_untouched
                 s = (np.asarray(self.field.forces_n) if mode == "contact"
                      else np.log(np.asarray(self.field.heights_mm)))
+                mid = s.size // 2  # the pair search's node of each point: the field's middle one
+                if mode == "hover":  # and nodes above the field's top
+                    d, s = far_nodes(d, s, *np.log(self.field.spec.height_range_mm))
                 U, V, S = np.meshgrid(u, v, s, indexing="ij")  # s fastest: a point's nodes in a row
-                n_ss.append(s.size)
+                n_ss.append((s.size, mid))
                 shapes.append((u.size, v.size))
-                d = (vals - self.field_untouched).reshape(-1, self.n_pairs) / sigma
+                d = d.reshape(-1, self.n_pairs) / sigma
                 D.append(d - (d @ Q) @ Q.T)
                 xs.append(np.c_[U.ravel(), V.ravel(), S.ravel()])
                 face_i.append(np.full(U.size, fi))
@@ -577,13 +542,13 @@ class StateModel:
         Dm = np.concatenate(D)
         stops = np.cumsum([len(d) for d in D])
         groups = [(int(a), int(b)) for a, b in zip(np.r_[0, stops[:-1]], stops)]
-        n_points = sum(len(d) // n_s for d, n_s in zip(D, n_ss))
+        n_points = sum(len(d) // n_s for d, (n_s, _) in zip(D, n_ss))
         stride = max(1, int(np.ceil(np.sqrt(n_points / PAIR_NODES))))
         rows = []
-        for (lo, _), shape, n_s in zip(groups, shapes, n_ss):
+        for (lo, _), shape, (n_s, mid) in zip(groups, shapes, n_ss):
             iu, iv = np.meshgrid(np.arange(0, shape[0], stride), np.arange(0, shape[1], stride),
                                  indexing="ij")
-            rows.append(lo + (iu.ravel() * shape[1] + iv.ravel()) * n_s + n_s // 2)
+            rows.append(lo + (iu.ravel() * shape[1] + iv.ravel()) * n_s + mid)
         pair_rows = np.concatenate(rows)
         sub = Dm[pair_rows]
         gram = 2.0 * (sub @ sub.T)
