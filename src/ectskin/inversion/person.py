@@ -18,8 +18,8 @@ to (:data:`POOL_SD_FLOOR`). The result is the ``finger`` prior of
 :meth:`~ectskin.inversion.Inversion.fit`: refitted with it, every frame of the person shares
 what the others told (:func:`~ectskin.inversion.fit_frames` ``person=``).
 
-Only frames with one finger, pressing, carry the nuisances here: a hovering finger has none,
-and of two pressing fingers one cannot say whose frame it is.
+Only frames with one finger pressing carry the nuisances here (beside it a finger may hover:
+a hovering finger has none); of two pressing fingers one cannot say whose frame it is.
 
 A stream (the live engine) pools as it goes: :class:`FingerPool` adds each frame as it is
 fitted, and the frame was fitted with the pool so far as its prior (centre c_p, sd s_p) rather
@@ -80,13 +80,14 @@ class FingerPool:
             used: Mapping[str, tuple[float, float]] | None = None) -> bool:
         """Add a frame fitted with the prior ``used`` ({name: (centre, sd)}, what
         :meth:`prior` gave; None or a name missing: the population's (0, sd)); whether it told
-        anything (one finger, pressing, with the nuisance fitted)."""
+        anything (one finger pressing, with the nuisance fitted)."""
         if not isinstance(result, InversionResult):
             raise EctskinError(f"FingerPool: results must be InversionResults, got "
                                f"{type(result).__name__}")
-        if result.n_fingers != 1 or not result.fingers[0].contact:
+        pressing = [f for f in result.fingers if f.contact]
+        if len(pressing) != 1:
             return False
-        e, told = result.fingers[0], False
+        e, told = pressing[0], False
         for name, sd0 in self.prior_sd.items():
             mu, se = getattr(e, f"{name}_ln"), getattr(e, f"{name}_ln_se")
             if not (math.isfinite(mu) and math.isfinite(se) and se > 0):
