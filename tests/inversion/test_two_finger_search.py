@@ -76,12 +76,13 @@ def test_two_nodes_of_other_sizes_are_found(analytic_field, table):
 
 def test_two_screened_fingers_count_two_and_one_finger_one(analytic_field):
     """With ``scaled_pairs`` two fingers, one at 0.6 of its signal (screened), are counted two
-    pressing, one finger one; the plain search alone misses one of these pairs."""
+    pressing, one finger one. (The plain search missed one of these four before the coarse
+    search's hover nodes above the field's top, :mod:`ectskin.inversion.far`, moved its pairs'
+    hover node higher; it no longer does. Where the scaled pairs find what the plain ones do
+    not is checked at the search itself, above.)"""
     inv = Inversion({STATE: analytic_field}, finger_scale_sd=FINGER_SCALE_SD, press_check=True,
                     scaled_pairs=True)
-    plain = Inversion({STATE: analytic_field}, finger_scale_sd=FINGER_SCALE_SD, press_check=True)
     rng = np.random.default_rng(5)
-    missed = 0
     for _ in range(4):
         while True:
             a, b = rng.uniform((-16, 4), (16, 56), size=(2, 2))
@@ -91,10 +92,8 @@ def test_two_screened_fingers_count_two_and_one_finger_one(analytic_field):
         y = analytic_field.readout("front", *a, fa) + 0.6 * analytic_field.delta("front", *b, fb)
         r = inv.fit(y, STATE)
         assert sum(f.contact for f in r.fingers) == 2, (a, b, r.bic_by_count)
-        missed += sum(f.contact for f in plain.fit(y, STATE).fingers) != 2
         one = inv.fit(analytic_field.readout("front", *a, fa), STATE)
         assert one.n_fingers == 1 and one.fingers[0].contact
-    assert missed >= 1
 
 
 def test_the_option_is_checked(analytic_field):

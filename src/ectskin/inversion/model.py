@@ -528,11 +528,10 @@ class StateModel:
                 d = vals[..., self.channels] - self.field_untouched
                 s = (np.asarray(self.field.forces_n) if mode == "contact"
                      else np.log(np.asarray(self.field.heights_mm)))
-                mid = s.size // 2  # the pair search's node of each point: the field's middle one
                 if mode == "hover":  # and nodes above the field's top
                     d, s = far_nodes(d, s, *np.log(self.field.spec.height_range_mm))
                 U, V, S = np.meshgrid(u, v, s, indexing="ij")  # s fastest: a point's nodes in a row
-                n_ss.append((s.size, mid))
+                n_ss.append(s.size)
                 shapes.append((u.size, v.size))
                 d = d.reshape(-1, self.n_pairs) / sigma
                 D.append(d - (d @ Q) @ Q.T)
@@ -542,13 +541,13 @@ class StateModel:
         Dm = np.concatenate(D)
         stops = np.cumsum([len(d) for d in D])
         groups = [(int(a), int(b)) for a, b in zip(np.r_[0, stops[:-1]], stops)]
-        n_points = sum(len(d) // n_s for d, (n_s, _) in zip(D, n_ss))
+        n_points = sum(len(d) // n_s for d, n_s in zip(D, n_ss))
         stride = max(1, int(np.ceil(np.sqrt(n_points / PAIR_NODES))))
         rows = []
-        for (lo, _), shape, (n_s, mid) in zip(groups, shapes, n_ss):
+        for (lo, _), shape, n_s in zip(groups, shapes, n_ss):
             iu, iv = np.meshgrid(np.arange(0, shape[0], stride), np.arange(0, shape[1], stride),
                                  indexing="ij")
-            rows.append(lo + (iu.ravel() * shape[1] + iv.ravel()) * n_s + mid)
+            rows.append(lo + (iu.ravel() * shape[1] + iv.ravel()) * n_s + n_s // 2)
         pair_rows = np.concatenate(rows)
         sub = Dm[pair_rows]
         gram = 2.0 * (sub @ sub.T)
