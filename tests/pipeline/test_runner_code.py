@@ -68,4 +68,4 @@ def test_a_step_other_code_made_is_reused_with_a_warning(tmp_path, monkeypatch, 
     warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert len(warned) == 1
     assert "made by other code (aaaaaaaaaaaa; this is bbbbbbbbbbbb+0123abcd)" in warned[0]
-    assert "--overwrite" in warned[0]
+    assert "remove a.txt (or use another output folder) to redo it" in warned[0]

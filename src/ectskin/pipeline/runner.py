@@ -12,7 +12,8 @@ records per step the settings it ran with, whether it finished and how long it t
 checkout, with a hash of its uncommitted changes). A step is keyed by its settings, not by the
 code, so a step that other code made is still reused, with a warning that names both: a
 change of the code that changes a step's results (a better fit, say) leaves its old results in
-place until ``--overwrite`` or another output folder redoes it.
+place until its outputs are removed (``--overwrite`` does not: the settings hold) or another
+output folder redoes it.
 
 :meth:`StepRunner.step` then decides:
 
@@ -205,8 +206,8 @@ class StepRunner:
             if made != now:
                 log.warning(
                     "%s: reused, but made by other code (%s; this is %s): its results are "
-                    "that code's; --overwrite or another output folder redoes it", name,
-                    made or "unrecorded", now,
+                    "that code's; remove %s (or use another output folder) to redo it", name,
+                    made or "unrecorded", now, self._names(existing),
                 )
             return False
         old = self.state.settings(name)
