@@ -12,10 +12,10 @@ carries the field's top pattern up, shrinking at its own rate there:
 s = ln h: a power law (h / h_top)^p in height with the exponent the field's own slope along its
 signal at the top, up to :data:`HOVER_REACH` times the top. The pattern's widening with height
 is left out (the fit's height there is rough; what matters is that the signal is taken up).
-p's slopes along (u, v), for the Jacobian, are central differences. A coupled finger's rank-one factor g scales by
-e^{p (s − s_top) / 2} (Δ ≈ −g gᵀ). The coarse search gets nodes at :data:`FAR_NODES` times the
-top, from the node values: the polynomial through the field's ln-height nodes, its value and
-slope at the top.
+p's slopes along (u, v), for the Jacobian, are central differences. A coupled finger's
+rank-one factor g scales by e^{p (s − s_top) / 2} (Δ ≈ −g gᵀ). The coarse search gets nodes at
+:data:`FAR_NODES` times the top, from the node values: the polynomial through the field's
+ln-height nodes, its value and slope at the top.
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ records per step the settings it ran with, whether it finished and how long it t
                             "seconds": 27.3}, ...}}
 
 ``code`` is the code that ran the step (:func:`code_version`: the commit of the source
-checkout, with a hash of its uncommitted changes). A step is keyed by its settings, not by the
+checkout, with a hash of the uncommitted changes to its tracked files). A step is keyed by its settings, not by the
 code, so a step that other code made is still reused, with a warning that names both: a
 change of the code that changes a step's results (a better fit, say) leaves its old results in
 place until its outputs are removed (``--overwrite`` does not: the settings hold) or another
@@ -82,8 +82,8 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1]
 def code_version(where: Path = PACKAGE_DIR) -> str:
     """The code in ``where`` (ectskin's package folder): its git commit (12 hex digits) when
     it lies in a git checkout that tracks it, followed by "+" and a short hash of the
-    uncommitted changes under it where there are any; otherwise "ectskin VERSION" (an
-    installed package)."""
+    uncommitted changes to the tracked files under it where there are any (a new file not yet
+    added is not seen); otherwise "ectskin VERSION" (an installed package)."""
     try:
         _git(where, "ls-files", "--error-unmatch", "__init__.py")  # tracked here, not a copy
         head = _git(where, "rev-parse", "--short=12", "HEAD").strip()
