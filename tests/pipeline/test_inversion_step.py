@@ -17,6 +17,8 @@ from ectskin import EctskinError
 from ectskin.inversion import Inversion
 from ectskin.io import Recording, read_recording, write_recording
 from ectskin.layout.geometry import on_skin_distance
+from ectskin.learn.data.contact import contact_dataset
+from ectskin.learn.tasks.contact import point_errors
 from ectskin.pipeline import ReproduceConfig
 from ectskin.pipeline import field as pfield
 from ectskin.pipeline import inversion as pinv
@@ -123,6 +125,19 @@ def test_the_step_scores_the_test_frames_as_a_hand_computation(world, tmp_path):
     assert m["push"]["use"] is False and m["n_test_trials"] == 3
     saved = json.loads((config.out_dir / "inversion" / "metrics.json").read_text())
     assert saved["loc_mm_mean"] == m["loc_mm_mean"]
+    # every inverted frame's fit is kept, named by its trial and frame; scored again from the
+    # file, the point error is the step's
+    fits = np.load(config.out_dir / "inversion" / "fits.npz")
+    assert fits["trial"].size == 120 and set(fits["trial"]) == set(TEST[:2]) and fits["spread"].all()
+    rec = read_recording(path)
+    data = contact_dataset(rec, window=1, trials=TEST[:2])
+    assert fits["frame"].tolist() == data.frame.tolist()
+    arrays = {k[4:]: fits[k] for k in fits.files if k.startswith("fit_")}
+    errs = point_errors(data, pinv.prediction_columns(arrays, data.faces, data.face_extent))
+    assert errs.mean() == pytest.approx(m["loc_mm_mean"], rel=1e-12)
+    # the force figure is drawn; the error map beside the bound only where the bound step ran
+    assert (config.out_dir / "inversion" / "force_sigma.png").is_file()
+    assert not (config.out_dir / "inversion" / "error_vs_bound.png").exists()
     # the step is reused with the same settings, refused with others
     monkey = pytest.MonkeyPatch()
     monkey.setattr(Inversion, "fit", lambda *a, **k: pytest.fail("inverted again"))

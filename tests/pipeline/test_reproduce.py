@@ -428,6 +428,11 @@ def test_reproduce_tiny_twin_experiment(tmp_path, monkeypatch):
         inv["frames_without_field"])
     assert (out / "inversion" / "metrics.json").is_file()
     assert {"bound", "inversion"} <= set(m["timings_s"])
+    # the inversion's error beside the bound and its forces with their standard errors, in the
+    # report's figures
+    for stem in ("error_vs_bound", "force_sigma"):
+        assert f"figures/inversion_{stem}.png" in m["figures"].values(), stem
+        assert (out / "figures" / f"inversion_{stem}.png").is_file(), stem
     # the contact model of the field states, chosen on validation frames where there are any
     choice = inv["choice"]
     assert choice is None or (choice["selected"] in choice["order"]

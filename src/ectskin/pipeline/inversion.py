@@ -90,14 +90,19 @@ from ectskin.inversion.person import POOL_SD_FLOOR
 from ectskin.inversion.seed import SEED_SEARCH
 from ectskin.io import Recording, read_recording
 from ectskin.io.calibration import untouched_readouts
-from ectskin.learn.data.contact import HOVER_MAX_MM, MAX_FINGERS, ContactData, contact_dataset
-from ectskin.learn.metrics.contact import multi_metrics
+from ectskin.learn.data.contact import ContactData, contact_dataset
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
-from ectskin.learn.tasks.contact import contact_report, slot_points
-from ectskin.pipeline.bound import state_key
+from ectskin.learn.tasks.contact import contact_report
+from ectskin.pipeline.bound import BOUND_DIR, BOUND_FILE, state_key
 from ectskin.pipeline.config import CONTACT_RUN, ReproduceConfig
 from ectskin.pipeline.contact_pick import CHOICE_FRAMES, RULE, contact_choice, load_learned
 from ectskin.pipeline.field import field_cache_dir
+from ectskin.pipeline.inversion_answers import (  # noqa: F401 (the step's answers, named here too)
+    prediction_columns,
+    two_finger_rows,
+    two_finger_score,
+    write_answers,
+)
 from ectskin.pipeline.inversion_error import (
     BOUND_ERROR_CHOICES,
     MODEL_ERROR_FRAMES,
@@ -150,68 +155,6 @@ def _field_of(fields: Mapping[tuple[float, ...], Any], state: Sequence[float]) -
         if len(k) == s.size and np.all(np.abs(np.asarray(k, float) - s) < STATE_TOL_ML):
             return f
     return None
-
-
-def prediction_columns(arrays: Mapping[str, np.ndarray], faces: Sequence[str],
-                       extent: Mapping[str, Any]) -> np.ndarray:
-    """The inversion's answers (:func:`ectskin.inversion.results_to_arrays`, F frames) as
-    ContactNet's prediction array (F, 3 + S · 5) (:data:`~ectskin.learn.models.contact.
-    PRED_COLUMNS`, then per slot :data:`~ectskin.learn.models.contact.SLOT_COLUMNS`).
-
-    ``count``: the fitted fingers that press; ``p_contact``: 1 when one does; ``p_hover``: 1
-    when none presses and one hovers at most ``HOVER_MAX_MM`` high. The pressing fingers take
-    the slots first, the best-located first (the least point standard error of the readout
-    noise, ``point_se_noise_mm`` where given: a two-finger fit's phantom, where the readouts
-    hardly tell a point, must not stand for the finger on the skin), then the hovering ones,
-    the lowest first; a frame where none presses gives slot 0 the point of the lowest hovering
-    finger (the nearest to touching), or, with no finger at all, the middle of the first face
-    (an answer is needed wherever a finger is on the skin, and that one is charged its full
-    error).
-    ``sigma_mm``: the point's standard error, √(σ_u² + σ_v²); ``force_sigma_n``: the force's
-    (0 where there is none: no force fitted); ``face``: the index in ``faces``.
-    """
-    n = len(arrays["n_fingers"])
-    S, nc = MAX_FINGERS, len(SLOT_COLUMNS)
-    pred = np.zeros((n, len(PRED_COLUMNS) + S * nc))
-    (u0, u1), (v0, v1) = extent[faces[0]]
-    col = {name: i for i, name in enumerate(SLOT_COLUMNS)}
-    face_of = {f: i for i, f in enumerate(faces)}
-    # the readout noise's point standard errors (a model error's grows most for large signals);
-    # +inf where the fit gave none (it sorts last)
-    located = (np.asarray(arrays["point_se_noise_mm"], dtype=np.float64)
-               if "point_se_noise_mm" in arrays else np.hypot(*np.moveaxis(arrays["uv_se_mm"], -1, 0)))
-    located = np.where(np.isfinite(located), located, np.inf)
-    for i in range(n):
-        fitted = [k for k in range(S) if arrays["face"][i, k]]
-        # the best-located press first: a two-finger fit's phantom (a finger where the readouts
-        # hardly tell its point, beyond the wire ends) never stands for the finger on the skin
-        pressing = sorted((k for k in fitted if arrays["contact"][i, k]),
-                          key=lambda k: located[i, k])
-        hovering = sorted((k for k in fitted if not arrays["contact"][i, k]),
-                          key=lambda k: arrays["height_mm"][i, k])  # the lowest first
-        pred[i, 0] = len(pressing)
-        pred[i, 1] = float(bool(pressing))
-        pred[i, 2] = float(not pressing and any(
-            arrays["height_mm"][i, k] <= HOVER_MAX_MM for k in hovering))
-        order = (pressing + hovering)[:S]
-        for slot in range(S):
-            a = len(PRED_COLUMNS) + slot * nc
-            if slot < len(order):
-                k = order[slot]
-                uv, se = arrays["uv_mm"][i, k], arrays["uv_se_mm"][i, k]
-                pred[i, a + col["face"]] = face_of.get(str(arrays["face"][i, k]), 0)
-                pred[i, a + col["u_mm"]], pred[i, a + col["v_mm"]] = uv
-                pred[i, a + col["sigma_mm"]] = float(np.hypot(*se))
-                pred[i, a + col["force_n"]] = (arrays["force_n"][i, k]
-                                               if arrays["contact"][i, k] else 0.0)
-                if "force_sigma_n" in col and "force_se_n" in arrays and arrays["contact"][i, k]:
-                    se_f = float(arrays["force_se_n"][i, k])  # the fit's Fisher standard error
-                    pred[i, a + col["force_sigma_n"]] = se_f if np.isfinite(se_f) else 0.0
-            else:
-                pred[i, a + col["u_mm"]] = (u0 + u1) / 2
-                pred[i, a + col["v_mm"]] = (v0 + v1) / 2
-                pred[i, a + col["sigma_mm"]] = np.nan
-    return pred
 
 
 def _frames(data: ContactData, single_only: bool, limit: int | None) -> np.ndarray:
@@ -295,39 +238,6 @@ def score(data: ContactData, arrays: Mapping[str, np.ndarray], seconds: np.ndarr
     out["n_frames"] = int(data.n_samples)
     out["converged_share"] = float(np.mean(arrays["converged"])) if data.n_samples else None
     return out
-
-
-def two_finger_rows(data: ContactData, skip: np.ndarray, limit: int | None) -> np.ndarray:
-    """Rows of ``data`` with two fingers on the skin that are not in ``skip``, at most ``limit``
-    evenly spread (in order)."""
-    rows = np.setdiff1d(np.flatnonzero(data.count == 2), skip)
-    if limit is not None and rows.size > limit:
-        rows = rows[np.unique(np.linspace(0, rows.size - 1, limit).round().astype(int))]
-    return rows
-
-
-def two_finger_score(data: ContactData, arrays: Mapping[str, np.ndarray]) -> dict[str, Any]:
-    """The count and the per-finger point error of frames with two fingers on the skin (``data``:
-    those frames only, every one inverted, in order): ``count_accuracy``, ``count_predicted``
-    (how many frames were counted 0, 1 and 2 fingers), the point error of each finger after
-    matching where two were counted (``loc_mm_*``, ``n_fingers``:
-    :func:`~ectskin.learn.metrics.contact.multi_metrics`), and the count accuracy per trial (a
-    trial's frames are one pair of fingers' moves, not independent draws)."""
-    pred = prediction_columns(arrays, data.faces, data.face_extent)
-    *_, true_pts, pred_pts = slot_points(data, pred)
-    count = pred[:, PRED_COLUMNS.index("count")].astype(int)
-    multi = multi_metrics(data.count, count, true_pts, pred_pts, MAX_FINGERS)
-    right = count == data.count
-    per_trial = {data.group_names[g]: float(right[data.group == g].mean())
-                 for g in np.unique(data.group)}
-    return {
-        "count_accuracy": multi["count_accuracy"],
-        "count_predicted": np.bincount(np.clip(count, 0, MAX_FINGERS),
-                                       minlength=MAX_FINGERS + 1).tolist(),
-        **{k: multi[k] for k in ("loc_mm_mean", "loc_mm_median", "loc_mm_p90", "n_fingers")},
-        "n_frames": int(data.n_samples), "n_trials": len(per_trial),
-        "count_accuracy_by_trial": per_trial,
-    }
 
 
 def _workers(config: ReproduceConfig) -> int:
@@ -476,7 +386,7 @@ def inversion_step(
         **({"two_fingers": two_fingers} if two_fingers != "superposition" else {}),
         **({"finger": finger, "finger_fields": [FINGER_FIELD_SPACING_MM, FINGER_FIELD_FORCE_NODES,
                                                 POOL_SD_FLOOR]} if finger != "off" else {}),
-        "bound_error": [bound_error, MODEL_ERROR_FRAMES],
+        "bound_error": [bound_error, MODEL_ERROR_FRAMES], **config.figure_settings,
     }
     if choice:  # the run's model and its baselines' seed are candidates' settings too
         settings.update(choice=True, choice_frames=CHOICE_FRAMES, choice_rule=RULE,
@@ -569,6 +479,10 @@ def inversion_step(
             if keep.any():
                 result["two_finger"] = two_finger_score(
                     data.take(every[keep]), {k: np.asarray(v)[keep] for k, v in both.items()})
+            result["files"] = write_answers(
+                out_dir, data, every, both, np.isin(every, rows),
+                bound_file=runner.out / BOUND_DIR / BOUND_FILE, threshold_n=FORCE_OBSERVABLE_N,
+                figure_format=config.figure_format, dpi=config.dpi)
         total = result.get("n_frames_in_field_states", 0) + n_without
         result.update(
             frames_without_field=without, n_frames_without_field=n_without,

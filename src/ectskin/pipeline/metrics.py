@@ -494,6 +494,14 @@ BOUND_FIGURES = (
               "inflation state (every nuisance at its prior)"),
     ("bound_vs_error", "ContactNet's localisation error beside the bound (the same log scale)"),
 )
+#: the inversion step's figures (file stem in OUT_DIR/inversion, caption), copied likewise
+INVERSION_FIGURES = (
+    ("error_vs_bound", "The inversion's localisation error beside the bound (the same log scale)"),
+    ("force_sigma", "Contact force of the inversion against the true force, ±1σ its standard "
+                    "error (observable: that standard error below 0.1 N)"),
+    ("two_fingers", "Two fingers on the skin as the inversion reads them (test frames evenly "
+                    "spread over those with two fingers)"),
+)
 
 
 def copy_figures(out: Path, runs: tuple[str, ...], figure_format: str = "png") -> dict[str, str]:
@@ -508,10 +516,11 @@ def copy_figures(out: Path, runs: tuple[str, ...], figure_format: str = "png") -
             dst = fig_dir / figure_file(copy_stem, figure_format)
             shutil.copyfile(src, dst)
             figures[caption] = dst.relative_to(out).as_posix()
-    for stem, caption in BOUND_FIGURES:
-        src = out / "bound" / figure_file(stem, figure_format)
-        if src.is_file():
-            dst = fig_dir / src.name
-            shutil.copyfile(src, dst)
-            figures[caption] = dst.relative_to(out).as_posix()
+    for folder, items in (("bound", BOUND_FIGURES), ("inversion", INVERSION_FIGURES)):
+        for stem, caption in items:
+            src = out / folder / figure_file(stem, figure_format)
+            if src.is_file():
+                dst = fig_dir / (src.name if folder == "bound" else f"{folder}_{src.name}")
+                shutil.copyfile(src, dst)
+                figures[caption] = dst.relative_to(out).as_posix()
     return figures
