@@ -699,3 +699,47 @@ def test_cli_live_takes_a_floor_and_names_a_bad_one(fields, field_dirs, tmp_path
     assert all(m["model_error"] is None for m in msgs if m is not None)
     assert main(argv[:-1] + [str(tmp_path / "c.jsonl"), "--inversion-bound-error", "1,x"]) == 2
     assert "--inversion-bound-error must be session, off or A,R" in capsys.readouterr().err
+
+
+def test_a_stream_of_two_fingers_screens_the_one_finger_fit_and_keeps_its_answers(fields,
+                                                                                  monkeypatch):
+    """From a warm start of two fingers that explains the frame, the one-finger fit runs on the
+    screen's budget and stops there; the answers are those of the full budget; and when a finger
+    lifts, the smaller count that explains the frame is still found."""
+    field = fields[REST]
+    inv = Inversion({REST: field}, NOISE)
+    rng = np.random.default_rng(11)
+    pts = [[(-5.5 + 0.3 * t, 42.0, 1.2, 0.0), (5.5, 58.0 - 0.3 * t, 0.9, 0.0)] for t in range(6)]
+    frames = [frame(field, p, rng) for p in pts]
+    lifted = frame(field, [(-3.7, 42.0, 1.2, 0.0)], rng)  # the second finger gone
+    budgets = []
+    real = fit_module.Inversion._fit_fingers
+
+    def recording(m, delta, sigma, start, coupled=False, **kw):
+        budgets.append((len(start), kw.get("max_nfev")))
+        return real(m, delta, sigma, start, coupled, **kw)
+
+    def stream_of(screen: bool):
+        monkeypatch.setattr(fit_module.Inversion, "_fit_fingers", staticmethod(recording))
+        if not screen:  # every count on the full budget
+            monkeypatch.setattr(fit_module.stream, "screened",
+                                lambda fit, m, d, s, st, c, g: fit(m, d, s, st, c))
+        out, prev = [], inv.fit(frames[0], REST)
+        for y in frames[1:] + [lifted]:
+            budgets.clear()
+            prev = inv.fit(y, REST, warm=prev)
+            out.append((prev, list(budgets)))
+        monkeypatch.undo()
+        return out
+
+    screened, full = stream_of(True), stream_of(False)
+    for (a, calls), (b, _) in zip(screened[:-1], full[:-1]):
+        # the warm two-finger fit, then the one-finger fit on the screen's budget alone
+        assert calls == [(2, None), (1, fit_module.stream.SCREEN_NFEV)]
+        assert a.n_fingers == b.n_fingers == 2
+        for fa, fb in zip(a.fingers, b.fingers):
+            np.testing.assert_allclose([fa.u_mm, fa.v_mm, fa.force_n], [fb.u_mm, fb.v_mm, fb.force_n],
+                                       rtol=0, atol=1e-9)
+    r, _ = screened[-1]
+    assert r.n_fingers == full[-1][0].n_fingers == 1
+    assert abs(r.fingers[0].u_mm + 3.7) < 0.3 and abs(r.fingers[0].v_mm - 42.0) < 0.3

@@ -34,7 +34,8 @@ import numpy as np
 from scipy.interpolate import make_interp_spline
 
 from ectskin._check import EctskinError
-from ectskin.inversion.model import FingerColumn, StateModel, _basis
+from ectskin.inversion.model import FingerColumn, StateModel
+from ectskin.inversion.spline import AxisBasis, axis_basis
 from ectskin.twin.bound_modulus import (
     MODULUS_PRIOR_SD,
     TABLE_FORCE_NODES,
@@ -79,7 +80,7 @@ class TableColumns:
         if missing:
             raise EctskinError(f"{where}: no nodes on the field's face(s) {missing} (the table "
                                f"has {sorted(values)})")
-        self._faces: dict[str, tuple[list[list[float]], np.ndarray, list[tuple[float, float]]]] = {}
+        self._faces: dict[str, tuple[list[AxisBasis], np.ndarray, list[tuple[float, float]]]] = {}
         lf = np.log(forces)
         for face in faces:
             u, v = (np.asarray(a, dtype=np.float64) for a in nodes[face])
@@ -91,22 +92,22 @@ class TableColumns:
             if min(u.size, v.size) < 4:
                 raise EctskinError(f"{where}: face {face!r} needs >= 4 nodes in u and v (cubic), "
                                    f"got {u.size} x {v.size}")
-            c, knots = val, []
+            c, bases = val, []
             for ax, x in enumerate((u, v, lf)):
                 s = make_interp_spline(x, c, k=3, axis=ax)
                 c = np.moveaxis(s.c, 0, ax)
-                knots.append([float(t) for t in s.t])
+                bases.append(axis_basis(s.t, 3))
             ends = [(float(x[0]), float(x[-1])) for x in (u, v, lf)]
-            self._faces[face] = (knots, np.ascontiguousarray(c), ends)
+            self._faces[face] = (bases, np.ascontiguousarray(c), ends)
 
     def __call__(self, face: str, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """M (n_pairs,) and ∂M/∂(u, v, F) (n_pairs, 3) at x = (u, v, F) on ``face``."""
-        knots, coef, ends = self._faces[face]
+        bases, coef, ends = self._faces[face]
         q = (float(x[0]), float(x[1]), math.log(max(float(x[2]), 1e-300)))
         spans, rows = [], []
         for ax in range(3):
             lo, hi = ends[ax]
-            i, (b, d) = _basis(knots[ax], 3, min(max(q[ax], lo), hi))
+            i, b, d = bases[ax](q[ax])  # clamped into [lo, hi]
             if not lo <= q[ax] <= hi:  # the nearest node plane: flat beyond it
                 d = [0.0] * 4
             spans.append(i)

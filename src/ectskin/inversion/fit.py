@@ -78,6 +78,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from ectskin._check import EctskinError, check_option
+from ectskin.inversion import stream
 from ectskin.inversion.finger_nuisance import (
     MODULUS_PRIOR_SD,
     RADIUS_PRIOR_SD,
@@ -382,7 +383,7 @@ class Inversion:
         (:func:`~ectskin.inversion.pool_fingers`)."""
         m = self.model(state)
         prior = finger_prior(finger)
-        warm_start = self._warm_start(m, warm)
+        warm_start = stream.warm_start(m, warm)
         y, w = self.observed(readouts, state, kind, reference)
         ok = np.isfinite(y)
         if not ok.all():  # masked channels (NaN in any frame of the window) are left out
@@ -400,6 +401,11 @@ class Inversion:
         n, nb = m.n_pairs, m.N.shape[1]
         fits: list[Fit | None] = [self._fit_none(m, delta, sigma)]
         passed = [self._passes(fits[0], 0, nb, n)]
+        # a stream's warm start first: where it explains the frame, smaller counts are screened
+        warm_fit = (None if warm_start is None
+                    else self._fit_fingers(m, delta, sigma, warm_start, self.coupled))
+        explained = (warm_fit is not None and self._passes(warm_fit, len(warm_fit.fingers), nb, n)
+                     and not (len(warm_fit.fingers) == 2 and self._overlap(m, warm_fit)))
         starts: list[list[list[tuple[int, int, np.ndarray]]]] = [[]]
         seeded = seed_starts(m, seeds, self.max_fingers)
         # counts in turn, each from its first start while no count passes the gate; a count's
@@ -408,9 +414,9 @@ class Inversion:
         for k in range(1, self.max_fingers + 1):
             if passed[-1]:
                 break
-            hot = None  # the best fit of the warm start and the seeds of k fingers
-            for start in ([warm_start] if warm_start is not None and len(warm_start) == k
-                          else []) + seeded.get(k, []):
+            # the best fit of the warm start and the seeds of k fingers
+            hot = warm_fit if warm_fit is not None and len(warm_fit.fingers) == k else None
+            for start in seeded.get(k, []):
                 f = self._fit_fingers(m, delta, sigma, start, self.coupled)
                 hot = f if hot is None or f.chi2 < hot.chi2 else hot
             # a warm start that explains the frame, or seeds that replace the search: no
@@ -421,7 +427,11 @@ class Inversion:
                 fits.append(hot)
             else:
                 starts.append(self._starts(m, delta, k, fits[1] if k > 1 else None))
-                cold = self._fit_fingers(m, delta, sigma, starts[k][0], self.coupled)
+                cold = (stream.screened(self._fit_fingers, m, delta, sigma, starts[k][0],
+                                        self.coupled, lambda f: _chi2_gate(n - f.n_params,
+                                                                           self.gate_p))
+                        if explained and k < len(warm_fit.fingers)  # type: ignore[union-attr]
+                        else self._fit_fingers(m, delta, sigma, starts[k][0], self.coupled))
                 fits.append(hot if hot is not None and hot.chi2 < cold.chi2 else cold)
             passed.append(self._passes(fits[k], k, nb, n))
             if k == self.max_fingers:
@@ -477,27 +487,6 @@ class Inversion:
         ha = math.exp(xa[2]) if MODES[ma] == "hover" else 0.0
         hb = math.exp(xb[2]) if MODES[mb] == "hover" else 0.0
         return math.hypot(xa[0] - xb[0], xa[1] - xb[1], ha - hb) < self.min_separation_mm
-
-    @staticmethod
-    def _warm_start(m: StateModel, warm: InversionResult | None
-                    ) -> list[tuple[int, int, np.ndarray]] | None:
-        """The fingers of a previous result as a start (face index, mode index, (u, v, s)), or
-        None (no result, no finger, or a face or mode this state's model lacks)."""
-        if warm is None:
-            return None
-        if not isinstance(warm, InversionResult):
-            raise EctskinError(
-                f"Inversion: warm must be the InversionResult of the previous frame or None, got "
-                f"{type(warm).__name__}"
-            )
-        start = []
-        for f in warm.fingers:
-            mode = "contact" if f.contact else "hover"
-            if f.face not in m.faces or mode not in m.modes:
-                return None
-            s = f.force_n if f.contact else math.log(f.height_mm)
-            start.append((m.faces.index(f.face), MODES.index(mode), np.array([f.u_mm, f.v_mm, s])))
-        return start or None
 
     def _passes(self, fit: Fit | None, k: int, nb: int, n: int) -> bool:
         """Whether the k-finger fit explains the frame of n channels within the noise (the

@@ -38,7 +38,8 @@ LM_CONVERGED = (1, 2, 3, 4)
 
 
 def fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
-                start: list[tuple[int, int, np.ndarray]], coupled: bool = False) -> Fit:
+                start: list[tuple[int, int, np.ndarray]], coupled: bool = False,
+                max_nfev: int = MAX_NFEV) -> Fit:
     """Levenberg–Marquardt over (x_1, …, x_k, [ρ], [a_1, …, a_k], [x_E of each pressing
     finger], β) from ``start`` (ρ: two coupled fingers; a: the fingers' scales, with
     ``m.scale_w``; x_E: the pulp moduli, and radii, with ``m.finger_columns``).
@@ -47,7 +48,8 @@ def fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
     ``FINGER_BOUND_SD`` prior sd) hold by evaluating the model at the parameters clipped into
     them and adding a stiff penalty residual ``BOUND_WEIGHT`` × (p − clip(p)): MINPACK's LM
     (``method="lm"``) takes no bounds, and costs a fraction of the bounded solvers' per
-    iteration. The result is clipped into the ranges.
+    iteration. The result is clipped into the ranges. ``max_nfev``: the most residual
+    evaluations (``converged`` says whether it stopped on a tolerance before).
     """
     k = len(start)
     keys = [(m.faces[fi], MODES[mi]) for fi, mi, _ in start]
@@ -136,7 +138,7 @@ def fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
         warnings.simplefilter("ignore", RuntimeWarning)
         p, status = leastsq(
             lambda p: evaluate(p)[0], np.concatenate([x0, beta0]),
-            Dfun=lambda p: evaluate(p)[1], maxfev=MAX_NFEV, **LM_OPTIONS,
+            Dfun=lambda p: evaluate(p)[1], maxfev=max_nfev, **LM_OPTIONS,
         )
     p = np.array(p, dtype=np.float64, ndmin=1)
     p[:na] = np.clip(p[:na], lo, hi)

@@ -27,27 +27,26 @@ untouched state's σ and projected off the nuisance columns, so that the distanc
 every node is one matrix-vector product).
 
 Fields: a :class:`~ectskin.twin.field.ResponseField` is evaluated through tensor-product
-B-splines built here from its public node values with the field's own construction (identical
-values, checked by the tests, without the field's per-call checks, which cost more than the
-evaluation); any other object with the field's interface
+B-splines built from its public node values with the field's own construction
+(:mod:`ectskin.inversion.spline`: identical values, checked by the tests, without the field's
+per-call checks, which cost more than the evaluation); any other object with the field's interface
 (:class:`~ectskin.inversion.field_like.FieldLike`) through its ``readout`` and ``jacobian``.
 """
 
 from __future__ import annotations
 
-import bisect
 import copy
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import make_interp_spline
 
 from ectskin._check import EctskinError
 from ectskin.inversion.coupling import correction, electrode_pairs, rank_one
 from ectskin.inversion.far import HOVER_REACH, far_factor, far_nodes, far_signal
 from ectskin.inversion.field_like import FieldLike
+from ectskin.inversion.spline import Signal, tensor_spline
 from ectskin.twin.bound import DEFAULT_PUSH_LOADS
 from ectskin.twin.field import ResponseField
 from ectskin.twin.mechanics import Handling, Touch
@@ -68,10 +67,6 @@ DRIFT_TERMS = ("gain", "offset")
 
 
 # ---------------------------------------------------------------------------- one finger's signal
-#: Δ and ∂Δ/∂(u, v, s) of one face and mode at one point x = (u, v, s): ((n_pairs,), (n_pairs, 3))
-Signal = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
-
-
 #: a pressing finger's nuisance column (:mod:`ectskin.inversion.finger_nuisance`): face, (u, v, F)
 #: → (M (n_pairs,), ∂M/∂(u, v, F) (n_pairs, 3))
 FingerColumn = Callable[[str, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -85,10 +80,6 @@ def _restricted(signal: Signal, ok: np.ndarray) -> Signal:
         return d[ok], J[ok]
 
     return sub
-
-
-def _clamped(lo: float, hi: float, k: int) -> np.ndarray:
-    return np.r_[[lo] * (k + 1), [hi] * (k + 1)]
 
 
 def field_axes(field: FieldLike, face: str, mode: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
@@ -108,86 +99,6 @@ def spline_signal(field: ResponseField, face: str, mode: str) -> Signal:
     u, v, x, lo, hi = field_axes(field, face, mode)
     values = np.asarray(field.node_values(face, mode), dtype=np.float64) - field.untouched
     return tensor_spline(u, v, x, lo, hi, values)
-
-
-def tensor_spline(u: np.ndarray, v: np.ndarray, x: np.ndarray, lo: float, hi: float,
-                  values: np.ndarray) -> Signal:
-    """The interpolant of ``values`` (n_u, n_v, n_s, q) over the nodes (u, v, s) as the field
-    builds it, and its three slopes: p = (u, v, s) → ((q,), (q, 3))."""
-    c = values
-    ts, ks = [], []
-    for ax, (nodes, k, t) in enumerate(
-        [(u, min(3, u.size - 1), None), (v, min(3, v.size - 1), None),
-         (x, x.size - 1, _clamped(lo, hi, x.size - 1))]
-    ):
-        s = make_interp_spline(nodes, c, k=k, t=t, axis=ax)
-        c = np.moveaxis(s.c, 0, ax)
-        ts.append(s.t)
-        ks.append(k)
-    knots = [[float(a) for a in t] for t in ts]
-    coef = np.ascontiguousarray(c)
-    n_pairs = coef.shape[-1]
-    ends = [(float(t[k]), float(t[-k - 1])) for t, k in zip(knots, ks)]
-
-    def signal(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # tensor-product evaluation: the k+1 live basis functions of each axis and their
-        # slopes (The NURBS Book, A2.2/A2.3), contracted with the live block of coefficients
-        spans, bases = [], []
-        for ax in range(2):
-            i, b = _basis(knots[ax], ks[ax], min(max(float(p[ax]), ends[ax][0]), ends[ax][1]))
-            spans.append(i)
-            bases.append(b)
-        # s: one polynomial piece on [lo, hi] (clamped knots): the Bernstein basis
-        bases.append(_bernstein(ks[2], lo, hi, min(max(float(p[2]), lo), hi)))
-        (iu, iv), (ku, kv, k_s), i_s = spans, ks, ks[2]
-        block = coef[iu - ku: iu + 1, iv - kv: iv + 1, i_s - k_s: i_s + 1]  # (ku+1, kv+1, ks+1, p)
-        (bu, du), (bv, dv), s2 = bases
-        uu, vv = np.array([bu, du, bu]), np.array([bv, bv, dv])
-        w = (uu[:, :, None] * vv[:, None, :]).reshape(3, -1)  # u·v, u'·v, u·v'
-        uvs = (w @ block.reshape(w.shape[1], -1)).reshape(3, k_s + 1, n_pairs)
-        z = np.array(s2) @ uvs  # (3, 2, p): [u·v, u'·v, u·v'] × [s, s']
-        return z[0, 0], np.stack([z[1, 0], z[2, 0], z[0, 1]], axis=-1)
-
-    return signal
-
-
-def _bernstein(k: int, lo: float, hi: float, x: float) -> tuple[list[float], list[float]]:
-    """The Bernstein polynomials of degree k on [lo, hi] at x, and their slopes (d/dx)."""
-    t = (x - lo) / (hi - lo)
-    low = [math.comb(k - 1, j) * t**j * (1 - t) ** (k - 1 - j) for j in range(k)] if k else []
-    val = [math.comb(k, j) * t**j * (1 - t) ** (k - j) for j in range(k + 1)]
-    scale = k / (hi - lo)
-    der = [scale * ((low[j - 1] if j else 0.0) - (low[j] if j < k else 0.0)) for j in range(k + 1)]
-    return val, der
-
-
-def _basis(t: list[float], k: int, x: float) -> tuple[int, tuple[list[float], list[float]]]:
-    """The span i (t[i] <= x < t[i+1], inside [t[k], t[-k-1]]) and the values (row 0) and first
-    derivatives (row 1) of the k+1 B-splines of degree k alive there, B_{i-k} … B_i."""
-    i = bisect.bisect_right(t, x) - 1
-    i = min(max(i, k), len(t) - k - 2)
-    left = [x - t[i + 1 - j] for j in range(1, k + 1)]
-    right = [t[i + j] - x for j in range(1, k + 1)]
-    n = [1.0]
-    low = n
-    for d in range(1, k + 1):
-        low = n
-        saved = 0.0
-        n = []
-        for r in range(d):
-            tmp = low[r] / (right[r] + left[d - r - 1])
-            n.append(saved + right[r] * tmp)
-            saved = left[d - r - 1] * tmp
-        n.append(saved)
-    # slopes from the degree k-1 functions (zero beyond the live ones)
-    lk = [0.0] + list(low) + [0.0] if k else [0.0, 0.0]
-    der = []
-    for r in range(k + 1):
-        j = i - k + r
-        a = lk[r] / (t[j + k] - t[j]) if k and t[j + k] > t[j] else 0.0
-        b = lk[r + 1] / (t[j + k + 1] - t[j + 1]) if k and t[j + k + 1] > t[j + 1] else 0.0
-        der.append(k * (a - b))
-    return i, (n, der)
 
 
 def generic_signal(field: FieldLike, face: str, mode: str) -> Signal:
