@@ -85,3 +85,21 @@ def test_the_step_refuses_a_bad_number_of_two_finger_frames(tmp_path):
     with pytest.raises(pinv.EctskinError, match="two_finger_frames must be an integer >= 0"):
         pinv.inversion_step(None, None, {}, (tmp_path, {}), two_finger_frames=True)  # type: ignore[arg-type]
 
+
+
+def test_force_is_observable_by_the_standard_error_of_the_force_scored():
+    """A one-finger frame fitted as two pressing fingers is scored by the best-located one
+    (slot 0); whether its force is observable is that finger's standard error, not the first
+    fitted finger's."""
+    data = _data([1, 1], [0, 1])  # finger at (0, 10) and (0, 11), 1 N
+    a = _arrays([[(9.0, 70.0, True), (0.0, 10.0, True)], [(0.0, 11.0, True)]])
+    a["uv_se_mm"][0, 0] = 5.0  # the phantom: its point hardly told
+    a["force_se_n"][0] = (0.05, 0.3)  # the phantom's force well told, the finger's not
+    a["force_n"][0] = (1.5, 1.2)
+    a["force_n"][1, 0] = 0.9
+    a["converged"] = np.ones(2, bool)
+    m = pinv.score(data, a, np.full(2, 1e-3))
+    fo = m["force_observable"]
+    assert fo["n_frames"] == 1 and fo["share"] == pytest.approx(0.5)
+    assert fo["force_mae_n"] == pytest.approx(0.1)  # frame 1 alone
+    assert fo["force_mae_n_not_observable"] == pytest.approx(0.2)  # frame 0's scored finger

@@ -217,9 +217,11 @@ def score(data: ContactData, arrays: Mapping[str, np.ndarray], seconds: np.ndarr
                                        "n_frames": int(rows.size)}
     out["per_state"] = per_state
     single = data.count == 1
-    se = np.asarray(arrays["force_se_n"])[:, 0]
-    ok = single & (pred[:, 0] >= 1) & np.isfinite(se) & (se < FORCE_OBSERVABLE_N)
-    err = np.abs(pred[:, len(PRED_COLUMNS) + SLOT_COLUMNS.index("force_n")] - data.force[:, 0])
+    a = len(PRED_COLUMNS)
+    # the standard error of the force scored: slot 0's, the best-located pressing finger (0: none)
+    se = pred[:, a + SLOT_COLUMNS.index("force_sigma_n")]
+    ok = single & (pred[:, 0] >= 1) & (se > 0) & (se < FORCE_OBSERVABLE_N)
+    err = np.abs(pred[:, a + SLOT_COLUMNS.index("force_n")] - data.force[:, 0])
     out["force_observable"] = {
         "threshold_n": FORCE_OBSERVABLE_N,
         "share": float(ok.sum() / single.sum()) if single.any() else None,
