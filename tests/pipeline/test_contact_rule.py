@@ -162,3 +162,8 @@ def test_the_report_line_names_the_rule_and_the_lowest_when_it_was_not_taken():
     assert line is not None and "of the lowest): the hybrid, 1.22 mm" in line
     old = choice_line({"choice": {k: v for k, v in c.items() if k not in ("rule", "best")}})
     assert old is not None and "validation frames by the mean point error: the inversion" in old
+    # the chosen one's worst inflation state, where the step recorded it
+    cands["inversion"]["test"]["worst_state"] = ["0/0/0 ml", 2.86]
+    line = choice_line({"choice": c})
+    assert line is not None
+    assert "1.35 mm on the test frames, 2.86 mm in its worst inflation state (0/0/0 ml)" in line

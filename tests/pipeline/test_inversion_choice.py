@@ -27,6 +27,7 @@ from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
 from ectskin.learn.tasks.contact import contact_report, point_errors
 from ectskin.pipeline import contact_pick as cp
 from ectskin.pipeline import inversion as pinv
+from ectskin.pipeline.bound import state_key
 from ectskin.pipeline.metrics import inversion_block
 from ectskin.pipeline.runner import StepRunner
 from ectskin.report.inversion import choice_line
@@ -206,6 +207,16 @@ def test_per_frame_errors_average_to_the_reports_point_error(world):
             sub.faces[int(np.clip(pred[i, a], 0, len(sub.faces) - 1))],
             pred[i, [a + 1, a + 2]], width, thickness) for i in single]
         np.testing.assert_allclose(errs, by_hand, rtol=1e-12)
+        # their mean per inflation state, and the worst state
+        st = sub.state[single]
+        want = {state_key(sub.states[s]): float(np.mean(np.asarray(by_hand)[st == s]))
+                for s in np.unique(st)}
+        assert numbers["per_state_loc_mm_mean"].keys() == want.keys()
+        for key, mm in want.items():
+            assert numbers["per_state_loc_mm_mean"][key] == pytest.approx(mm, rel=1e-12)
+        worst = max(want, key=want.__getitem__)
+        assert numbers["worst_state"][0] == worst
+        assert numbers["worst_state"][1] == pytest.approx(want[worst], rel=1e-12)
     with pytest.raises(Exception, match="pred must have shape"):
         point_errors(sub, guess[:-1])
 

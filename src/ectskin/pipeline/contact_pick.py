@@ -56,6 +56,7 @@ from ectskin.learn.data.contact import MAX_FINGERS, ContactData, contact_dataset
 from ectskin.learn.evaluate import calibration, read_run
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
 from ectskin.learn.tasks.contact import contact_report, point_errors
+from ectskin.pipeline.bound import state_key
 
 log = logging.getLogger(__name__)
 
@@ -192,22 +193,31 @@ def seeds_from_predictions(pred: np.ndarray, faces: Sequence[str], *, pressing_o
 
 def score(data: ContactData, pred: np.ndarray, seconds: np.ndarray | None = None
           ) -> dict[str, Any]:
-    """:data:`SCORE_KEYS` of ``pred`` on ``data`` (every row), with the median time per frame
-    (ms) where ``seconds`` are given."""
+    """:data:`SCORE_KEYS` of ``pred`` on ``data`` (every row), the point error per state
+    (:func:`scored`), with the median time per frame (ms) where ``seconds`` are given."""
     return scored(data, pred, seconds)[0]
 
 
 def scored(data: ContactData, pred: np.ndarray, seconds: np.ndarray | None = None
            ) -> tuple[dict[str, Any], np.ndarray]:
     """(:func:`score`, the per-frame point errors of the frames with one finger in row order,
-    :func:`~ectskin.learn.tasks.contact.point_errors`: their mean is ``loc_mm_mean``)."""
+    :func:`~ectskin.learn.tasks.contact.point_errors`: their mean is ``loc_mm_mean``). The score
+    holds their mean per inflation state too (``per_state_loc_mm_mean``, {"0/20/0 ml": mm}) and
+    the worst of those (``worst_state``: [state, mm])."""
     report = contact_report(data, pred, with_maps=False) if data.n_samples else {}
     out: dict[str, Any] = {k: report.get(k) for k in SCORE_KEYS}
     out["n_frames"] = int(data.n_samples)
     if seconds is not None and len(seconds):
         out["ms_per_frame_median"] = float(np.median(seconds) * 1e3)
         out["ms_per_frame_mean"] = float(np.mean(seconds) * 1e3)
-    return out, (point_errors(data, pred) if data.n_samples else np.zeros(0))
+    errors = point_errors(data, pred) if data.n_samples else np.zeros(0)
+    # the point error per inflation state (the frames with one finger), and the worst state
+    state = data.state[data.count == 1] if data.n_samples else np.zeros(0, np.int64)
+    per = {state_key(data.states[s]): float(errors[state == s].mean())
+           for s in np.unique(state)}
+    out["per_state_loc_mm_mean"] = per
+    out["worst_state"] = max(per.items(), key=lambda kv: kv[1]) if per else None
+    return out, errors
 
 
 def paired_se(errors: np.ndarray, reference: np.ndarray) -> float | None:

@@ -144,8 +144,9 @@ def choice_line(inv: Mapping[str, Any]) -> str | None:
     """One sentence on the contact model chosen for the states with a field (metrics.json's
     ``inversion.choice``): which, on how many validation frames and by which rule (the
     one-standard-error rule: the lowest validation error when the chosen one is not it), every
-    candidate's validation point error, the chosen one's test error, and who answers the states
-    without a field; None without a choice."""
+    candidate's validation point error, the chosen one's test error and its worst inflation
+    state (where the step recorded one), and who answers the states without a field; None
+    without a choice."""
     c = inv.get("choice")
     if not isinstance(c, Mapping) or not c.get("selected"):
         return None
@@ -164,10 +165,14 @@ def choice_line(inv: Mapping[str, Any]) -> str | None:
             + (f", {_choice_name(best)}'s" if best and best != chosen else "") + ")"
             if c.get("rule") == "one standard error (paired)"  # pipeline.contact_pick.RULE
             else "by the mean point error")
+    worst = ((cands.get(chosen) or {}).get("test") or {}).get("worst_state")
+    worst_text = (f", {_mm(worst[1])} in its worst inflation state ({worst[0]})"
+                  if isinstance(worst, list | tuple) and len(worst) == 2 else "")
     text = (f"Contact model of the states with a field, chosen on {c.get('n_val_frames')} "
             f"validation frames {rule}: {_choice_name(chosen)}, "
             f"{_mm(err(chosen, 'val'))} ({others}); {_mm(err(chosen, 'test'))} on the test "
-            "frames (the hybrid is the inversion seeded with the learned model's guess).")
+            f"frames{worst_text} (the hybrid is the inversion seeded with the learned model's "
+            "guess).")
     if isinstance(share, int | float) and share > 0:
         text += (f" The test frames of states without a field ({_pct(share)}) can only be "
                  f"answered by the learned model ({_choice_name(ans.get('model'))}).")
