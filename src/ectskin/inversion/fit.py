@@ -25,7 +25,9 @@ count starts from the previous frame's fingers instead of the coarse search; whi
 passes the gate the coarse search of that count is skipped. Otherwise the count is fitted from
 its cold starts too and the better fit kept. Every other count is fitted as without ``warm``
 (a two-finger stream still fits one finger from its coarse search: the count is chosen by BIC
-against the same one-finger fit as a cold fit's), so a warm fit only ever adds a start.
+against the same one-finger fit as a cold fit's), so a warm fit only ever adds a start; but
+where the warm fit passes the gate, a smaller count's fit is screened on a few evaluations and
+run on only where it comes near its gate (:mod:`ectskin.inversion.stream`).
 **Seeds** (``fit(..., seeds=...)``, e.g. a learned model's guess): more starts of their counts,
 beside the coarse search's or in place of it (``seed_search``; :mod:`ectskin.inversion.seed`).
 
