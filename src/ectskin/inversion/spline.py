@@ -20,6 +20,8 @@ from operator import mul
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
+from ectskin._check import EctskinError
+
 #: Δ and ∂Δ/∂(u, v, s) of one face and mode at one point x = (u, v, s): ((n_pairs,), (n_pairs, 3))
 Signal = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 #: one axis: x → (the span i, the live B-splines B_{i-k} … B_i at x, their slopes)
@@ -123,8 +125,9 @@ def tensor_spline(u: np.ndarray, v: np.ndarray, x: np.ndarray, lo: float, hi: fl
     coef = np.ascontiguousarray(c)
     n_pairs = coef.shape[-1]
     (ku, kv, k_s), (bu_at, bv_at, bs_at) = ks, bases
-    # s is one polynomial piece: its B-splines are every coefficient along s
-    assert coef.shape[2] == k_s + 1
+    if coef.shape[2] != k_s + 1:  # s is one polynomial piece: every coefficient along s is live
+        raise EctskinError(f"tensor_spline: {coef.shape[2]} coefficients along s for one piece "
+                           f"of degree {k_s}")
 
     def signal(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         # the k+1 live basis functions of each axis and their slopes, contracted with the live
