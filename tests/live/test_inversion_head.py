@@ -22,6 +22,7 @@ from ectskin.cli import main
 from ectskin.inversion import Inversion, fit_frames
 from ectskin.inversion import fit as fit_module
 from ectskin.inversion.model_error import ml_model_error, residuals
+from ectskin.inversion.stream import SCREEN_NFEV
 from ectskin.io.hdf5 import read_recording, write_recording
 from ectskin.io.recording import Recording, Trial
 from ectskin.layout import default_layout
@@ -722,7 +723,7 @@ def test_a_stream_of_two_fingers_screens_the_one_finger_fit_and_keeps_its_answer
     def stream_of(screen: bool):
         monkeypatch.setattr(fit_module.Inversion, "_fit_fingers", staticmethod(recording))
         if not screen:  # every count on the full budget
-            monkeypatch.setattr(fit_module.stream, "screened",
+            monkeypatch.setattr(fit_module, "screened",
                                 lambda fit, m, d, s, st, c, g: fit(m, d, s, st, c))
         out, prev = [], inv.fit(frames[0], REST)
         for y in frames[1:] + [lifted]:
@@ -735,7 +736,7 @@ def test_a_stream_of_two_fingers_screens_the_one_finger_fit_and_keeps_its_answer
     screened, full = stream_of(True), stream_of(False)
     for (a, calls), (b, _) in zip(screened[:-1], full[:-1]):
         # the warm two-finger fit, then the one-finger fit on the screen's budget alone
-        assert calls == [(2, None), (1, fit_module.stream.SCREEN_NFEV)]
+        assert calls == [(2, None), (1, SCREEN_NFEV)]
         assert a.n_fingers == b.n_fingers == 2
         for fa, fb in zip(a.fingers, b.fingers):
             np.testing.assert_allclose([fa.u_mm, fa.v_mm, fa.force_n], [fb.u_mm, fb.v_mm, fb.force_n],

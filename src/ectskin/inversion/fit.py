@@ -80,7 +80,6 @@ import numpy as np
 from scipy.stats import chi2
 
 from ectskin._check import EctskinError, check_option
-from ectskin.inversion import stream
 from ectskin.inversion.finger_nuisance import (
     MODULUS_PRIOR_SD,
     RADIUS_PRIOR_SD,
@@ -100,6 +99,8 @@ from ectskin.inversion.model import MODES, FieldLike, StateModel
 from ectskin.inversion.noise import check_floor, widened_sigma
 from ectskin.inversion.result import FingerEstimate, Fit, InversionResult, build_result
 from ectskin.inversion.seed import SEED_SEARCH, FingerGuess, seed_starts
+from ectskin.inversion.stream import screened
+from ectskin.inversion.stream import warm_start as stream_start
 from ectskin.twin.readout import ReadoutConfig
 
 # FingerEstimate and InversionResult live in :mod:`ectskin.inversion.result`; named here too
@@ -385,7 +386,7 @@ class Inversion:
         (:func:`~ectskin.inversion.pool_fingers`)."""
         m = self.model(state)
         prior = finger_prior(finger)
-        warm_start = stream.warm_start(m, warm)
+        warm_start = stream_start(m, warm)
         y, w = self.observed(readouts, state, kind, reference)
         ok = np.isfinite(y)
         if not ok.all():  # masked channels (NaN in any frame of the window) are left out
@@ -429,9 +430,8 @@ class Inversion:
                 fits.append(hot)
             else:
                 starts.append(self._starts(m, delta, k, fits[1] if k > 1 else None))
-                cold = (stream.screened(self._fit_fingers, m, delta, sigma, starts[k][0],
-                                        self.coupled, lambda f: _chi2_gate(n - f.n_params,
-                                                                           self.gate_p))
+                cold = (screened(self._fit_fingers, m, delta, sigma, starts[k][0], self.coupled,
+                                 lambda f: _chi2_gate(n - f.n_params, self.gate_p))
                         if explained and k < len(warm_fit.fingers)  # type: ignore[union-attr]
                         else self._fit_fingers(m, delta, sigma, starts[k][0], self.coupled))
                 fits.append(hot if hot is not None and hot.chi2 < cold.chi2 else cold)
