@@ -76,6 +76,9 @@ def test_the_inversion_stands_beside_contactnet_the_baselines_and_the_bound():
     assert "(the fitted force's standard error, the bound at the solution, below" in text
     assert "within one standard error" not in text
     assert "median 9.5 ms, 95th percentile 21.0 ms" in text
+    # the step's fits are cold (and twice where the person's finger is pooled), not a stream's
+    assert "(this run, on its machine; each frame cold, from the coarse search)" in text
+    assert "A live stream fits each frame from the previous frame's answer instead" in text
     assert "10/10/10 ml (90 frames), 18.75 % of the test frames" in text
     # the contact sections carry it, and so do the rendered report's
     assert ("h2", "The physical inversion (no training)") in contact_sections(_metrics())

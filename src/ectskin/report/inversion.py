@@ -264,10 +264,15 @@ def inversion_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
                        "one pair of fingers' moves: few trials make this number coarse."))
     med, p95 = inv.get("ms_per_frame_median"), inv.get("ms_per_frame_p95")
     if isinstance(med, int | float):
-        s.append(("p", f"Time per frame on one core (this run, on its machine): median "
-                       f"{med:.1f} ms, 95th percentile {p95:.1f} ms (live target ≤ {LIVE_MS:g} ms)."
-                  if isinstance(p95, int | float) else
-                  f"Time per frame on one core: median {med:.1f} ms."))
+        pooled = (inv.get("finger") or {}).get("use")
+        how = ("each frame cold, from the coarse search"
+               + (", and again with its trial's pooled finger" if pooled else ""))
+        s.append(("p", f"Time per frame of these fits on one core (this run, on its machine; "
+                       f"{how}): median {med:.1f} ms"
+                       + (f", 95th percentile {p95:.1f} ms" if isinstance(p95, int | float) else "")
+                       + f". A live stream fits each frame from the previous frame's answer "
+                       f"instead (target ≤ {LIVE_MS:g} ms a frame; its time: "
+                       "benchmarks/bench_live.py, BENCHMARKS.md)."))
     missing = inv.get("frames_without_field") or {}
     if missing:
         s.append(("p", "Test frames in states without a response field (not inverted): "
