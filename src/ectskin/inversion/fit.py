@@ -23,11 +23,11 @@ noise (the gate, ``gate_p``): a one-finger frame costs one fit, a two-finger fra
 **Warm start** (``fit(..., warm=previous)``, a live stream): the fit of the previous frame's
 count starts from the previous frame's fingers instead of the coarse search; while that fit
 passes the gate the coarse search of that count is skipped. Otherwise the count is fitted from
-its cold starts too and the better fit kept. Every other count is fitted as without ``warm``
-(a two-finger stream still fits one finger from its coarse search: the count is chosen by BIC
-against the same one-finger fit as a cold fit's), so a warm fit only ever adds a start; but
-where the warm fit passes the gate, a smaller count's fit is screened on a few evaluations and
-run on only where it comes near its gate (:mod:`ectskin.inversion.stream`).
+its cold starts too and the better fit kept. Every other count is fitted as without ``warm``,
+so a warm fit only ever adds a start; except where the warm fit passes the gate: a smaller
+count's fit then starts from the warm fit's strongest fingers instead of its coarse search, is
+screened on a few evaluations and run on only where it comes near its gate
+(:mod:`ectskin.inversion.stream`).
 **Seeds** (``fit(..., seeds=...)``, e.g. a learned model's guess): more starts of their counts,
 beside the coarse search's or in place of it (``seed_search``; :mod:`ectskin.inversion.seed`).
 
@@ -99,7 +99,7 @@ from ectskin.inversion.model import MODES, FieldLike, StateModel
 from ectskin.inversion.noise import check_floor, widened_sigma
 from ectskin.inversion.result import FingerEstimate, Fit, InversionResult, build_result
 from ectskin.inversion.seed import SEED_SEARCH, FingerGuess, seed_starts
-from ectskin.inversion.stream import screened
+from ectskin.inversion.stream import screened, strongest
 from ectskin.inversion.stream import warm_start as stream_start
 from ectskin.twin.readout import ReadoutConfig
 
@@ -429,11 +429,13 @@ class Inversion:
                 starts.append([])
                 fits.append(hot)
             else:
-                starts.append(self._starts(m, delta, k, fits[1] if k > 1 else None))
-                cold = (screened(self._fit_fingers, m, delta, sigma, starts[k][0], self.coupled,
-                                 lambda f: _chi2_gate(n - f.n_params, self.gate_p))
-                        if explained and k < len(warm_fit.fingers)  # type: ignore[union-attr]
-                        else self._fit_fingers(m, delta, sigma, starts[k][0], self.coupled))
+                if explained and k < len(warm_fit.fingers):  # type: ignore[union-attr]
+                    starts.append([strongest(m, warm_fit, k, sigma)])  # type: ignore[arg-type]
+                    cold = screened(self._fit_fingers, m, delta, sigma, starts[k][0],
+                                    self.coupled, lambda f: _chi2_gate(n - f.n_params, self.gate_p))
+                else:
+                    starts.append(self._starts(m, delta, k, fits[1] if k > 1 else None))
+                    cold = self._fit_fingers(m, delta, sigma, starts[k][0], self.coupled)
                 fits.append(hot if hot is not None and hot.chi2 < cold.chi2 else cold)
             passed.append(self._passes(fits[k], k, nb, n))
             if k == self.max_fingers:

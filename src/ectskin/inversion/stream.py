@@ -10,9 +10,12 @@ budget (40 evaluations of 50 on average, against some 5 for a warm fit), most of
 time, to be discarded (BENCHMARKS.md, eighteenth session).
 
 So where the warm start of more fingers explains the frame (it passes the gate, its fingers do
-not overlap), a smaller count is fitted on :data:`SCREEN_NFEV` evaluations first
-(:func:`screened`), and on with the full budget only where that fit converged or came within
-:data:`SCREEN_FACTOR` times its gate. A smaller count can be the answer only by passing its gate
+not overlap), a smaller count is fitted from the warm fit's strongest fingers (:func:`strongest`,
+in place of the coarse search) on :data:`SCREEN_NFEV` evaluations first (:func:`screened`), and
+on with the full budget only where that fit converged or came within :data:`SCREEN_FACTOR` times
+its gate. If fewer fingers explain the frame (one lifted), the ones left are among the warm
+fit's and carry the most signal, so that start is at the answer and a few evaluations bring it
+near its gate; else the fit cannot explain the frame from any start. A smaller count can be the answer only by passing its gate
 or by a BIC below the warm fit's; with the warm fit within its gate, the latter asks for a χ²
 within that gate and the BIC's charge for the parameters it saves (a few ln n), far below
 :data:`SCREEN_FACTOR` gates. What this leaves out: a fit that after its first evaluations is
@@ -31,7 +34,7 @@ from ectskin.inversion.model import MODES, StateModel
 from ectskin.inversion.result import Fit, InversionResult
 
 #: the evaluations a smaller count's fit gets before it is screened
-SCREEN_NFEV = 10
+SCREEN_NFEV = 4
 #: a screened fit goes on with the full budget where its χ² is within this many times its gate
 SCREEN_FACTOR = 10.0
 
@@ -57,6 +60,17 @@ def warm_start(m: StateModel, warm: InversionResult | None) -> Start | None:
         s = f.force_n if f.contact else math.log(f.height_mm)
         start.append((m.faces.index(f.face), MODES.index(mode), np.array([f.u_mm, f.v_mm, s])))
     return start or None
+
+
+def strongest(m: StateModel, fit: Fit, k: int, sigma: np.ndarray) -> Start:
+    """The ``k`` fingers of ``fit`` whose signals are the largest in noise units (‖Δ / σ‖, in
+    the fit's order): the start of a smaller count's screened fit."""
+    if not 0 < k <= len(fit.fingers):
+        raise EctskinError(f"strongest: k must be 1..{len(fit.fingers)}, got {k}")
+    size = [float(np.linalg.norm(m.signal(m.faces[fi], MODES[mi], x)[0] / sigma))
+            for fi, mi, x in fit.fingers]
+    keep = sorted(np.argsort(size)[::-1][:k].tolist())
+    return [(fit.fingers[j][0], fit.fingers[j][1], fit.fingers[j][2].copy()) for j in keep]
 
 
 def screened(fit: Callable[..., Fit], m: StateModel, delta: np.ndarray, sigma: np.ndarray,
