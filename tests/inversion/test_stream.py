@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ectskin._check import EctskinError
 from ectskin.inversion.lm import MAX_NFEV
 from ectskin.inversion.result import Fit
-from ectskin._check import EctskinError
 from ectskin.inversion.stream import SCREEN_FACTOR, SCREEN_NFEV, screened, strongest
 
 START = [(0, 0, np.array([1.0, 2.0, 0.5]))]

@@ -15,10 +15,10 @@ in place of the coarse search) on :data:`SCREEN_NFEV` evaluations first (:func:`
 on with the full budget only where that fit converged or came within :data:`SCREEN_FACTOR` times
 its gate. If fewer fingers explain the frame (one lifted), the ones left are among the warm
 fit's and carry the most signal, so that start is at the answer and a few evaluations bring it
-near its gate; else the fit cannot explain the frame from any start. A smaller count can be the answer only by passing its gate
-or by a BIC below the warm fit's; with the warm fit within its gate, the latter asks for a χ²
-within that gate and the BIC's charge for the parameters it saves (a few ln n), far below
-:data:`SCREEN_FACTOR` gates. What this leaves out: a fit that after its first evaluations is
+near its gate; else the fit cannot explain the frame from any start. A smaller count can be
+the answer only by passing its gate or by a BIC below the warm fit's; with the warm fit within
+its gate, the latter asks for a χ² within that gate and the BIC's charge for the parameters it
+saves (a few ln n), far below :data:`SCREEN_FACTOR` gates. What this leaves out: a fit that after its first evaluations is
 more than that far from its gate and would still come below it within the remaining budget.
 """
 
