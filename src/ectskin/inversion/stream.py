@@ -18,8 +18,9 @@ fit's and carry the most signal, so that start is at the answer and a few evalua
 near its gate; else the fit cannot explain the frame from any start. A smaller count can be
 the answer only by passing its gate or by a BIC below the warm fit's; with the warm fit within
 its gate, the latter asks for a χ² within that gate and the BIC's charge for the parameters it
-saves (a few ln n), far below :data:`SCREEN_FACTOR` gates. What this leaves out: a fit that after its first evaluations is
-more than that far from its gate and would still come below it within the remaining budget.
+saves (a few ln n), far below :data:`SCREEN_FACTOR` gates. What this leaves out: a fit that
+after its first evaluations is more than that far from its gate and would still come below it
+within the remaining budget.
 """
 
 from __future__ import annotations
