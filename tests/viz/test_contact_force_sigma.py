@@ -82,6 +82,9 @@ def test_error_bars_are_the_sigma_and_the_legend_the_hand_count():
         np.testing.assert_allclose(bars[part][:, 1], PRED[with_sigma])
         np.testing.assert_allclose(bars[part][:, 2], SIGMA[with_sigma])
     assert _legend(ax) == LEGEND
+    assert sorted(t.get_text().split(",")[0] for t in ax.get_legend().get_texts()
+                  if "frame" in t.get_text()) == [
+        "no bound", "not observable (bound ≥ 0.1 N)", "observable (bound < 0.1 N)"]
     # frame 4 (no σ) is drawn, hollow and without a bar
     hollow = [ln for ln in ax.lines if ln.get_markerfacecolor() == "none"]
     assert len(hollow) == 1 and hollow[0].get_gid() == "observable"
@@ -126,3 +129,11 @@ def test_bad_input_names_the_field():
         plot_force_sigma(TRUE, PRED, SIGMA, BOUND, threshold_n=0)
     with pytest.raises(EctskinError, match=r"max_points must be an integer >= 1, got 0"):
         plot_force_sigma(TRUE, PRED, SIGMA, max_points=0)
+
+
+def test_the_legend_names_what_the_frames_are_split_by():
+    """An inversion splits its frames by its own standard error, and the legend says so."""
+    ax = plot_force_sigma(TRUE, PRED, SIGMA, BOUND, threshold_n=0.1, split_by="σ").axes[0]
+    assert sorted(t.get_text().split(",")[0] for t in ax.get_legend().get_texts()
+                  if "frame" in t.get_text()) == [
+        "no σ", "not observable (σ ≥ 0.1 N)", "observable (σ < 0.1 N)"]

@@ -197,8 +197,8 @@ def write_answers(out_dir: Path, data: ContactData, rows: np.ndarray,
     if one.any():
         a = len(PRED_COLUMNS)
         force, sigma = (pred[one, a + SLOT_COLUMNS.index(c)] for c in ("force_n", "force_sigma_n"))
-        save(plot_force_sigma(sub.force[one, 0], force, sigma, sigma, threshold_n=threshold_n),
-             "force_sigma")
+        save(plot_force_sigma(sub.force[one, 0], force, sigma, sigma, threshold_n=threshold_n,
+                              split_by="σ"), "force_sigma")
     two = np.flatnonzero(data.count[rows] == 2)
     if two.size:
         pick = two[np.unique(np.linspace(0, two.size - 1, TWO_FINGER_EXAMPLES).round().astype(int))]

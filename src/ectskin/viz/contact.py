@@ -16,11 +16,12 @@ from ectskin._check import EctskinError
 from ectskin.viz.learning import _finish, _new_figure
 
 #: the parts of :func:`plot_force_sigma` with a bound: (name, colour, legend text; ``{thr}`` the
-#: threshold in N), as :func:`ectskin.learn.metrics.contact.force_split` names them
+#: threshold in N, ``{by}`` what is split: the bound, or the fit's own σ), as
+#: :func:`ectskin.learn.metrics.contact.force_split` names them
 FORCE_PARTS = (
-    ("observable", "tab:green", "observable (bound < {thr:g} N)"),
-    ("not_observable", "tab:red", "not observable (bound ≥ {thr:g} N)"),
-    ("no_bound", "tab:gray", "no bound"),
+    ("observable", "tab:green", "observable ({by} < {thr:g} N)"),
+    ("not_observable", "tab:red", "not observable ({by} ≥ {thr:g} N)"),
+    ("no_bound", "tab:gray", "no {by}"),
 )
 
 
@@ -117,6 +118,7 @@ def plot_force_sigma(
     bound_sd_n: Any = None,
     *,
     threshold_n: float = 0.1,
+    split_by: str = "bound",
     max_points: int = 400,
     axes: Any = None,
     show: bool = False,
@@ -129,7 +131,9 @@ def plot_force_sigma(
     marker without a bar). ``bound_sd_n`` (n,) N: the Cramér–Rao bound on the force's standard
     deviation at each frame's true point (NaN: none); frames whose bound is below
     ``threshold_n`` are *observable*, those at or above it *not observable*, the rest *no bound*
-    (:data:`FORCE_PARTS`); None: one part, all frames. The legend gives per part its frames
+    (:data:`FORCE_PARTS`); None: one part, all frames. ``split_by``: what ``bound_sd_n`` is, as
+    the legend names it ("bound"; an inversion's split by its own standard error: "σ"). The
+    legend gives per part its frames
     and the share of those with a σ whose true force lies within ±1σ and ±2σ of the prediction
     (a calibrated Gaussian σ covers 68.3 % and 95.4 %), over every frame of the part; at most
     ``max_points`` frames (evenly spaced) are drawn. ``axes``: where to draw (a new figure
@@ -158,7 +162,8 @@ def plot_force_sigma(
             "not_observable": has & ~(b < threshold_n),
             "no_bound": ~has,
         }
-        parts = [(n, c, text.format(thr=threshold_n), masks[n]) for n, c, text in FORCE_PARTS]
+        parts = [(n, c, text.format(thr=threshold_n, by=split_by), masks[n])
+                 for n, c, text in FORCE_PARTS]
     drawn = np.zeros(t.shape, bool)  # the frames drawn: at most max_points, evenly spaced
     drawn[np.linspace(0, t.size - 1, min(t.size, max_points)).astype(int)] = True
     if axes is None:
