@@ -164,11 +164,14 @@ def crb(
             known.append(int(c))
         elif np.isfinite(var):
             fim[c, c] += 1.0 / var
-    keep = [c for c in range(n) if c not in known]
-    std, cov, ok, ret = np.zeros(n), np.zeros((n, n)), np.ones(n, bool), np.ones(n)  # known: 0
-    std[keep], cov[np.ix_(keep, keep)], ok[keep], ret[keep], cond = _bound_block(
-        fim[np.ix_(keep, keep)], rcond
-    )
+    if known:
+        keep = [c for c in range(n) if c not in known]
+        std, cov, ok, ret = np.zeros(n), np.zeros((n, n)), np.ones(n, bool), np.ones(n)  # known: 0
+        std[keep], cov[np.ix_(keep, keep)], ok[keep], ret[keep], cond = _bound_block(
+            fim[np.ix_(keep, keep)], rcond
+        )
+    else:  # (the same without the indexing: every frame of the live inversion comes here)
+        std, cov, ok, ret, cond = _bound_block(fim, rcond)
     i = [c for c in range(n) if c not in nuis]
     return Bound(std[i], cov[np.ix_(i, i)], ok[i], ret[i], cond)
 
@@ -188,7 +191,7 @@ def _bound_block(fim: np.ndarray, rcond: float):
         return std, cov, resolved, retained, np.inf
     idx = np.flatnonzero(live)
     dl = d[idx]
-    lam, V = np.linalg.eigh(fim[np.ix_(idx, idx)] / np.outer(dl, dl))
+    lam, V = np.linalg.eigh((fim if live.all() else fim[np.ix_(idx, idx)]) / np.outer(dl, dl))
     floor = rcond * lam[-1]
     null = lam <= floor
     inv = 1.0 / np.where(null, floor, lam)
@@ -199,7 +202,10 @@ def _bound_block(fim: np.ndarray, rcond: float):
     cond = float(lam[-1] / lam[0]) if lam[0] > 0 else np.inf
     good = idx[ok]
     sub = np.flatnonzero(ok)
-    cov[np.ix_(good, good)] = cov_s[np.ix_(sub, sub)] / np.outer(dl[sub], dl[sub])
+    if good.size == n:  # (every column resolved: the same without the indexing)
+        cov = cov_s / np.outer(dl, dl)
+    else:
+        cov[np.ix_(good, good)] = cov_s[np.ix_(sub, sub)] / np.outer(dl[sub], dl[sub])
     std[good] = np.sqrt(var_s[sub]) / dl[sub]
     retained[good] = 1.0 / var_s[sub]  # 1 / (F_ii var_i) in scaled units
     resolved[good] = True
