@@ -82,9 +82,13 @@ def test_seeds_give_means_intervals_and_the_paired_verdict(tmp_path):
     assert design["rank_agreement"]["layouts"] == ["paper", "three", "five"]
     assert design["rank_agreement_fit"]["key"] == "fit_error_mm_p95"
     assert design["rank_agreement_fit"]["layouts"] == ["paper", "three", "five"]
+    assert design["rank_agreement_fit_median"]["key"] == "fit_error_mm_median"
+    assert design["rank_agreement_fit_median"]["layouts"] == ["paper", "three", "five"]
     assert design["goal"]["paper_bound_mm_p95"] == e["paper"]["bound_mm_p95"]
     md = (tmp_path / "design.md").read_text()
     assert "Spearman rho" in md and "At most 8 electrodes" in md
+    for name in ("worst-case bound", "worst-case error of a fit", "median error of a fit"):
+        assert f"The information score ({name}" in md
     assert "three is better than the paper's layout in loc_mm_mean" in md
     assert "five is better" not in md
     assert (tmp_path / "layouts" / "three" / "seed-2" / SCORE_FILE).is_file()

@@ -394,7 +394,8 @@ def _verdicts(layouts: Sequence[Mapping[str, Any]]) -> tuple[list[list[str]], li
 
 #: the information scores whose ranking is set beside the trained score's, and their names
 AGREEMENT_SCORES = (("bound_mm_p95", "worst-case bound"),
-                    ("fit_error_mm_p95", "worst-case error of a fit with one fingertip"))
+                    ("fit_error_mm_p95", "worst-case error of a fit with one fingertip"),
+                    ("fit_error_mm_median", "median error of a fit with one fingertip"))
 
 
 def rank_agreement(layouts: Sequence[Mapping[str, Any]]) -> str | None:

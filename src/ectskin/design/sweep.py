@@ -307,7 +307,9 @@ def write_design(
 ) -> dict[str, Any]:
     """Write ``design.json``: the settings, the engine and one entry per scored layout
     (``to_entry`` of its score, with its name and folder); with both scores on 3 or more
-    layouts the ``rank_agreement`` (:func:`~ectskin.design.stats.rank_agreement`), with paired
+    layouts the ``rank_agreement`` of the worst-case bound
+    (:func:`~ectskin.design.stats.rank_agreement`; ``rank_agreement_fit``,
+    ``rank_agreement_fit_median``: of the fit error's p95 and median), with paired
     comparisons the ``goal`` (:func:`~ectskin.design.stats.goal_layouts`)."""
     entries = []
     for name, _ in named:
@@ -329,9 +331,11 @@ def write_design(
     agreement = rank_agreement(entries)
     if agreement is not None:
         design["rank_agreement"] = agreement
-    fit_agreement = rank_agreement(entries, key="fit_error_mm_p95")
-    if fit_agreement is not None:
-        design["rank_agreement_fit"] = fit_agreement
+    for name, key in (("rank_agreement_fit", "fit_error_mm_p95"),
+                      ("rank_agreement_fit_median", "fit_error_mm_median")):
+        fit_agreement = rank_agreement(entries, key=key)
+        if fit_agreement is not None:
+            design[name] = fit_agreement
     if any("vs_paper" in e for e in entries):
         design["goal"] = goal_layouts(entries)
     write_json_atomic(Path(out) / DESIGN_FILE, design)
