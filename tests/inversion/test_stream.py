@@ -74,8 +74,8 @@ def test_the_screened_start_is_the_warm_fits_strongest_fingers_in_noise_units():
     assert (fi, mi) == (0, 0) and x.tolist() == [1.0, 2.0, 1.0]
     # with equal noise the back finger
     assert strongest(m, fit, 1, np.array([1.0, 1.0]))[0][0] == 1
-    # all of them in the fit's order, copies
-    both = strongest(m, fit, 2, np.array([1.0, 10.0]))
+    # all of them in the fit's order (the back finger is the stronger here), copies
+    both = strongest(m, fit, 2, np.array([1.0, 1.0]))
     assert [f[0] for f in both] == [0, 1]
     both[0][2][0] = 99.0
     assert fit.fingers[0][2][0] == 1.0
