@@ -159,8 +159,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default="bound",
         help="bound (default: minimise the worst-case position bound, the electrode count and "
         "the total wire length), fit (the same with the worst-case error of a fit with one "
-        "fingertip instead of the bound) or trained (the mean localisation error and the "
-        "electrode count)",
+        "fingertip instead of the bound), fit-median (the same with that fit's median error) or "
+        "trained (the mean localisation error and the electrode count)",
     )
     q.add_argument("--trials", type=integer(1), default=6, help="trials to finish (default 6)")
     q.add_argument("--sampler", default="tpe", help="tpe (default) or nsga2")
