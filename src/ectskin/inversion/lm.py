@@ -63,8 +63,8 @@ def fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
     nm = len(mod) * len(names)  # per nuisance, per pressing finger
     mws = np.repeat([m.finger_columns[q][1] for q in names], len(mod))
     # the priors' centres: 0 for the scales, the finger nuisances' (0 unless set)
-    centre = np.r_[np.zeros(ns), np.repeat([m.finger_centre.get(q, 0.0) for q in names],
-                                           len(mod))]
+    centre = np.concatenate([np.zeros(ns), np.repeat(
+        np.array([m.finger_centre.get(q, 0.0) for q in names], dtype=np.float64), len(mod))])
     nr = ns + nm  # the priors' rows of the finger nuisances
     na = nx + nr  # the bounded parameters
     Nw = m.N / sigma[:, None]
@@ -85,7 +85,7 @@ def fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
     cache: dict[str, Any] = {"p": None}
     diag = np.arange(na)
     neg_inv_sigma = (-1.0 / sigma)[:, None]
-    prior_rows = np.r_[np.full(ns, sw), mws]
+    prior_rows = np.concatenate([np.full(ns, sw), mws])  # (np.r_ costs more than a fit's step)
 
     def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if cache["p"] is None or not (cache["p"] == p).all():
@@ -129,8 +129,9 @@ def fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
     r0 = evaluate(np.concatenate([x0, np.zeros(nb)]))[0][:n]
     # the linear parameters (the scales, the moduli and β) from a linear fit at the start (the
     # priors' centres), with their priors, so that the optimiser begins near its valley
-    A = np.vstack([np.c_[-J[:n, nx:na], Nw], np.diag(np.r_[prior_rows, m.prior_w])])
-    lin = (np.linalg.lstsq(A, np.r_[r0, np.zeros(nr + nb)], rcond=None)[0] if nr + nb
+    A = np.vstack([np.hstack([-J[:n, nx:na], Nw]),
+                   np.diag(np.concatenate([prior_rows, m.prior_w]))])
+    lin = (np.linalg.lstsq(A, np.concatenate([r0, np.zeros(nr + nb)]), rcond=None)[0] if nr + nb
            else np.zeros(0))
     x0[nx:] = np.clip(x0[nx:] + lin[:nr], lo[nx:], hi[nx:])
     beta0 = lin[nr:]
