@@ -15,8 +15,8 @@ and checks it (:func:`~ectskin.design.family.build_layout`), and scores it into
 * ``fit``: the same score, the study minimising the worst-case error of a fit through a field
   made with one fingertip (``fit_error_mm_p95``, docs/design.md) instead of the bound;
 * ``fit-median``: the same score, the study minimising the median error of that fit
-  (``fit_error_mm_median``): of the information scores it is the one that ranked layouts as the
-  trained score does on two searches (BENCHMARKS.md, nineteenth session);
+  (``fit_error_mm_median``), which ranked layouts as the trained score did on two searches but
+  not on a third (BENCHMARKS.md, twentieth session);
 * ``trained``: the trained score (:func:`~ectskin.design.score.score_layout`: simulate, train,
   evaluate); the study minimises (mean localisation error, electrode count).
 
