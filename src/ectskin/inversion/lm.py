@@ -85,7 +85,7 @@ def fit_fingers(m: StateModel, delta: np.ndarray, sigma: np.ndarray,
     cache: dict[str, Any] = {"p": None}
     diag = np.arange(na)
     neg_inv_sigma = (-1.0 / sigma)[:, None]
-    prior_rows = np.concatenate([np.full(ns, sw), mws])  # (np.r_ costs more than a fit's step)
+    prior_rows = np.concatenate([np.full(ns, sw), mws])
 
     def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if cache["p"] is None or not (cache["p"] == p).all():
