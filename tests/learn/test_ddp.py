@@ -17,6 +17,7 @@ import socket
 import subprocess
 import sys
 import textwrap
+import warnings
 
 import numpy as np
 import pytest
@@ -79,35 +80,51 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+#: how a rank killed inside gloo's C++ threads reads in torchrun's report (std::terminate:
+#: "terminate called without an active exception", then SIGABRT), seen once in some twenty
+#: runs of this module on a loaded 2-core machine; see pytorch/pytorch#179291 on gloo threads at
+#: process exit
+GLOO_ABORT = "Signal 6 (SIGABRT)"
+
+
 @pytest.fixture(scope="module")
 def ddp_run(tmp_path_factory, blobs, displacements, states_data, small_c2dt):
-    tmp = tmp_path_factory.mktemp("ddp")
     data = {
         "touch": (blobs(20, 30, seed=0), blobs(6, 30, seed=1)),
         "track": (displacements(4, 60, seed=0), displacements(2, 60, seed=1)),
         "robust": (states_data(0, 0, per=20), states_data(1, 0, per=20, no_contact=False)),
     }
-    with open(tmp / "data.pkl", "wb") as fh:
-        pickle.dump((data, small_c2dt), fh)
-    script = tmp / "ddp_script.py"
-    script.write_text(SCRIPT)
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     env.pop("WORLD_SIZE", None)
-    cmd = [
-        sys.executable,
-        "-m",
-        "torch.distributed.run",
-        "--nproc_per_node",
-        "2",
-        "--master_addr",
-        "127.0.0.1",
-        "--master_port",
-        str(_free_port()),
-        str(script),
-        str(tmp),
-    ]
-    proc = subprocess.run(cmd, check=False, env=env, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    # a launch whose rank gloo aborted is run once more, in a fresh folder, and the abort is
+    # reported as a warning; any other failure, or a second abort, fails the tests
+    for attempt in (1, 2):
+        tmp = tmp_path_factory.mktemp("ddp")
+        with open(tmp / "data.pkl", "wb") as fh:
+            pickle.dump((data, small_c2dt), fh)
+        script = tmp / "ddp_script.py"
+        script.write_text(SCRIPT)
+        cmd = [
+            sys.executable,
+            "-m",
+            "torch.distributed.run",
+            "--nproc_per_node",
+            "2",
+            "--master_addr",
+            "127.0.0.1",
+            "--master_port",
+            str(_free_port()),
+            str(script),
+            str(tmp),
+        ]
+        proc = subprocess.run(cmd, check=False, env=env, capture_output=True, text=True,
+                              timeout=300)
+        report = proc.stdout[-3000:] + proc.stderr[-3000:]
+        if proc.returncode == 0 or attempt == 2 or GLOO_ABORT not in proc.stderr:
+            break
+        warnings.warn(f"torchrun: a rank aborted inside gloo; launched again:\n{report}",
+                      stacklevel=1)
+    assert proc.returncode == 0, report
     ranks = [json.loads((tmp / f"rank{r}.json").read_text()) for r in (0, 1)]
     return tmp, ranks
 
