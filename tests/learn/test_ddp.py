@@ -81,9 +81,9 @@ def _free_port() -> int:
 
 
 #: how a rank killed inside gloo's C++ threads reads in torchrun's report (std::terminate:
-#: "terminate called without an active exception", then SIGABRT), seen once in some twenty
-#: runs of this module on a loaded 2-core machine; see pytorch/pytorch#179291 on gloo threads at
-#: process exit
+#: "terminate called without an active exception", then SIGABRT), seen once in eight runs of
+#: this module on a 2-core machine (in a full `make test-all`, none in seven runs alone); see
+#: pytorch/pytorch#179291 on gloo threads at process exit
 GLOO_ABORT = "Signal 6 (SIGABRT)"
 
 
