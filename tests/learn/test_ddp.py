@@ -80,8 +80,8 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-#: how a rank killed inside gloo's C++ threads reads in torchrun's report (std::terminate:
-#: "terminate called without an active exception", then SIGABRT), seen once in eight runs of
+#: how a rank aborted from C++ reads in torchrun's report (std::terminate: "terminate called
+#: without an active exception", then SIGABRT; most likely gloo's threads), seen once in eight runs of
 #: this module on a 2-core machine (in a full `make test-all`, none in seven runs alone); see
 #: pytorch/pytorch#179291 on gloo threads at process exit
 GLOO_ABORT = "Signal 6 (SIGABRT)"
@@ -96,7 +96,7 @@ def ddp_run(tmp_path_factory, blobs, displacements, states_data, small_c2dt):
     }
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     env.pop("WORLD_SIZE", None)
-    # a launch whose rank gloo aborted is run once more, in a fresh folder, and the abort is
+    # a launch with a rank aborted that way is run once more, in a fresh folder, and the abort is
     # reported as a warning; any other failure, or a second abort, fails the tests
     for attempt in (1, 2):
         tmp = tmp_path_factory.mktemp("ddp")
@@ -122,7 +122,7 @@ def ddp_run(tmp_path_factory, blobs, displacements, states_data, small_c2dt):
         report = proc.stdout[-3000:] + proc.stderr[-3000:]
         if proc.returncode == 0 or attempt == 2 or GLOO_ABORT not in proc.stderr:
             break
-        warnings.warn(f"torchrun: a rank aborted inside gloo; launched again:\n{report}",
+        warnings.warn(f"torchrun: a rank aborted (SIGABRT); launched again:\n{report}",
                       stacklevel=1)
     assert proc.returncode == 0, report
     ranks = [json.loads((tmp / f"rank{r}.json").read_text()) for r in (0, 1)]
