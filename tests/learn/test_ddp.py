@@ -84,7 +84,7 @@ def _free_port() -> int:
 #: without an active exception", then SIGABRT; most likely gloo's threads), seen once in eight runs of
 #: this module on a 2-core machine (in a full `make test-all`, none in seven runs alone); see
 #: pytorch/pytorch#179291 on gloo threads at process exit
-GLOO_ABORT = "Signal 6 (SIGABRT)"
+RANK_ABORT = "Signal 6 (SIGABRT)"
 
 
 @pytest.fixture(scope="module")
@@ -120,7 +120,7 @@ def ddp_run(tmp_path_factory, blobs, displacements, states_data, small_c2dt):
         proc = subprocess.run(cmd, check=False, env=env, capture_output=True, text=True,
                               timeout=300)
         report = proc.stdout[-3000:] + proc.stderr[-3000:]
-        if proc.returncode == 0 or attempt == 2 or GLOO_ABORT not in proc.stderr:
+        if proc.returncode == 0 or attempt == 2 or RANK_ABORT not in proc.stderr:
             break
         warnings.warn(f"torchrun: a rank aborted (SIGABRT); launched again:\n{report}",
                       stacklevel=1)
