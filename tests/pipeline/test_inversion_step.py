@@ -57,11 +57,11 @@ def world(tmp_path_factory):
     return make_world(tmp_path_factory.mktemp("inversion_step"))
 
 
-def _out(tmp_path, config, test=TEST, val=VAL):
+def _out(tmp_path, config, test=TEST, val=VAL, train=()):
     out = tmp_path / "out"
     (out / "runs" / "contact").mkdir(parents=True)
     (out / "runs" / "contact" / "split.json").write_text(
-        json.dumps({"train": [], "val": val, "test": test}))
+        json.dumps({"train": list(train), "val": val, "test": test}))
     return replace(config, out_dir=out)
 
 
@@ -163,6 +163,64 @@ def test_the_frame_cap_spreads_over_the_test_frames(world, tmp_path):
     m = pinv.inversion_step(StepRunner(config.out_dir, False), config, fields, (path, {}),
                             push="off", max_frames=30)
     assert m["n_frames"] == 30 and m["share_without_field"] == pytest.approx(60 / 180)
+
+
+def test_the_training_trials_are_inverted_and_scored_apart(world, tmp_path, monkeypatch):
+    """The inversion is not trained, so the contact run's training trials are frames it has not
+    seen: with ``train_trials`` those in a field state (not far_0003) are inverted: the count by
+    true count as a hand computation from Inversion.fit frame by frame, and every number as the
+    step scores the same trials when they are its test trials (checked against a hand
+    computation above); the test split's numbers stay the test trial's; the cap spreads the
+    frames; metrics.json's block carries it. Without ``train_trials``: no block, and the
+    step's key is the one cached before it existed."""
+    config, fields, path = world
+    train = ["trial_0006", "trial_0007", "trial_0008", "far_0003"]
+    cfg = _out(tmp_path, config, test=TEST[1:2], train=train)
+    m = pinv.inversion_step(StepRunner(cfg.out_dir, False), cfg, fields, (path, {}),
+                            push="off", max_frames=None, train_trials=True)
+    noise = cfg.contact_protocol().readout
+    _, _, count = _by_hand(fields, path, noise, train[:3])
+    rec = read_recording(path)
+    true = np.concatenate([rec.trial(n).n_contacts for n in train[:3]])
+    t = m["train_trials"]
+    assert t["n_trials"] == 3 and t["n_frames"] == true.size == 180
+    ref_cfg = _out(tmp_path / "ref", config, test=train[:3])
+    ref = pinv.inversion_step(StepRunner(ref_cfg.out_dir, False), ref_cfg, fields, (path, {}),
+                              push="off", max_frames=None)
+    assert ref["n_single_contact_frames"] > 5
+    assert t["loc_mm_mean"] == ref["loc_mm_mean"] and t["loc_mm_median"] == ref["loc_mm_median"]
+    assert t["count_accuracy_by_true"] == ref["multi"]["count_accuracy_by_true"]
+    assert t["two_finger"] == ref["two_finger"]
+    by_true = {str(k): float(count[true == k].mean()) for k in range(3)}
+    assert t["count_accuracy_by_true"] == {k: pytest.approx(v, rel=1e-12)
+                                           for k, v in by_true.items()}
+    two = t["two_finger"]
+    assert two["n_frames"] == (true == 2).sum() == 30 and two["n_trials"] == 2
+    assert two["count_accuracy"] == pytest.approx(by_true["2"], rel=1e-12)
+    test_loc, _, _ = _by_hand(fields, path, noise, TEST[1:2])
+    assert m["loc_mm_mean"] == pytest.approx(test_loc.mean(), rel=1e-6) != t["loc_mm_mean"]
+    block = inversion_block(m, None, None)["train_trials"]
+    assert "count_accuracy_by_trial" in two and "count_accuracy_by_trial" not in block["two_finger"]
+    assert block["loc_mm_mean"] == t["loc_mm_mean"]
+    # the caps: evenly spread over the training trials' frames, the two-finger ones besides
+    monkeypatch.setattr(pinv, "TRAIN_FRAMES", 50)
+    cfg = _out(tmp_path / "b", config, test=TEST[1:2], train=train)
+    m = pinv.inversion_step(StepRunner(cfg.out_dir, False), cfg, fields, (path, {}),
+                            push="off", max_frames=None, train_trials=True)
+    assert m["train_trials"]["n_frames"] == 50 and m["train_trials"]["two_finger"]["n_frames"] == 30
+    monkeypatch.setattr(pinv, "TRAIN_TWO_FINGER_FRAMES", 10)
+    cfg = _out(tmp_path / "d", config, test=TEST[1:2], train=train)
+    m = pinv.inversion_step(StepRunner(cfg.out_dir, False), cfg, fields, (path, {}),
+                            push="off", max_frames=None, train_trials=True)
+    data = contact_dataset(rec, window=1, trials=train[:3])
+    in_spread = int((data.count[pinv._frames(data, False, 50)] == 2).sum())
+    assert m["train_trials"]["two_finger"]["n_frames"] == in_spread + 10
+    # off: no block, and the settings without it
+    cfg = _out(tmp_path / "c", config, test=TEST[1:2], train=train)
+    m = pinv.inversion_step(StepRunner(cfg.out_dir, False), cfg, fields, (path, {}),
+                            push="off", max_frames=None)
+    assert "train_trials" not in m and inversion_block(m, None, None)["train_trials"] is None
+    assert "train_trials" not in (cfg.out_dir / "reproduce.json").read_text()
 
 
 def test_the_push_is_chosen_on_the_validation_frames(world, tmp_path, monkeypatch):

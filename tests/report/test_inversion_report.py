@@ -156,6 +156,25 @@ def test_the_report_gives_the_two_finger_frames_scored_apart():
     assert "counted two on 85.00 %" in text and "4.50 mm" in text and "(median 3.00 mm)" in text
 
 
+def test_the_report_gives_the_training_trials_the_inversion_has_not_seen():
+    m = _metrics()
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert "training trials" not in text
+    m["inversion"]["train_trials"] = {
+        "n_trials": 40, "n_frames": 1000, "loc_mm_mean": 1.5, "loc_mm_median": 0.75,
+        "count_accuracy_by_true": {"0": 0.96875, "1": 0.90625, "2": 0.8125}, "two_finger": None}
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert ("The training trials, which the inversion has not seen" in text
+            and "1000 frames spread over 40 trial(s), point error 1.50 mm (median 0.75 mm)" in text)
+    assert "0 / 1 / 2 fingers on the skin 96.88 % / 90.62 % / 81.25 %" in text
+    assert "frames with two fingers from" not in text
+    m["inversion"]["train_trials"]["two_finger"] = {
+        "n_frames": 1250, "n_trials": 19, "count_accuracy": 0.8125, "loc_mm_mean": 3.25}
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert "1250 frames with two fingers from 19 trial(s), counted two on 81.25 %" in text
+    assert "each finger 3.25 mm from its true point." in text
+
+
 def test_the_point_error_without_another_finger_above_the_skin_has_its_own_row():
     m = _metrics()
     table = lambda metrics: next(  # noqa: E731

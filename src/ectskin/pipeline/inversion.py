@@ -56,6 +56,16 @@ frames with two fingers on the skin are inverted besides them and scored with th
 accuracy per trial). The spread's metrics (``multi`` among them) stay the spread's. The labels
 only pick which frames are scored, as they pick the one-finger frames of the point error.
 
+The training trials (``train_trials``, as the reproduction runs the step): the inversion is not
+trained, and its choices (push, the person's finger, the contact model, the model error) read
+the validation trials only, so the contact run's *training* trials are frames it has not seen,
+from many more trials than the test split's few with two fingers. Up to
+:data:`TRAIN_FRAMES` of their frames, evenly spread, and up to :data:`TRAIN_TWO_FINGER_FRAMES`
+more with two fingers on the skin are inverted as the test frames are (each trial's finger pooled over them)
+and scored apart (the result's ``train_trials``: the point error and the count by true count of
+the spread, the two-finger frames' :func:`two_finger_score`). The test split's numbers stay the
+test split's.
+
 The contact model of the states with a field (``choice``, as the reproduction runs the step):
 the contact run's model, its k-NN and ridge baselines, the inversion and the hybrid (the
 inversion seeded with the run's model's answer for the frame) are scored on up to
@@ -139,6 +149,12 @@ MAX_FRAMES = 3000
 #: evenly spread over them) and scored apart (``two_finger``): the even spread holds some 50-70
 #: of them in a quick reproduction, from a few trials, too few to tell a count accuracy of 95 %
 MAX_TWO_FINGER_FRAMES = 1000
+#: the training trials' frames (at most, evenly spread) that the step inverts besides the test
+#: frames with ``train_trials`` (module docstring), and the frames with two fingers on the skin
+#: among the rest (at most, evenly spread; none where ``two_finger_frames`` is 0): a two-finger
+#: frame costs several one-finger frames' time, and 500 from some 20 trials tell the count
+TRAIN_FRAMES = 1000
+TRAIN_TWO_FINGER_FRAMES = 500
 #: force is called observable at a frame whose fitted force's standard error (the Cramér–Rao
 #: bound at the solution) is below this (N), as the bound step's ``force_threshold_n``
 FORCE_OBSERVABLE_N = 0.1
@@ -242,6 +258,33 @@ def score(data: ContactData, arrays: Mapping[str, np.ndarray], seconds: np.ndarr
     return out
 
 
+def train_score(inv: Inversion, rec: Recording, data: ContactData, limit: int | None,
+                two_limit: int | None, workers: int = 1, person: bool = False) -> dict[str, Any]:
+    """The inversion on frames of the contact run's training trials (``data``; module
+    docstring): ``limit`` of them evenly spread and up to ``two_limit`` more with two fingers
+    on the skin, inverted together (a trial's finger is pooled over both); the spread's point
+    error and count by true count, and the two-finger frames' :func:`two_finger_score`."""
+    rows = _frames(data, False, limit)
+    extra = (two_finger_rows(data, rows, two_limit) if two_limit != 0
+             else np.zeros(0, np.int64))
+    every = np.union1d(rows, extra)
+    both, seconds = invert_rows(inv, rec, data, every, workers=workers, person=person)
+    spread = np.searchsorted(every, rows)
+    s = score(data.take(rows), {k: np.asarray(v)[spread] for k, v in both.items()},
+              seconds[spread])
+    out: dict[str, Any] = {
+        "n_trials": int(np.unique(data.group).size), "n_frames": int(rows.size),
+        "loc_mm_mean": s["loc_mm_mean"], "loc_mm_median": s["loc_mm_median"],
+        "count_accuracy_by_true": (s.get("multi") or {}).get("count_accuracy_by_true"),
+        "two_finger": None,
+    }
+    keep = data.count[every] == 2
+    if keep.any():
+        out["two_finger"] = two_finger_score(
+            data.take(every[keep]), {k: np.asarray(v)[keep] for k, v in both.items()})
+    return out
+
+
 def _workers(config: ReproduceConfig) -> int:
     """The processes that fit the step's frames: the reproduction's workers (default all
     cores); the results do not depend on them."""
@@ -322,6 +365,7 @@ def inversion_step(
     two_fingers: str = "superposition",
     finger: str = "off",
     bound_error: str = "validation",
+    train_trials: bool = False,
 ) -> dict[str, Any]:
     """Step "inversion": OUT_DIR/inversion/metrics.json (module docstring); returns it.
 
@@ -346,6 +390,8 @@ def inversion_step(
     finger fitted and pooled per trial (module docstring; the result's ``finger``).
     ``bound_error``: "validation" or "off", the standard errors' model error estimated from the
     validation frames' residuals (module docstring; the result's ``model_error``) or none.
+    ``train_trials``: also score the inversion on the contact run's training trials (module
+    docstring; the result's ``train_trials``, None where none is in a field state).
     """
     if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
         raise EctskinError(f"inversion_step: max_frames must be an integer >= 1 or None, got "
@@ -362,7 +408,8 @@ def inversion_step(
     check_option("two_fingers", two_fingers, TWO_FINGER_MODELS)
     check_option("finger", finger, FINGER_CHOICES)
     check_option("bound_error", bound_error, BOUND_ERROR_CHOICES)
-    for name, flag in (("press_check", press_check), ("choice", choice)):
+    for name, flag in (("press_check", press_check), ("choice", choice),
+                       ("train_trials", train_trials)):
         if not isinstance(flag, bool):
             raise EctskinError(f"inversion_step: {name} must be True or False, got {flag!r}")
     fields = {tuple(float(x) for x in s): f for s, f in fields.items()}
@@ -389,6 +436,9 @@ def inversion_step(
         **({"finger": finger, "finger_fields": [FINGER_FIELD_SPACING_MM, FINGER_FIELD_FORCE_NODES,
                                                 POOL_SD_FLOOR]} if finger != "off" else {}),
         "bound_error": [bound_error, MODEL_ERROR_FRAMES], **config.figure_settings,
+        # named only when on, so that the steps cached before keep their key
+        **({"train_trials": [split.get("train") or [], TRAIN_FRAMES, TRAIN_TWO_FINGER_FRAMES]}
+           if train_trials else {}),
     }
     if choice:  # the run's model and its baselines' seed are candidates' settings too
         settings.update(choice=True, choice_frames=CHOICE_FRAMES, choice_rule=RULE,
@@ -481,6 +531,11 @@ def inversion_step(
             if keep.any():
                 result["two_finger"] = two_finger_score(
                     data.take(every[keep]), {k: np.asarray(v)[keep] for k, v in both.items()})
+            if train_trials:
+                tdata = _dataset(rec, [n for n in split.get("train") or [] if has.get(n)])
+                result["train_trials"] = (None if tdata is None else train_score(
+                    inv, rec, tdata, TRAIN_FRAMES,
+                    0 if two_finger_frames == 0 else TRAIN_TWO_FINGER_FRAMES, workers, person))
             result["files"] = write_answers(
                 out_dir, data, every, both, np.isin(every, rows),
                 bound_file=runner.out / BOUND_DIR / BOUND_FILE, threshold_n=FORCE_OBSERVABLE_N,

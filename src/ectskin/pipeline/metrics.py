@@ -432,11 +432,21 @@ def alone_beside(contact: Mapping[str, Any] | None, inversion: Mapping[str, Any]
     }
 
 
+def _train_trials(block: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    """The step's ``train_trials`` without the two-finger frames' per-trial list."""
+    if not block:
+        return None
+    two = block.get("two_finger")
+    return {**block, "two_finger": ({k: v for k, v in two.items()
+                                     if k != "count_accuracy_by_trial"} if two else None)}
+
+
 def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
                     bound: Mapping[str, Any] | None) -> dict[str, Any]:
     """metrics.json's ``inversion`` from the inversion step's metrics (``docs/reproduce.md``):
     its contact metrics (:data:`INVERSION_KEYS`), the count by true count, the two-finger frames
-    scored apart (``two_finger``, without its per-trial list), force where its
+    scored apart (``two_finger``, without its per-trial list), the same on the contact run's
+    training trials (``train_trials``: the inversion is not trained), force where its
     standard error says it is observable, the share of force errors within 1 and 2 standard
     errors (``force_coverage``) and the model error those carry (``model_error``), the time per
     frame, and per state its numbers beside ContactNet's, the baselines' and the bound's at the
@@ -467,6 +477,7 @@ def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
         "alone": alone_beside(contact, inv, bound),
         "two_finger": {k: v for k, v in (inv.get("two_finger") or {}).items()
                        if k != "count_accuracy_by_trial"} or None,
+        "train_trials": _train_trials(inv.get("train_trials")),
         "force_mae_n_observable": fo.get("force_mae_n"),
         "force_observable_share": fo.get("share"),
         "force_observable_threshold_n": fo.get("threshold_n"),

@@ -114,7 +114,8 @@ def _physics_steps(
     # of the states with a field (choice: the run's model, its baselines, inversion, hybrid)
     inversion = inversion_step(runner, config, fields, found, contact, untouched="auto",
                                finger_scale_sd=FINGER_SCALE_SD, press_check=True, choice=True,
-                               two_fingers=REPRODUCTION_TWO_FINGERS, finger=config.inversion_finger)
+                               two_fingers=REPRODUCTION_TWO_FINGERS, finger=config.inversion_finger,
+                               train_trials=True)
     return bound, inversion
 
 

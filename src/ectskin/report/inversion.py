@@ -179,6 +179,25 @@ def choice_line(inv: Mapping[str, Any]) -> str | None:
     return text
 
 
+def train_line(train: Mapping[str, Any] | None) -> str:
+    """The inversion on the contact run's training trials, in one paragraph ("" for none)."""
+    if not train or not train.get("n_frames"):
+        return ""
+    by = train.get("count_accuracy_by_true") or {}
+    counts = " / ".join(_pct(by.get(k)) for k in ("0", "1", "2") if k in by)
+    two = train.get("two_finger") or {}
+    text = (f"The training trials, which the inversion has not seen (it is not trained, and its "
+            f"choices read the validation trials): {train['n_frames']} frames spread over "
+            f"{train.get('n_trials')} trial(s), point error {_mm(train.get('loc_mm_mean'))} "
+            f"(median {_mm(train.get('loc_mm_median'))})"
+            + (f", counted right with 0 / 1 / 2 fingers on the skin {counts}" if counts else ""))
+    if two.get("n_frames"):
+        text += (f"; {two['n_frames']} frames with two fingers from {two.get('n_trials')} "
+                 f"trial(s), counted two on {_pct(two.get('count_accuracy'))}, each finger "
+                 f"{_mm(two.get('loc_mm_mean'))} from its true point")
+    return text + "."
+
+
 def _options_text(settings: Mapping[str, Any]) -> str:
     """What the fit assumed beyond the field: whose untouched readout, people's finger sizes,
     the press check (the step's settings; "" for a step made before they existed)."""
@@ -262,6 +281,9 @@ def inversion_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
                        f"{_mm(two.get('loc_mm_mean'))} from its true point after matching "
                        f"(median {_mm(two.get('loc_mm_median'))}). The frames of one trial are "
                        "one pair of fingers' moves: few trials make this number coarse."))
+    line = train_line(inv.get("train_trials"))
+    if line:
+        s.append(("p", line))
     med, p95 = inv.get("ms_per_frame_median"), inv.get("ms_per_frame_p95")
     if isinstance(med, int | float):
         pooled = (inv.get("finger") or {}).get("use")
