@@ -183,7 +183,7 @@ def test_the_training_trials_are_inverted_and_scored_apart(world, tmp_path, monk
     rec = read_recording(path)
     true = np.concatenate([rec.trial(n).n_contacts for n in train[:3]])
     t = m["train_trials"]
-    assert t["n_trials"] == 3 and t["n_frames"] == true.size == 180
+    assert t["n_trials"] == 3 and t["n_frames"] == true.size == 180 and t["seconds"] > 0
     ref_cfg = _out(tmp_path / "ref", config, test=train[:3])
     ref = pinv.inversion_step(StepRunner(ref_cfg.out_dir, False), ref_cfg, fields, (path, {}),
                               push="off", max_frames=None)

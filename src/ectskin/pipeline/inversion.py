@@ -263,7 +263,9 @@ def train_score(inv: Inversion, rec: Recording, data: ContactData, limit: int | 
     """The inversion on frames of the contact run's training trials (``data``; module
     docstring): ``limit`` of them evenly spread and up to ``two_limit`` more with two fingers
     on the skin, inverted together (a trial's finger is pooled over both); the spread's point
-    error and count by true count, and the two-finger frames' :func:`two_finger_score`."""
+    error and count by true count, the two-finger frames' :func:`two_finger_score`, and the
+    seconds it took (wall)."""
+    t0 = time.perf_counter()
     rows = _frames(data, False, limit)
     extra = (two_finger_rows(data, rows, two_limit) if two_limit != 0
              else np.zeros(0, np.int64))
@@ -282,6 +284,7 @@ def train_score(inv: Inversion, rec: Recording, data: ContactData, limit: int | 
     if keep.any():
         out["two_finger"] = two_finger_score(
             data.take(every[keep]), {k: np.asarray(v)[keep] for k, v in both.items()})
+    out["seconds"] = time.perf_counter() - t0
     return out
 
 
