@@ -59,11 +59,11 @@ only pick which frames are scored, as they pick the one-finger frames of the poi
 The training trials (``train_trials``, as the reproduction runs the step): the inversion is not
 trained, and its choices (push, the person's finger, the contact model, the model error) read
 the validation trials only, so the contact run's *training* trials are frames it has not seen,
-from many more trials than the test split's few with two fingers. Up to
-:data:`TRAIN_FRAMES` of their frames, evenly spread, and up to :data:`TRAIN_TWO_FINGER_FRAMES`
-more with two fingers on the skin are inverted as the test frames are (each trial's finger pooled over them)
-and scored apart (the result's ``train_trials``: the point error and the count by true count of
-the spread, the two-finger frames' :func:`two_finger_score`). The test split's numbers stay the
+from many more trials than the test split's few with two fingers. Up to :data:`TRAIN_FRAMES`
+of their frames, evenly spread, and up to :data:`TRAIN_TWO_FINGER_FRAMES` more with two fingers
+on the skin are inverted as the test frames are (each trial's finger pooled over them) and
+scored apart (the result's ``train_trials``: the point error and the count by true count of the
+spread, the two-finger frames' :func:`two_finger_score`). The test split's numbers stay the
 test split's.
 
 The contact model of the states with a field (``choice``, as the reproduction runs the step):
