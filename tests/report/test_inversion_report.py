@@ -167,6 +167,7 @@ def test_the_report_gives_the_training_trials_the_inversion_has_not_seen():
     assert ("The training trials, which the inversion has not seen" in text
             and "1000 frames spread over 40 trial(s), point error 1.50 mm (median 0.75 mm)" in text)
     assert "0 / 1 / 2 fingers on the skin 96.88 % / 90.62 % / 81.25 %" in text
+    assert "the learned models and baselines were fitted on them" in text
     assert "frames with two fingers from" not in text
     m["inversion"]["train_trials"]["two_finger"] = {
         "n_frames": 1250, "n_trials": 19, "count_accuracy": 0.8125, "loc_mm_mean": 3.25}

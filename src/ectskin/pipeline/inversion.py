@@ -258,34 +258,45 @@ def score(data: ContactData, arrays: Mapping[str, np.ndarray], seconds: np.ndarr
     return out
 
 
-def train_score(inv: Inversion, rec: Recording, data: ContactData, limit: int | None,
-                two_limit: int | None, workers: int = 1, person: bool = False) -> dict[str, Any]:
-    """The inversion on frames of the contact run's training trials (``data``; module
-    docstring): ``limit`` of them evenly spread and up to ``two_limit`` more with two fingers
-    on the skin, inverted together (a trial's finger is pooled over both); the spread's point
-    error and count by true count, the two-finger frames' :func:`two_finger_score`, and the
-    seconds it took (wall)."""
-    t0 = time.perf_counter()
+def invert_spread(inv: Inversion, rec: Recording, data: ContactData, limit: int | None,
+                  two_limit: int | None, workers: int = 1, person: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], np.ndarray,
+                             dict[str, Any] | None]:
+    """Invert ``limit`` frames of ``data`` evenly spread and up to ``two_limit`` more with two
+    fingers on the skin (0: none; None: all), in one call (a trial's finger is pooled over
+    both: its one-finger frames are in the spread). Returns the spread's rows, every row
+    inverted, the fits of every row and their seconds (:func:`invert_rows`), and the
+    :func:`two_finger_score` of every inverted frame with two fingers (None without one)."""
     rows = _frames(data, False, limit)
     extra = (two_finger_rows(data, rows, two_limit) if two_limit != 0
              else np.zeros(0, np.int64))
     every = np.union1d(rows, extra)
     both, seconds = invert_rows(inv, rec, data, every, workers=workers, person=person)
+    keep = data.count[every] == 2
+    two = (two_finger_score(data.take(every[keep]),
+                            {k: np.asarray(v)[keep] for k, v in both.items()})
+           if keep.any() else None)
+    return rows, every, both, seconds, two
+
+
+def train_score(inv: Inversion, rec: Recording, data: ContactData, limit: int | None,
+                two_limit: int | None, workers: int = 1, person: bool = False) -> dict[str, Any]:
+    """The inversion on frames of the contact run's training trials (``data``; module
+    docstring), inverted as the test frames are (:func:`invert_spread`): the spread's point
+    error and count by true count, the two-finger frames' :func:`two_finger_score`, and the
+    seconds it took (wall)."""
+    t0 = time.perf_counter()
+    rows, every, both, seconds, two = invert_spread(inv, rec, data, limit, two_limit, workers,
+                                                    person)
     spread = np.searchsorted(every, rows)
     s = score(data.take(rows), {k: np.asarray(v)[spread] for k, v in both.items()},
               seconds[spread])
-    out: dict[str, Any] = {
+    return {
         "n_trials": int(np.unique(data.group).size), "n_frames": int(rows.size),
         "loc_mm_mean": s["loc_mm_mean"], "loc_mm_median": s["loc_mm_median"],
         "count_accuracy_by_true": (s.get("multi") or {}).get("count_accuracy_by_true"),
-        "two_finger": None,
+        "two_finger": two, "seconds": time.perf_counter() - t0,
     }
-    keep = data.count[every] == 2
-    if keep.any():
-        out["two_finger"] = two_finger_score(
-            data.take(every[keep]), {k: np.asarray(v)[keep] for k, v in both.items()})
-    out["seconds"] = time.perf_counter() - t0
-    return out
 
 
 def _workers(config: ReproduceConfig) -> int:
@@ -510,15 +521,9 @@ def inversion_step(
         if data is None:
             result: dict[str, Any] = {"n_frames": 0, "per_state": {}}
         else:
-            rows = _frames(data, False, max_frames)
+            rows, every, both, all_seconds, two = invert_spread(
+                inv, rec, data, max_frames, two_finger_frames, workers, person)
             test_data = data.take(rows)
-            # the spread and the extra two-finger frames in one call: a trial's finger is
-            # pooled over all of them (its one-finger frames are in the spread)
-            extra = (two_finger_rows(data, rows, two_finger_frames) if two_finger_frames != 0
-                     else np.zeros(0, np.int64))
-            every = np.union1d(rows, extra)
-            both, all_seconds = invert_rows(inv, rec, data, every, workers=workers,
-                                            person=person)
             spread = np.searchsorted(every, rows)
             arrays = {k: np.asarray(v)[spread] for k, v in both.items()}
             seconds = all_seconds[spread]
@@ -530,10 +535,8 @@ def inversion_step(
                                            [n for n in val if has[n]], test_data,
                                            (arrays, seconds), data.n_samples, n_without,
                                            person=person)
-            keep = data.count[every] == 2
-            if keep.any():
-                result["two_finger"] = two_finger_score(
-                    data.take(every[keep]), {k: np.asarray(v)[keep] for k, v in both.items()})
+            if two is not None:
+                result["two_finger"] = two
             if train_trials:
                 tdata = _dataset(rec, [n for n in split.get("train") or [] if has.get(n)])
                 result["train_trials"] = (None if tdata is None else train_score(

@@ -187,7 +187,9 @@ def train_line(train: Mapping[str, Any] | None) -> str:
     counts = " / ".join(_pct(by.get(k)) for k in ("0", "1", "2") if k in by)
     two = train.get("two_finger") or {}
     text = (f"The training trials, which the inversion has not seen (it is not trained, and its "
-            f"choices read the validation trials): {train['n_frames']} frames spread over "
+            f"choices read the validation trials; the learned models and baselines were fitted "
+            f"on them, so none is scored beside it here, nor the bound, which the bound step "
+            f"gives for the test frames): {train['n_frames']} frames spread over "
             f"{train.get('n_trials')} trial(s), point error {_mm(train.get('loc_mm_mean'))} "
             f"(median {_mm(train.get('loc_mm_median'))})"
             + (f", counted right with 0 / 1 / 2 fingers on the skin {counts}" if counts else ""))
