@@ -3,6 +3,7 @@ count and per-finger point error against a hand computation from given fits (no 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -77,6 +78,25 @@ def test_the_two_finger_score_is_the_hand_count_and_the_matched_error():
     assert m["n_fingers"] == 4
     assert m["loc_mm_mean"] == pytest.approx(np.mean(errors), abs=1e-5)
     assert m["loc_mm_median"] == pytest.approx(np.median(errors), abs=1e-5)
+
+
+def test_the_two_finger_count_is_told_per_inflation_state():
+    """Frames of two states: the count accuracy, frames and trials of each, by hand."""
+    data = _data([2, 2, 2, 2], [0, 0, 1, 2])
+    data = dataclasses.replace(data, state=np.array([1, 1, 1, 0]),
+                               states=[(0.0, 0.0, 20.0), (20.0, 0.0, 0.0)])
+    fits = [
+        [(0.0, 10.0, True), (10.0, 60.0, True)],  # counted 2
+        [(1.0, 11.0, True), (10.0, 60.0, False)],  # counted 1
+        [(0.0, 12.0, True), (10.0, 60.0, True)],  # counted 2
+        [(0.0, 13.0, True)],  # counted 1
+    ]
+    m = pinv.two_finger_score(data, _arrays(fits))
+    assert m["by_state"] == {
+        "20/0/0 ml": {"count_accuracy": pytest.approx(2 / 3), "n_frames": 3, "n_trials": 2},
+        "0/0/20 ml": {"count_accuracy": 0.0, "n_frames": 1, "n_trials": 1},
+    }
+    assert m["count_accuracy"] == pytest.approx(0.5)
 
 
 def test_the_step_refuses_a_bad_number_of_two_finger_frames(tmp_path):

@@ -154,6 +154,13 @@ def test_the_report_gives_the_two_finger_frames_scored_apart():
     text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
     assert "Two fingers on the skin: 400 test frames of 3 trial(s)" in text
     assert "counted two on 85.00 %" in text and "4.50 mm" in text and "(median 3.00 mm)" in text
+    assert "lowest in state" not in text
+    m["inversion"]["two_finger"]["by_state"] = {
+        "0/0/0 ml": {"count_accuracy": 1.0, "n_frames": 100, "n_trials": 1},
+        "0/0/20 ml": {"count_accuracy": 0.625, "n_frames": 200, "n_trials": 2},
+        "20/0/0 ml": {"count_accuracy": 0.75, "n_frames": 100, "n_trials": 1}}
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert "(median 3.00 mm); lowest in state 0/0/20 ml: 62.50 % of 200 frames (2 trial(s))." in text
 
 
 def test_the_report_gives_the_training_trials_the_inversion_has_not_seen():
@@ -174,6 +181,12 @@ def test_the_report_gives_the_training_trials_the_inversion_has_not_seen():
     text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
     assert "1250 frames with two fingers from 19 trial(s), counted two on 81.25 %" in text
     assert "each finger 3.25 mm from its true point." in text
+    m["inversion"]["train_trials"]["two_finger"]["by_state"] = {
+        "0/0/20 ml": {"count_accuracy": 0.5, "n_frames": 400, "n_trials": 6},
+        "20/0/0 ml": {"count_accuracy": 0.875, "n_frames": 850, "n_trials": 13}}
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert ("each finger 3.25 mm from its true point; lowest in state 0/0/20 ml: 50.00 % of 400 "
+            "frames (6 trial(s)).") in text
 
 
 def test_the_point_error_without_another_finger_above_the_skin_has_its_own_row():

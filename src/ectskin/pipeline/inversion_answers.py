@@ -33,6 +33,7 @@ from ectskin.learn.data.contact import HOVER_MAX_MM, MAX_FINGERS, ContactData
 from ectskin.learn.metrics.contact import multi_metrics
 from ectskin.learn.models.contact import PRED_COLUMNS, SLOT_COLUMNS
 from ectskin.learn.tasks.contact import contact_report, slot_points
+from ectskin.pipeline.bound import state_key
 from ectskin.viz import figure_file
 from ectskin.viz.bound import plot_error_vs_bound
 from ectskin.viz.contact import plot_force_sigma
@@ -121,8 +122,10 @@ def two_finger_score(data: ContactData, arrays: Mapping[str, np.ndarray]) -> dic
     those frames only, every one inverted, in order): ``count_accuracy``, ``count_predicted``
     (how many frames were counted 0, 1 and 2 fingers), the point error of each finger after
     matching where two were counted (``loc_mm_*``, ``n_fingers``:
-    :func:`~ectskin.learn.metrics.contact.multi_metrics`), and the count accuracy per trial (a
-    trial's frames are one pair of fingers' moves, not independent draws)."""
+    :func:`~ectskin.learn.metrics.contact.multi_metrics`), the count accuracy per trial (a
+    trial's frames are one pair of fingers' moves, not independent draws) and per inflation
+    state (``by_state``: {"0/0/20 ml": {"count_accuracy", "n_frames", "n_trials"}}, the names
+    of the contact metrics' ``per_state``; the misses gather in a few states)."""
     pred = prediction_columns(arrays, data.faces, data.face_extent)
     *_, true_pts, pred_pts = slot_points(data, pred)
     count = pred[:, PRED_COLUMNS.index("count")].astype(int)
@@ -130,13 +133,19 @@ def two_finger_score(data: ContactData, arrays: Mapping[str, np.ndarray]) -> dic
     right = count == data.count
     per_trial = {data.group_names[g]: float(right[data.group == g].mean())
                  for g in np.unique(data.group)}
+    by_state = {}
+    for s in np.unique(data.state):
+        rows = data.state == s
+        by_state[state_key(data.states[int(s)])] = {
+            "count_accuracy": float(right[rows].mean()), "n_frames": int(rows.sum()),
+            "n_trials": int(np.unique(data.group[rows]).size)}
     return {
         "count_accuracy": multi["count_accuracy"],
         "count_predicted": np.bincount(np.clip(count, 0, MAX_FINGERS),
                                        minlength=MAX_FINGERS + 1).tolist(),
         **{k: multi[k] for k in ("loc_mm_mean", "loc_mm_median", "loc_mm_p90", "n_fingers")},
         "n_frames": int(data.n_samples), "n_trials": len(per_trial),
-        "count_accuracy_by_trial": per_trial,
+        "count_accuracy_by_trial": per_trial, "by_state": by_state,
     }
 
 

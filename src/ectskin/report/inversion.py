@@ -196,8 +196,20 @@ def train_line(train: Mapping[str, Any] | None) -> str:
     if two.get("n_frames"):
         text += (f"; {two['n_frames']} frames with two fingers from {two.get('n_trials')} "
                  f"trial(s), counted two on {_pct(two.get('count_accuracy'))}, each finger "
-                 f"{_mm(two.get('loc_mm_mean'))} from its true point")
+                 f"{_mm(two.get('loc_mm_mean'))} from its true point" + worst_state_text(two))
     return text + "."
+
+
+def worst_state_text(two: Mapping[str, Any]) -> str:
+    """"; lowest in STATE: P of N frames (T trial(s))" for the two-finger block's state with the
+    lowest count accuracy ("" with fewer than two states scored: nothing to single out)."""
+    by = {k: v for k, v in (two.get("by_state") or {}).items()
+          if isinstance(v, Mapping) and isinstance(v.get("count_accuracy"), int | float)}
+    if len(by) < 2:
+        return ""
+    name, worst = min(by.items(), key=lambda kv: kv[1]["count_accuracy"])
+    return (f"; lowest in state {name}: {_pct(worst['count_accuracy'])} of "
+            f"{worst.get('n_frames')} frames ({worst.get('n_trials')} trial(s))")
 
 
 def _options_text(settings: Mapping[str, Any]) -> str:
@@ -281,8 +293,10 @@ def inversion_sections(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
                        f"{two.get('n_trials')} trial(s), inverted apart from the spread above; "
                        f"counted two on {_pct(two.get('count_accuracy'))}, each finger "
                        f"{_mm(two.get('loc_mm_mean'))} from its true point after matching "
-                       f"(median {_mm(two.get('loc_mm_median'))}). The frames of one trial are "
-                       "one pair of fingers' moves: few trials make this number coarse."))
+                       f"(median {_mm(two.get('loc_mm_median'))})"
+                       + worst_state_text(two)
+                       + ". The frames of one trial are one pair of fingers' moves: few trials "
+                       "make this number coarse."))
     line = train_line(inv.get("train_trials"))
     if line:
         s.append(("p", line))
