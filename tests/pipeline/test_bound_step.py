@@ -146,6 +146,40 @@ def test_bound_step_writes_the_maps_and_the_test_frames_bound(layout, fields, tm
     assert set(b["per_face"]) == {"front", "back"}
 
 
+def test_the_training_frames_alone_are_bounded_when_asked(layout, fields, tmp_path):
+    """``train_trials``: the training trials' frames with one finger and no other above the
+    skin, by hand from field_bounds; the test frames' blocks unchanged; off: no such block."""
+    rec, uv, force = _recording(layout)
+    moved = uv + [0.5, -0.8]  # not the test trial's points: its bound differs
+    t = _trial(layout, "moved", STATES[0], moved, force, np.ones((len(force), 1), bool))
+    rec = Recording(layout, [*rec.trials, t], 30.0)
+    write_recording(rec, tmp_path / "contact.h5")
+    run_dir = tmp_path / "runs" / "contact"
+    run_dir.mkdir(parents=True)
+    # trial b's one-finger frames have its other finger above the skin: not bounded here
+    write_json_atomic(run_dir / "split.json", {"test": ["a"], "train": ["moved", "b", "c"]})
+    config = ReproduceConfig(out_dir=tmp_path)
+    data = (tmp_path / "contact.h5", {"source": "test"})
+    off = bound_step(StepRunner(tmp_path, False), config, fields, data, spacing_mm=4.0)
+    assert "train_alone" not in off
+    out = bound_step(StepRunner(tmp_path, True), config, fields, data, spacing_mm=4.0,
+                     train_trials=True)
+    f = np.clip(force[:, 0], *fields[STATES[0]].spec.force_range_n)
+    ref = field_bounds(fields[STATES[0]], "front", moved[:, 0], f,
+                       columns=field_nuisances(fields[STATES[0]]))["all"]
+    got = out["train_alone"]["per_state"]["0/20/0 ml"]
+    assert got["n_points"] == len(force)
+    assert got["loc_mm_mean"] == pytest.approx(float(np.mean(ref["position_mm"])), rel=1e-9)
+    assert got["loc_mm_mean"] != pytest.approx(out["test_alone"]["per_state"]["0/20/0 ml"]["loc_mm_mean"])
+    assert list(out["train_alone"]["per_state"]) == ["0/20/0 ml"]
+    assert out["train_alone"]["states_without_field"] == {"10/10/10 ml": 7}
+    assert out["test"] == off["test"] and out["test_alone"] == off["test_alone"]
+    assert bound_block(out, None)["train_alone"] == out["train_alone"]["pooled"]
+    assert bound_block(off, None)["train_alone"] is None
+    with pytest.raises(EctskinError, match="train_trials must be True or False"):
+        bound_step(StepRunner(tmp_path, False), config, fields, data, train_trials="yes")  # type: ignore[arg-type]
+
+
 def test_frame_bounds_counts_a_face_the_field_lacks(layout, fields):
     pts = {STATES[0]: {"left": (np.zeros((2, 2)), np.ones(2))}}
     res = frame_bounds(fields, {}, pts, nuisances=(), case="none")

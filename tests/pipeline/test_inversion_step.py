@@ -191,6 +191,8 @@ def test_the_training_trials_are_inverted_and_scored_apart(world, tmp_path, monk
     assert t["loc_mm_mean"] == ref["loc_mm_mean"] and t["loc_mm_median"] == ref["loc_mm_median"]
     assert t["count_accuracy_by_true"] == ref["multi"]["count_accuracy_by_true"]
     assert t["two_finger"] == ref["two_finger"]
+    alone = ref["by_other_finger"]["alone"]
+    assert t["alone"] == {k: alone[k] for k in ("loc_mm_mean", "n_frames", "share")}
     by_true = {str(k): float(count[true == k].mean()) for k in range(3)}
     assert t["count_accuracy_by_true"] == {k: pytest.approx(v, rel=1e-12)
                                            for k, v in by_true.items()}
@@ -201,7 +203,10 @@ def test_the_training_trials_are_inverted_and_scored_apart(world, tmp_path, monk
     assert m["loc_mm_mean"] == pytest.approx(test_loc.mean(), rel=1e-6) != t["loc_mm_mean"]
     block = inversion_block(m, None, None)["train_trials"]
     assert "count_accuracy_by_trial" in two and "count_accuracy_by_trial" not in block["two_finger"]
-    assert block["loc_mm_mean"] == t["loc_mm_mean"]
+    assert block["loc_mm_mean"] == t["loc_mm_mean"] and block["bound_alone_loc_mm_mean"] is None
+    # the bound at the training frames alone (metrics.json's bound.train_alone) beside it
+    bound = {"train_alone": {"loc_mm_mean": 0.25}, "test_alone": {"loc_mm_mean": 0.5}}
+    assert inversion_block(m, None, bound)["train_trials"]["bound_alone_loc_mm_mean"] == 0.25
     # the caps: evenly spread over the training trials' frames, the two-finger ones besides
     monkeypatch.setattr(pinv, "TRAIN_FRAMES", 50)
     cfg = _out(tmp_path / "b", config, test=TEST[1:2], train=train)

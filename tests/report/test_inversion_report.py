@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ectskin.report import render_markdown
 from ectskin.report.contact import contact_sections
-from ectskin.report.inversion import inversion_sections
+from ectskin.report.inversion import inversion_sections, train_line
 
 
 def _metrics():
@@ -172,9 +172,19 @@ def test_the_report_gives_the_training_trials_the_inversion_has_not_seen():
         "count_accuracy_by_true": {"0": 0.96875, "1": 0.90625, "2": 0.8125}, "two_finger": None}
     text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
     assert ("The training trials, which the inversion has not seen" in text
-            and "1000 frames spread over 40 trial(s), point error 1.50 mm (median 0.75 mm)" in text)
+            and "1000 frames spread over 40 trial(s), point error 1.50 mm (median 0.75 mm); "
+                "counted right" in text)
     assert "0 / 1 / 2 fingers on the skin 96.88 % / 90.62 % / 81.25 %" in text
     assert "the learned models and baselines were fitted on them" in text
+    line = train_line(m["inversion"]["train_trials"])
+    assert "no other finger above" not in line and "the bound" not in line
+    m["inversion"]["train_trials"]["alone"] = {"loc_mm_mean": 0.875, "n_frames": 300, "share": 0.6}
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert "(median 0.75 mm); with no other finger above the skin 0.88 mm over 300 frames; " in text
+    m["inversion"]["train_trials"]["bound_alone_loc_mm_mean"] = 0.625
+    text = " ".join(str(p) for k, p in inversion_sections(m) if k == "p")
+    assert ("with no other finger above the skin 0.88 mm over 300 frames, the bound 0.62 mm at "
+            "those trials' frames; counted right") in text
     assert "frames with two fingers from" not in text
     m["inversion"]["train_trials"]["two_finger"] = {
         "n_frames": 1250, "n_trials": 19, "count_accuracy": 0.8125, "loc_mm_mean": 3.25}

@@ -5,8 +5,9 @@
     bound   OUT_DIR/bound/bound.json        Cramér–Rao bound maps of every contact state's
             OUT_DIR/bound/bound.<fmt>       response field over both faces (ectskin.twin.
             OUT_DIR/bound/bound_vs_error.<fmt>  bound_field), and the bound at each test frame's
-                                            true point; the maps, and ContactNet's error map
-                                            beside the bound map per face
+                                            true point (with ``train_trials``, at the training
+                                            frames with one finger alone too); the maps, and
+                                            ContactNet's error map beside the bound map per face
     force_observable
             OUT_DIR/runs/contact/force_observable.json
                                             the force error of the contact run's model, its
@@ -291,6 +292,7 @@ def bound_step(
     force_n: float = 1.0,
     case: str = HEADLINE_CASE,
     push_columns: str = "untouched",
+    train_trials: bool = False,
 ) -> dict[str, Any]:
     """Steps "bound": OUT_DIR/bound/ (module docstring) from ``fields`` ({inflation: field}),
     and, with ``data`` and a trained contact run, "force_observable"; returns bound.json, with
@@ -303,7 +305,12 @@ def bound_step(
     ``data``: (contact.h5, its settings) of the contact step, whose test trials
     (runs/contact/split.json) are bounded frame by frame; None: the maps alone. The error map
     beside the bound (runs/contact/metrics.json's ``contact.map``) is drawn when there.
+    ``train_trials``: also bound the training trials' frames with one finger on the skin and no
+    other above it (bound.json's ``train_alone``), beside which the inversion's score on those
+    trials stands (the inversion step's ``train_trials``: it is not trained).
     """
+    if not isinstance(train_trials, bool):
+        raise EctskinError(f"bound_step: train_trials must be True or False, got {train_trials!r}")
     if not fields:
         raise EctskinError("bound_step: no response fields given")
     fields = {tuple(float(x) for x in s): f for s, f in fields.items()}
@@ -312,8 +319,11 @@ def bound_step(
     out_dir = runner.out / BOUND_DIR
     run_dir = runner.out / "runs" / CONTACT_RUN
     test: list[str] = []
+    train: list[str] = []
     if data is not None and (run_dir / "split.json").is_file():
-        test = list(read_json(run_dir / "split.json", "contact run split").get("test") or [])
+        split = read_json(run_dir / "split.json", "contact run split")
+        test = list(split.get("test") or [])
+        train = list(split.get("train") or []) if train_trials else []
     settings: dict[str, Any] = {
         "fields": {state_key(s): f.key for s, f in fields.items()},
         "nuisances": list(nuisances), "prior_sd": dict(prior_sd or {}), "case": case,
@@ -321,6 +331,8 @@ def bound_step(
         "data": digest(dict(data[1])) if data is not None else None, "test_trials": test,
         # named only when not the default, so that the steps cached before keep their key
         **({"push_columns": push_columns} if push_columns != "untouched" else {}),
+        # named only when on, so that the steps cached before keep their key
+        **({"train_trials": train} if train else {}),
         **config.figure_settings,
     }
 
@@ -350,6 +362,10 @@ def bound_step(
                 for key, alone in (("test", False), ("test_alone", True)):
                     maps[key] = frame_bounds(fields, columns, frame_points(rec, test, alone=alone),
                                              case=case, nuisances=nuisances, prior_sd=prior_sd)
+                if train:
+                    maps["train_alone"] = frame_bounds(
+                        fields, columns, frame_points(rec, train, alone=True), case=case,
+                        nuisances=nuisances, prior_sd=prior_sd)
         maps["headline_case"] = case
         maps["timing"].update(columns_s=t_cols, maps_s=t_maps,
                               total_s=time.perf_counter() - t0)

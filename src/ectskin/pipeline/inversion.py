@@ -284,16 +284,20 @@ def train_score(inv: Inversion, rec: Recording, data: ContactData, limit: int | 
     """The inversion on frames of the contact run's training trials (``data``; module
     docstring), inverted as the test frames are (:func:`invert_spread`): the spread's point
     error and count by true count, the two-finger frames' :func:`two_finger_score`, and the
-    seconds it took (wall)."""
+    seconds it took (wall); ``alone``: the point error of the spread's frames with no other
+    finger above the skin (the frames the bound step bounds, ``train_alone``)."""
     t0 = time.perf_counter()
     rows, every, both, seconds, two = invert_spread(inv, rec, data, limit, two_limit, workers,
                                                     person)
     spread = np.searchsorted(every, rows)
     s = score(data.take(rows), {k: np.asarray(v)[spread] for k, v in both.items()},
               seconds[spread])
+    alone = (s.get("by_other_finger") or {}).get("alone") or {}
     return {
         "n_trials": int(np.unique(data.group).size), "n_frames": int(rows.size),
         "loc_mm_mean": s["loc_mm_mean"], "loc_mm_median": s["loc_mm_median"],
+        "alone": {"loc_mm_mean": alone.get("loc_mm_mean"), "n_frames": alone.get("n_frames"),
+                  "share": alone.get("share")},
         "count_accuracy_by_true": (s.get("multi") or {}).get("count_accuracy_by_true"),
         "two_finger": two, "seconds": time.perf_counter() - t0,
     }

@@ -356,6 +356,7 @@ def bound_block(bound: Mapping[str, Any], contact: Mapping[str, Any] | None) -> 
         "cases": {c: {k: v.get(k) for k in BOUND_KEYS} for c, v in top.items()},
         "test": {**(test.get("pooled") or {}), "states_without_field": test.get("states_without_field")},
         "test_alone": (bound.get("test_alone") or {}).get("pooled"),
+        "train_alone": (bound.get("train_alone") or {}).get("pooled"),
         "settings": {k: settings.get(k) for k in (
             "source", "faces", "spacing_mm", "force_n", "nuisances", "prior_sd",
             "force_threshold_n", "near_wire_mm", "position", "push_columns")},
@@ -432,13 +433,17 @@ def alone_beside(contact: Mapping[str, Any] | None, inversion: Mapping[str, Any]
     }
 
 
-def _train_trials(block: Mapping[str, Any] | None) -> dict[str, Any] | None:
-    """The step's ``train_trials`` without the two-finger frames' per-trial list."""
+def _train_trials(block: Mapping[str, Any] | None, bound: Mapping[str, Any] | None
+                  ) -> dict[str, Any] | None:
+    """The step's ``train_trials`` without the two-finger frames' per-trial list, and the bound
+    at the training frames with one finger alone (metrics.json's ``bound.train_alone``) beside
+    its point error there (``bound_alone_loc_mm_mean``; None where the bound step made none)."""
     if not block:
         return None
     two = block.get("two_finger")
     return {**block, "two_finger": ({k: v for k, v in two.items()
-                                     if k != "count_accuracy_by_trial"} if two else None)}
+                                     if k != "count_accuracy_by_trial"} if two else None),
+            "bound_alone_loc_mm_mean": ((bound or {}).get("train_alone") or {}).get("loc_mm_mean")}
 
 
 def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
@@ -477,7 +482,7 @@ def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
         "alone": alone_beside(contact, inv, bound),
         "two_finger": {k: v for k, v in (inv.get("two_finger") or {}).items()
                        if k != "count_accuracy_by_trial"} or None,
-        "train_trials": _train_trials(inv.get("train_trials")),
+        "train_trials": _train_trials(inv.get("train_trials"), bound),
         "force_mae_n_observable": fo.get("force_mae_n"),
         "force_observable_share": fo.get("share"),
         "force_observable_threshold_n": fo.get("threshold_n"),

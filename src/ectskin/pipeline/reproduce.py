@@ -108,7 +108,8 @@ def _physics_steps(
     runner.timings["contact_fields_load"] = time.perf_counter() - t0
     if not fields:
         return None, None
-    bound = bound_step(runner, config, fields, found, push_columns=config.bound_push_columns)
+    bound = bound_step(runner, config, fields, found, push_columns=config.bound_push_columns,
+                       train_trials=True)
     # the skin's own untouched readout, people's finger sizes and the press check: chosen on the
     # validation trials of the contact experiment (docs/inversion.md); so is the contact model
     # of the states with a field (choice: the run's model, its baselines, inversion, hybrid)

@@ -186,13 +186,18 @@ def train_line(train: Mapping[str, Any] | None) -> str:
     by = train.get("count_accuracy_by_true") or {}
     counts = " / ".join(_pct(by.get(k)) for k in ("0", "1", "2") if k in by)
     two = train.get("two_finger") or {}
+    alone = train.get("alone") or {}
+    bound = train.get("bound_alone_loc_mm_mean")
     text = (f"The training trials, which the inversion has not seen (it is not trained, and its "
             f"choices read the validation trials; the learned models and baselines were fitted "
-            f"on them, so none is scored beside it here, nor the bound, which the bound step "
-            f"gives for the test frames): {train['n_frames']} frames spread over "
+            f"on them, so none is scored beside it here): {train['n_frames']} frames spread over "
             f"{train.get('n_trials')} trial(s), point error {_mm(train.get('loc_mm_mean'))} "
             f"(median {_mm(train.get('loc_mm_median'))})"
-            + (f", counted right with 0 / 1 / 2 fingers on the skin {counts}" if counts else ""))
+            + (f"; with no other finger above the skin {_mm(alone.get('loc_mm_mean'))} over "
+               f"{alone.get('n_frames')} frames"
+               + (f", the bound {_mm(bound)} at those trials' frames" if bound is not None
+                  else "") if alone.get("n_frames") else "")
+            + (f"; counted right with 0 / 1 / 2 fingers on the skin {counts}" if counts else ""))
     if two.get("n_frames"):
         text += (f"; {two['n_frames']} frames with two fingers from {two.get('n_trials')} "
                  f"trial(s), counted two on {_pct(two.get('count_accuracy'))}, each finger "
