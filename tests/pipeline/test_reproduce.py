@@ -420,6 +420,9 @@ def test_reproduce_tiny_twin_experiment(tmp_path, monkeypatch):
     # the physical limit and the training-free inversion, on the contact run's test frames
     assert m["bound"]["test"]["n_points"] > 0 and m["bound"]["per_state"]
     inv = m["inversion"]
+    # the bound at the training frames beside the inversion's error there (it is not trained)
+    assert m["bound"]["train_alone"]["n_points"] > 0
+    assert inv["train_trials"]["bound_alone_loc_mm_mean"] == m["bound"]["train_alone"]["loc_mm_mean"]
     split = json.loads((out / "runs" / "contact" / "split.json").read_text())
     assert inv["n_test_trials"] == len(split["test"])
     assert inv["n_frames"] > 0 and inv["n_frames_without_field"] >= 0
