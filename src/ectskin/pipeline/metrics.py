@@ -440,10 +440,13 @@ def _train_trials(block: Mapping[str, Any] | None, bound: Mapping[str, Any] | No
     its point error there (``bound_alone_loc_mm_mean``; None where the bound step made none)."""
     if not block:
         return None
-    two = block.get("two_finger")
-    return {**block, "two_finger": ({k: v for k, v in two.items()
-                                     if k != "count_accuracy_by_trial"} if two else None),
+    return {**block, "two_finger": _without_trials(block.get("two_finger")),
             "bound_alone_loc_mm_mean": ((bound or {}).get("train_alone") or {}).get("loc_mm_mean")}
+
+
+def _without_trials(two: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    """A two-finger block without its per-trial list (the step's file keeps it); None for none."""
+    return {k: v for k, v in two.items() if k != "count_accuracy_by_trial"} if two else None
 
 
 def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
@@ -480,8 +483,7 @@ def inversion_block(inv: Mapping[str, Any], contact: Mapping[str, Any] | None,
         "count_accuracy_by_true": (inv.get("multi") or {}).get("count_accuracy_by_true"),
         "by_other_finger": inv.get("by_other_finger"),
         "alone": alone_beside(contact, inv, bound),
-        "two_finger": {k: v for k, v in (inv.get("two_finger") or {}).items()
-                       if k != "count_accuracy_by_trial"} or None,
+        "two_finger": _without_trials(inv.get("two_finger")),
         "train_trials": _train_trials(inv.get("train_trials"), bound),
         "force_mae_n_observable": fo.get("force_mae_n"),
         "force_observable_share": fo.get("share"),

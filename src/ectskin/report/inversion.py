@@ -192,12 +192,14 @@ def train_line(train: Mapping[str, Any] | None) -> str:
             f"choices read the validation trials; the learned models and baselines were fitted "
             f"on them, so none is scored beside it here): {train['n_frames']} frames spread over "
             f"{train.get('n_trials')} trial(s), point error {_mm(train.get('loc_mm_mean'))} "
-            f"(median {_mm(train.get('loc_mm_median'))})"
-            + (f"; with no other finger above the skin {_mm(alone.get('loc_mm_mean'))} over "
-               f"{alone.get('n_frames')} frames"
-               + (f", the bound {_mm(bound)} at those trials' frames" if bound is not None
-                  else "") if alone.get("n_frames") else "")
-            + (f"; counted right with 0 / 1 / 2 fingers on the skin {counts}" if counts else ""))
+            f"(median {_mm(train.get('loc_mm_median'))})")
+    if alone.get("n_frames"):
+        text += (f"; with no other finger above the skin {_mm(alone.get('loc_mm_mean'))} over "
+                 f"{alone['n_frames']} frames")
+        if bound is not None:
+            text += f", the bound {_mm(bound)} at those trials' frames"
+    if counts:
+        text += f"; counted right with 0 / 1 / 2 fingers on the skin {counts}"
     if two.get("n_frames"):
         text += (f"; {two['n_frames']} frames with two fingers from {two.get('n_trials')} "
                  f"trial(s), counted two on {_pct(two.get('count_accuracy'))}, each finger "
